@@ -14,11 +14,31 @@ import sys
 from sphere import __version__, commands
 
 
+class _BrokenCommand:
+    """Stands in for a subcommand whose module failed to load, so the other subcommands still work."""
+
+    def __init__(self, name: str, error: BaseException):
+        self.HELP = f"(unavailable: {type(error).__name__}: {error})"
+        self._message = f"sphere {name}: this subcommand failed to load: {type(error).__name__}: {error}"
+
+    def add_arguments(self, parser) -> None:
+        parser.add_argument("rest", nargs=argparse.REMAINDER)
+
+    def run(self, args) -> int:
+        print(self._message, file=sys.stderr)
+        print("reinstall with the README's setup command; if it persists, it is a bug: please report it", file=sys.stderr)
+        return 1
+
+
 def _command_modules():
     for info in sorted(pkgutil.iter_modules(commands.__path__), key=lambda i: i.name):
         if info.name.startswith("_"):
             continue
-        yield info.name.replace("_", "-"), importlib.import_module(f"sphere.commands.{info.name}")
+        name = info.name.replace("_", "-")
+        try:
+            yield name, importlib.import_module(f"sphere.commands.{info.name}")
+        except Exception as e:  # one broken subcommand must not take the others down
+            yield name, _BrokenCommand(name, e)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -31,7 +51,12 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name, module in _command_modules():
         p = sub.add_parser(name, help=module.HELP, description=getattr(module, "DESCRIPTION", module.HELP))
-        module.add_arguments(p)
+        try:
+            module.add_arguments(p)
+        except Exception as e:
+            module = _BrokenCommand(name, e)
+            p = sub._name_parser_map[name] = argparse.ArgumentParser(prog=f"sphere {name}")
+            module.add_arguments(p)
         p.set_defaults(_run=module.run)
     return parser
 

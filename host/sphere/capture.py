@@ -1,0 +1,109 @@
+"""Serial captures: the raw byte stream exactly as it came off the port.
+
+`cat /dev/ttyUSB0 > file` makes a valid capture. A recorder may add a sidecar ``FILE.rx.csv`` with
+one line per received chunk, ``byte_offset,host_time_s``: where the chunk starts in the capture and
+when the host received it (Unix time), for latency and timing studies.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import BinaryIO, Iterator
+
+from sphere.protocol.decoder import DecoderStats, FrameDecoder
+from sphere.protocol.packets import Packet
+from sphere.protocol.timebase import TimeUnwrapper
+
+SIDECAR_SUFFIX = ".rx.csv"
+READ_CHUNK = 64 * 1024
+
+
+class CaptureError(Exception):
+    """A capture that cannot be used, with what to do about it."""
+
+
+def sidecar_path(path: Path | str) -> Path:
+    path = Path(path)
+    return path.with_name(path.name + SIDECAR_SUFFIX)
+
+
+@dataclass
+class DecodedPacket:
+    """A packet with the device time unwrapped (``t_us`` is None for packets without a time)."""
+
+    packet: Packet
+    t_us: int | None
+
+
+class CaptureFile:
+    """A capture on disk, read as packets."""
+
+    def __init__(self, path: Path | str):
+        self.path = Path(path)
+        if not self.path.exists():
+            raise CaptureError(f"{self.path}: no such capture file (record one with `sphere capture --port PORT --out FILE`)")
+        if self.path.is_dir():
+            raise CaptureError(f"{self.path} is a folder, not a capture file")
+        self.decoder = FrameDecoder("device")
+
+    @property
+    def stats(self) -> DecoderStats:
+        return self.decoder.stats
+
+    def size(self) -> int:
+        return self.path.stat().st_size
+
+    def chunks(self, chunk_size: int = READ_CHUNK) -> Iterator[bytes]:
+        with open(self.path, "rb") as f:
+            while True:
+                data = f.read(chunk_size)
+                if not data:
+                    return
+                yield data
+
+    def packets(self, chunk_size: int = READ_CHUNK) -> Iterator[DecodedPacket]:
+        """Every packet in the file, in order, with unwrapped device times. Counters in ``stats``."""
+        unwrap = TimeUnwrapper()
+        for data in self.chunks(chunk_size):
+            for packet in self.decoder.feed(data):
+                t = getattr(packet, "t_us", None)
+                if packet.NAME == "HELLO" and packet.seq == 0:
+                    unwrap.reset()
+                yield DecodedPacket(packet, unwrap(t) if t is not None else None)
+
+
+class CaptureWriter:
+    """Appends received bytes to a capture, flushing each chunk to the OS so that a crash, Ctrl-C or
+    unplug loses nothing already received; optionally writes the receive-time sidecar."""
+
+    def __init__(self, path: Path | str, with_times: bool = False):
+        self.path = Path(path)
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self._file: BinaryIO = open(self.path, "wb")
+        self._times = open(sidecar_path(self.path), "w") if with_times else None
+        if self._times:
+            self._times.write("byte_offset,host_time_s\n")
+        self.bytes_written = 0
+
+    def write(self, data: bytes, host_time_s: float | None = None) -> None:
+        if not data:
+            return
+        if self._times is not None:
+            self._times.write(f"{self.bytes_written},{host_time_s if host_time_s is not None else time.time():.6f}\n")
+            self._times.flush()
+        self._file.write(data)
+        self._file.flush()
+        self.bytes_written += len(data)
+
+    def close(self) -> None:
+        self._file.close()
+        if self._times is not None:
+            self._times.close()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
