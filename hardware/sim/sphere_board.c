@@ -1,0 +1,551 @@
+/*
+ * sphere_board.c - the MARG sphere's virtual board: the real firmware image on a simulated
+ * ATmega328P at 16 MHz (simavr), with register-level ADXL345, ITG-3200 and HMC5883L models on its
+ * I2C bus fed by a recorded motion trace, its UART into a capture file and/or a pseudo-terminal,
+ * fault injection, and cycle-exact timing of the MARG update from the timing pin.
+ *
+ * Part of the MARG sphere project (hardware/sim).
+ * Copyright (C) 2026 the MARG sphere developers
+ *
+ * This program is free software: you can redistribute it and/or modify it under the terms of the
+ * GNU General Public License as published by the Free Software Foundation, either version 3 of the
+ * License, or (at your option) any later version. It links simavr, which is GPL-3.0.
+ *
+ * This program is distributed in the hope that it will be useful, but WITHOUT ANY WARRANTY; without
+ * even the implied warranty of MERCHANTABILITY or FITNESS FOR A PARTICULAR PURPOSE. See the GNU
+ * General Public License for more details. You should have received a copy of the GNU General Public
+ * License along with this program. If not, see <https://www.gnu.org/licenses/>.
+ */
+#include <errno.h>
+#include <getopt.h>
+#include <math.h>
+#include <signal.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+#include <unistd.h>
+
+#include "sim_avr.h"
+#include "sim_elf.h"
+#include "sim_io.h"
+#include "sim_cycle_timers.h"
+#include "avr_ioport.h"
+#include "avr_uart.h"
+#include "parts/uart_pty.h"
+#include "sensors.h"
+
+#define MAX_FAULTS 32
+
+typedef struct {
+	int chip;     /* CHIP_* for a NACK, -1 for a bus stall */
+	double start_s, end_s;
+	int active;
+} fault_t;
+
+typedef struct {
+	uint32_t *v;
+	size_t n, cap;
+} vec_t;
+
+static void vec_push(vec_t *v, uint32_t x)
+{
+	if (v->n == v->cap) {
+		v->cap = v->cap ? 2 * v->cap : 1024;
+		v->v = realloc(v->v, v->cap * sizeof(uint32_t));
+	}
+	v->v[v->n++] = x;
+}
+
+static int cmp_u32(const void *a, const void *b)
+{
+	uint32_t x = *(const uint32_t *)a, y = *(const uint32_t *)b;
+	return x < y ? -1 : x > y;
+}
+
+typedef struct {
+	board_t *board;
+	avr_cycle_count_t rise, last_rise;
+	int high, have_last_rise;
+	vec_t update, loop;
+	uint32_t long_pulses, overruns, updates;
+	avr_cycle_count_t period_cycles;
+	int is_loop_pin;
+} timing_t;
+
+static timing_t tm_update, tm_loop;
+static int have_loop_pin;
+
+static void pin_hook(struct avr_irq_t *irq, uint32_t value, void *param)
+{
+	(void)irq;
+	timing_t *t = param;
+	avr_t *avr = t->board->avr;
+	if (value && !t->high) {
+		t->high = 1;
+		t->rise = avr->cycle;
+		if (!t->is_loop_pin) {
+			if (t->have_last_rise && avr->cycle - t->last_rise > t->period_cycles * 3 / 2 &&
+			    avr->cycle - t->last_rise < t->period_cycles * 100)
+				t->overruns += (uint32_t)((avr->cycle - t->last_rise + t->period_cycles / 2) / t->period_cycles) - 1;
+			t->last_rise = avr->cycle;
+			t->have_last_rise = 1;
+		}
+	} else if (!value && t->high) {
+		t->high = 0;
+		avr_cycle_count_t d = avr->cycle - t->rise;
+		if (d > t->period_cycles) { /* longer than a sample period: the LED, not the update */
+			t->long_pulses++;
+			return;
+		}
+		vec_push(&t->update, (uint32_t)d);
+		t->updates++;
+		if (!t->is_loop_pin && !have_loop_pin) {
+			board_t *b = t->board;
+			if (!b->start_armed && avr->cycle > b->first_start_cycle &&
+			    avr->cycle - b->first_start_cycle <= 4 * t->period_cycles)
+				vec_push(&tm_loop.update, (uint32_t)(avr->cycle - b->first_start_cycle));
+			b->start_armed = 1;
+		}
+	}
+}
+
+/* ---------------------------------------------------------------- UART */
+
+typedef struct {
+	FILE *capture;
+	uint64_t bytes;
+	uint32_t frames;
+	int last_nonzero;
+} uart_out_t;
+
+static uart_out_t uart_out;
+
+static void uart_hook(struct avr_irq_t *irq, uint32_t value, void *param)
+{
+	(void)irq;
+	uart_out_t *u = param;
+	uint8_t byte = (uint8_t)value;
+	if (u->capture)
+		fputc(byte, u->capture);
+	u->bytes++;
+	if (byte == 0) {
+		if (u->last_nonzero)
+			u->frames++;
+		u->last_nonzero = 0;
+	} else
+		u->last_nonzero = 1;
+}
+
+/* Bytes for the device's UART from a file of lines "SECONDS HEX HEX ...". */
+typedef struct {
+	double t_s;
+	uint8_t *bytes;
+	size_t n;
+} uart_send_t;
+
+static uart_send_t *sends;
+static size_t n_sends, send_i, send_pos;
+static avr_irq_t *uart_in_irq;
+static int uart_xon = 1;
+
+static void xon_hook(struct avr_irq_t *irq, uint32_t v, void *p) { (void)irq; (void)v; (void)p; uart_xon = 1; }
+static void xoff_hook(struct avr_irq_t *irq, uint32_t v, void *p) { (void)irq; (void)v; (void)p; uart_xon = 0; }
+
+static avr_cycle_count_t uart_send_timer(avr_t *avr, avr_cycle_count_t when, void *param)
+{
+	(void)param;
+	if (send_i >= n_sends)
+		return 0;
+	uart_send_t *s = &sends[send_i];
+	if ((double)when / avr->frequency < s->t_s)
+		return when + avr->frequency / 10000;
+	if (uart_xon) {
+		avr_raise_irq(uart_in_irq, s->bytes[send_pos++]);
+		if (send_pos >= s->n) {
+			send_pos = 0;
+			send_i++;
+		}
+	}
+	return when + avr->frequency / 11520; /* one byte time at 115200 baud 8N1 */
+}
+
+static int load_sends(const char *path)
+{
+	FILE *f = fopen(path, "r");
+	if (!f) {
+		fprintf(stderr, "sphere-board: cannot open %s\n", path);
+		return -1;
+	}
+	char line[4096];
+	while (fgets(line, sizeof line, f)) {
+		char *p = line, *end;
+		while (*p == ' ' || *p == '\t') p++;
+		if (*p == '#' || *p == '\n' || !*p)
+			continue;
+		double t = strtod(p, &end);
+		if (end == p)
+			continue;
+		sends = realloc(sends, (n_sends + 1) * sizeof(*sends));
+		uart_send_t *s = &sends[n_sends++];
+		s->t_s = t;
+		s->bytes = malloc(strlen(line));
+		s->n = 0;
+		p = end;
+		for (;;) {
+			long v = strtol(p, &end, 16);
+			if (end == p)
+				break;
+			s->bytes[s->n++] = (uint8_t)v;
+			p = end;
+		}
+	}
+	fclose(f);
+	return 0;
+}
+
+/* ---------------------------------------------------------------- faults */
+
+static int chip_by_name(const char *name)
+{
+	if (!strcmp(name, "adxl345") || !strcmp(name, "accel")) return CHIP_ADXL345;
+	if (!strcmp(name, "itg3200") || !strcmp(name, "gyro")) return CHIP_ITG3200;
+	if (!strcmp(name, "hmc5883l") || !strcmp(name, "mag")) return CHIP_HMC5883L;
+	return -1;
+}
+
+static avr_io_t *find_io(avr_t *avr, const char *kind)
+{
+	for (avr_io_t *io = avr->io_port; io; io = io->next)
+		if (io->kind && !strcmp(io->kind, kind))
+			return io;
+	return NULL;
+}
+
+/* A stalled bus: a slave holds the clock, so the TWI never finishes its step and TWINT never rises.
+ * simavr finishes each TWI step from a cycle timer whose parameter is the TWI module: cancel it. */
+static void hold_twi(avr_t *avr, void *twi)
+{
+	avr_cycle_timer_t fn[8];
+	int n = 0;
+	for (avr_cycle_timer_slot_p s = avr->cycle_timers.timer; s && n < 8; s = s->next)
+		if (s->param == twi)
+			fn[n++] = s->timer;
+	for (int i = 0; i < n; i++)
+		avr_cycle_timer_cancel(avr, fn[i], twi);
+}
+
+/* ---------------------------------------------------------------- main */
+
+static volatile sig_atomic_t stop_requested;
+static void on_signal(int sig) { (void)sig; stop_requested = 1; }
+
+static double wall_now(void)
+{
+	struct timespec ts;
+	clock_gettime(CLOCK_MONOTONIC, &ts);
+	return ts.tv_sec + ts.tv_nsec * 1e-9;
+}
+
+static void no_sleep(avr_t *avr, avr_cycle_count_t howLong) { (void)avr; (void)howLong; }
+
+static void stats3(FILE *f, const char *name, vec_t *v)
+{
+	if (!v->n) {
+		fprintf(f, "  \"%s\": {\"min\": null, \"median\": null, \"max\": null, \"count\": 0},\n", name);
+		return;
+	}
+	qsort(v->v, v->n, sizeof(uint32_t), cmp_u32);
+	fprintf(f, "  \"%s\": {\"min\": %u, \"median\": %u, \"max\": %u, \"count\": %zu},\n", name, v->v[0],
+		v->v[v->n / 2], v->v[v->n - 1], v->n);
+}
+
+static int parse_pin(const char *s, char *port, int *bit)
+{
+	if (strlen(s) != 2 || s[0] < 'B' || s[0] > 'D' || s[1] < '0' || s[1] > '7')
+		return -1;
+	*port = s[0];
+	*bit = s[1] - '0';
+	return 0;
+}
+
+static void usage(FILE *f)
+{
+	fprintf(f,
+		"usage: sphere-board FIRMWARE.elf --trace TRACE.bin [options]\n"
+		"  --seconds S          simulated seconds to run (default 10)\n"
+		"  --capture FILE       write the UART's bytes (device to host) to FILE\n"
+		"  --pty                open the UART as a pseudo-terminal (prints its /dev/pts/N); implies --realtime\n"
+		"  --realtime           pace simulated time to the wall clock\n"
+		"  --stats FILE.json    write the run's figures as JSON\n"
+		"  --rate HZ            the firmware's sample rate, for load and overrun figures (default 200)\n"
+		"  --nack CHIP:T0:T1    CHIP (adxl345|itg3200|hmc5883l) does not answer from T0 to T1 s (T1 may be inf)\n"
+		"  --stall T0:T1        the I2C bus is stalled (clock held low) from T0 to T1 s\n"
+		"  --send FILE          bytes for the device's UART: lines \"SECONDS HEX HEX ...\"\n"
+		"  --timing-pin PIN     the pin high during the MARG update (default B5 = D13)\n"
+		"  --loop-pin PIN       a pin high during a whole sample period's work (optional)\n"
+		"  -v                   log the bus (twice: every byte)\n");
+}
+
+int main(int argc, char **argv)
+{
+	const char *trace_path = NULL, *capture_path = NULL, *stats_path = NULL, *send_path = NULL;
+	double seconds = 10.0, rate_hz = 200.0;
+	int use_pty = 0, realtime = 0, verbose = 0;
+	char tpin_port = 'B', lpin_port = 0;
+	int tpin_bit = 5, lpin_bit = 0;
+	fault_t faults[MAX_FAULTS];
+	int n_faults = 0;
+
+	static struct option opts[] = {
+		{"trace", required_argument, 0, 't'}, {"seconds", required_argument, 0, 's'},
+		{"capture", required_argument, 0, 'c'}, {"pty", no_argument, 0, 'p'},
+		{"realtime", no_argument, 0, 'r'}, {"stats", required_argument, 0, 'j'},
+		{"rate", required_argument, 0, 'R'}, {"nack", required_argument, 0, 'N'},
+		{"stall", required_argument, 0, 'S'}, {"send", required_argument, 0, 'i'},
+		{"timing-pin", required_argument, 0, 'T'}, {"loop-pin", required_argument, 0, 'L'},
+		{"help", no_argument, 0, 'h'}, {0, 0, 0, 0}};
+	int o;
+	while ((o = getopt_long(argc, argv, "t:s:c:prj:vh", opts, NULL)) != -1) {
+		switch (o) {
+		case 't': trace_path = optarg; break;
+		case 's': seconds = atof(optarg); break;
+		case 'c': capture_path = optarg; break;
+		case 'p': use_pty = 1; realtime = 1; break;
+		case 'r': realtime = 1; break;
+		case 'j': stats_path = optarg; break;
+		case 'R': rate_hz = atof(optarg); break;
+		case 'i': send_path = optarg; break;
+		case 'v': verbose++; break;
+		case 'T':
+			if (parse_pin(optarg, &tpin_port, &tpin_bit)) { fprintf(stderr, "bad pin %s (e.g. B5)\n", optarg); return 2; }
+			break;
+		case 'L':
+			if (parse_pin(optarg, &lpin_port, &lpin_bit)) { fprintf(stderr, "bad pin %s (e.g. B4)\n", optarg); return 2; }
+			break;
+		case 'N': case 'S': {
+			if (n_faults >= MAX_FAULTS) { fprintf(stderr, "too many faults\n"); return 2; }
+			fault_t *f = &faults[n_faults];
+			char buf[128];
+			snprintf(buf, sizeof buf, "%s", optarg);
+			char *t0 = buf;
+			f->chip = -1;
+			if (o == 'N') {
+				char *c = strchr(buf, ':');
+				if (!c) { fprintf(stderr, "--nack CHIP:T0:T1\n"); return 2; }
+				*c = 0;
+				f->chip = chip_by_name(buf);
+				if (f->chip < 0) { fprintf(stderr, "unknown chip %s (adxl345, itg3200, hmc5883l)\n", buf); return 2; }
+				t0 = c + 1;
+			}
+			char *c2 = strchr(t0, ':');
+			if (!c2) { fprintf(stderr, "a fault needs T0:T1\n"); return 2; }
+			*c2 = 0;
+			f->start_s = atof(t0);
+			f->end_s = !strcmp(c2 + 1, "inf") ? INFINITY : atof(c2 + 1);
+			f->active = 0;
+			n_faults++;
+			break;
+		}
+		case 'h': usage(stdout); return 0;
+		default: usage(stderr); return 2;
+		}
+	}
+	if (optind != argc - 1 || !trace_path) {
+		usage(stderr);
+		return 2;
+	}
+	const char *elf_path = argv[optind];
+
+	trace_t trace;
+	char err[512];
+	if (trace_load(&trace, trace_path, err, sizeof err)) {
+		fprintf(stderr, "sphere-board: %s\n", err);
+		return 1;
+	}
+
+	elf_firmware_t fw;
+	memset(&fw, 0, sizeof fw);
+	if (access(elf_path, R_OK) || elf_read_firmware(elf_path, &fw)) {
+		fprintf(stderr, "sphere-board: cannot read firmware %s\n", elf_path);
+		return 1;
+	}
+	avr_t *avr = avr_make_mcu_by_name("atmega328p");
+	if (!avr) {
+		fprintf(stderr, "sphere-board: simavr has no atmega328p\n");
+		return 1;
+	}
+	avr_init(avr);
+	avr->frequency = 16000000;
+	avr->log = verbose > 2 ? LOG_TRACE : LOG_ERROR;
+	avr_load_firmware(avr, &fw);
+	avr->frequency = 16000000; /* a Nano's crystal, whatever the ELF says */
+	avr->sleep = no_sleep;     /* sleep is simulated time, never wall time */
+
+	board_t board;
+	board_init(&board, avr, &trace, verbose);
+
+	/* UART 0 */
+	uint32_t flags = 0;
+	avr_ioctl(avr, AVR_IOCTL_UART_GET_FLAGS('0'), &flags);
+	flags &= ~(AVR_UART_FLAG_STDIO | AVR_UART_FLAG_POLL_SLEEP);
+	avr_ioctl(avr, AVR_IOCTL_UART_SET_FLAGS('0'), &flags);
+	if (capture_path) {
+		uart_out.capture = fopen(capture_path, "wb");
+		if (!uart_out.capture) {
+			fprintf(stderr, "sphere-board: cannot write %s: %s\n", capture_path, strerror(errno));
+			return 1;
+		}
+	}
+	avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_OUTPUT), uart_hook, &uart_out);
+	uart_in_irq = avr_io_getirq(avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_INPUT);
+	avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_OUT_XON), xon_hook, NULL);
+	avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_OUT_XOFF), xoff_hook, NULL);
+	if (send_path) {
+		if (load_sends(send_path))
+			return 1;
+		avr_cycle_timer_register(avr, avr->frequency / 10000, uart_send_timer, NULL);
+	}
+	static uart_pty_t pty;
+	if (use_pty) {
+		uart_pty_init(avr, &pty);
+		uart_pty_connect(&pty, '0');
+		printf("sphere-board: UART on %s\n", pty.port[0].slavename);
+		fflush(stdout);
+	}
+
+	/* timing pins */
+	avr_cycle_count_t period = (avr_cycle_count_t)llround(avr->frequency / rate_hz);
+	tm_update.board = tm_loop.board = &board;
+	tm_update.period_cycles = tm_loop.period_cycles = period;
+	board.start_armed = 1;
+	avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_IOPORT_GETIRQ(tpin_port), tpin_bit), pin_hook, &tm_update);
+	if (lpin_port) {
+		have_loop_pin = 1;
+		tm_loop.is_loop_pin = 1;
+		tm_loop.period_cycles = 4 * period;
+		avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_IOPORT_GETIRQ(lpin_port), lpin_bit), pin_hook, &tm_loop);
+	}
+
+	void *twi = find_io(avr, "twi");
+	if (!twi && n_faults)
+		fprintf(stderr, "sphere-board: warning: no TWI module found, bus stalls cannot be simulated\n");
+
+	signal(SIGINT, on_signal);
+	signal(SIGTERM, on_signal);
+
+	avr_cycle_count_t end_cycle = (avr_cycle_count_t)(seconds * avr->frequency);
+	avr_cycle_count_t next_check = 0;
+	const avr_cycle_count_t check_every = avr->frequency / 1000; /* 1 ms */
+	double wall0 = wall_now();
+	int stall = 0, state = cpu_Running;
+	while (avr->cycle < end_cycle && !stop_requested) {
+		state = avr_run(avr);
+		if (state == cpu_Done || state == cpu_Crashed)
+			break;
+		if (stall && twi)
+			hold_twi(avr, twi);
+		if (avr->cycle >= next_check) {
+			next_check = avr->cycle + check_every;
+			double t = (double)avr->cycle / avr->frequency;
+			int stall_now = 0;
+			for (int i = 0; i < n_faults; i++) {
+				fault_t *f = &faults[i];
+				int on = t >= f->start_s && t < f->end_s;
+				if (f->chip < 0) {
+					stall_now |= on;
+				} else if (on != f->active) {
+					board.chip[f->chip].nack = on;
+					if (verbose)
+						fprintf(stderr, "[%.3f] %s %s\n", t, board.chip[f->chip].name, on ? "stops answering" : "answers again");
+				}
+				f->active = on;
+			}
+			if (stall_now != stall) {
+				if (verbose)
+					fprintf(stderr, "[%.3f] bus %s\n", t, stall_now ? "stalled" : "released");
+				if (!stall_now) {
+					board.bus_busy = 0;
+					board.cur_chip = -1;
+				}
+				stall = stall_now;
+				board.stalled = stall;
+			}
+			if (realtime) {
+				double ahead = t - (wall_now() - wall0);
+				if (ahead > 0.002) {
+					struct timespec ts = {(time_t)ahead, (long)((ahead - floor(ahead)) * 1e9)};
+					nanosleep(&ts, NULL);
+				}
+			}
+		}
+	}
+	double wall = wall_now() - wall0;
+	double sim_s = (double)avr->cycle / avr->frequency;
+	if (uart_out.capture)
+		fclose(uart_out.capture);
+	if (use_pty)
+		uart_pty_stop(&pty);
+
+	if (state == cpu_Crashed)
+		fprintf(stderr, "sphere-board: the AVR crashed at %.6f s (pc 0x%04x)\n", sim_s, avr->pc);
+
+	vec_t *lv = &tm_loop.update;
+	size_t loop_n = lv->n;
+	uint32_t loop_med = 0, upd_med = 0;
+	FILE *sf = NULL;
+	if (stats_path) {
+		sf = fopen(stats_path, "w");
+		if (!sf) {
+			fprintf(stderr, "sphere-board: cannot write %s\n", stats_path);
+			return 1;
+		}
+		fprintf(sf, "{\n");
+		stats3(sf, "cycles_per_update", &tm_update.update);
+		stats3(sf, "cycles_per_loop", lv);
+	} else {
+		if (tm_update.update.n) qsort(tm_update.update.v, tm_update.update.n, 4, cmp_u32);
+		if (lv->n) qsort(lv->v, lv->n, 4, cmp_u32);
+	}
+	if (tm_update.update.n) upd_med = tm_update.update.v[tm_update.update.n / 2];
+	if (loop_n) loop_med = lv->v[loop_n / 2];
+	double load = loop_n ? (double)loop_med / period : (tm_update.update.n ? (double)upd_med / period : 0);
+	double load_max = loop_n ? (double)lv->v[loop_n - 1] / period : 0;
+	uint32_t i2c_errors = board.i2c_errors;
+	if (sf) {
+		fprintf(sf, "  \"cpu_load\": %.4f,\n", load);
+		fprintf(sf, "  \"cpu_load_max\": %.4f,\n", load_max);
+		fprintf(sf, "  \"cpu_load_basis\": \"%s\",\n",
+			have_loop_pin ? "median loop-pin pulse / sample period"
+			: loop_n ? "median (first I2C START of the period .. end of the MARG update) / sample period"
+			: "median MARG update / sample period (no loop measured)");
+		fprintf(sf, "  \"i2c_timing_note\": \"simavr 1.6 advances the TWI one step per microsecond whatever TWBR says, so I2C time in the loop figures is not real 400 kHz time; the MARG update cycles are exact\",\n");
+		fprintf(sf, "  \"sample_rate_hz\": %.3f,\n", rate_hz);
+		fprintf(sf, "  \"period_cycles\": %llu,\n", (unsigned long long)period);
+		fprintf(sf, "  \"overruns\": %u,\n", tm_update.overruns);
+		fprintf(sf, "  \"updates\": %u,\n", tm_update.updates);
+		fprintf(sf, "  \"timing_pin_long_pulses\": %u,\n", tm_update.long_pulses);
+		fprintf(sf, "  \"frames_sent\": %u,\n", uart_out.frames);
+		fprintf(sf, "  \"uart_bytes\": %llu,\n", (unsigned long long)uart_out.bytes);
+		fprintf(sf, "  \"i2c_transactions\": %u,\n", board.transactions);
+		fprintf(sf, "  \"i2c_errors\": %u,\n", i2c_errors);
+		fprintf(sf, "  \"i2c_starts\": %u,\n", board.starts);
+		fprintf(sf, "  \"i2c_address_nacks\": %u,\n", board.addr_nacks);
+		fprintf(sf, "  \"chip_nacks\": {\"adxl345\": %u, \"itg3200\": %u, \"hmc5883l\": %u},\n",
+			board.chip[0].nacked, board.chip[1].nacked, board.chip[2].nacked);
+		fprintf(sf, "  \"adxl345_events\": {\"single_tap\": %u, \"double_tap\": %u, \"free_fall\": %u},\n",
+			board.events_single_tap, board.events_double_tap, board.events_free_fall);
+		fprintf(sf, "  \"simulated_seconds\": %.6f,\n", sim_s);
+		fprintf(sf, "  \"wall_seconds\": %.3f,\n", wall);
+		fprintf(sf, "  \"speed\": %.3f,\n", wall > 0 ? sim_s / wall : 0);
+		fprintf(sf, "  \"crashed\": %s\n", state == cpu_Crashed ? "true" : "false");
+		fprintf(sf, "}\n");
+		fclose(sf);
+	}
+	fprintf(stderr,
+		"sphere-board: %.3f simulated s in %.3f wall s (x%.2f); %u MARG updates, median %u cycles; "
+		"%u frames, %llu bytes; %u I2C transactions, %u errors\n",
+		sim_s, wall, wall > 0 ? sim_s / wall : 0, tm_update.updates, upd_med, uart_out.frames,
+		(unsigned long long)uart_out.bytes, board.transactions, i2c_errors);
+	return state == cpu_Crashed ? 3 : 0;
+}

@@ -1,0 +1,238 @@
+"""Motion traces for the simulated board.
+
+A trace is what the three chip models output: for each chip, samples in the chip's own units at the
+chip's output data rate, rounded and saturated as the chip does (:mod:`sphere.chips`):
+
+- ADXL345 full resolution, 256 LSB/g, ±16 g (13 bits), at 200 Hz;
+- ITG-3200, 14.375 LSB/(°/s), at 200 Hz (SMPLRT_DIV = 4 with the 1 kHz internal rate);
+- HMC5883L gain 1, 1090 LSB/gauss, −4096 on an overflowing axis, at 75 Hz.
+
+Sources in physical units (m/s², rad/s, µT in the sensor frame, as BROAD stores them) are resampled to
+each chip's rate by linear interpolation. The board's models hold each sample for one period of the rate
+the firmware configures, so a trace at another rate still plays at the right speed.
+
+File format (little-endian), read by hardware/sim/sensors.c::
+
+    b"SPHTRACE", u32 version = 1,
+    then for accel, gyro, mag: f64 rate_hz, u32 count, count × 3 × i16 (x, y, z)
+"""
+
+from __future__ import annotations
+
+import struct
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from sphere import chips
+from sphere import quaternion as quat
+
+ACCEL_RATE_HZ = 200.0
+GYRO_RATE_HZ = 200.0
+MAG_RATE_HZ = 75.0
+MAGIC = b"SPHTRACE"
+VERSION = 1
+
+#: Earth's field used by the synthetic sources, ENU µT: 20 µT north, 45 µT down (Berlin-like).
+EARTH_FIELD_ENU_UT = np.array([0.0, 20.0, -45.0])
+GRAVITY_UP_M_S2 = np.array([0.0, 0.0, chips.STANDARD_GRAVITY_M_S2])
+
+
+@dataclass
+class Motion:
+    """Motion in physical units on a common time base (sensor frame)."""
+
+    rate_hz: float
+    acc_m_s2: np.ndarray  # (N, 3)
+    gyr_rad_s: np.ndarray  # (N, 3)
+    mag_uT: np.ndarray  # (N, 3)
+    name: str = "motion"
+
+    @property
+    def seconds(self) -> float:
+        return len(self.acc_m_s2) / self.rate_hz
+
+
+@dataclass
+class ChipTrace:
+    """Chip units at the chips' rates: what the board's sensor models output."""
+
+    accel_lsb: np.ndarray
+    gyro_lsb: np.ndarray
+    mag_lsb: np.ndarray
+    accel_rate_hz: float = ACCEL_RATE_HZ
+    gyro_rate_hz: float = GYRO_RATE_HZ
+    mag_rate_hz: float = MAG_RATE_HZ
+
+    @property
+    def seconds(self) -> float:
+        return len(self.accel_lsb) / self.accel_rate_hz
+
+    def write(self, path: Path | str) -> Path:
+        path = Path(path)
+        with open(path, "wb") as f:
+            f.write(MAGIC + struct.pack("<I", VERSION))
+            for data, rate in ((self.accel_lsb, self.accel_rate_hz), (self.gyro_lsb, self.gyro_rate_hz),
+                               (self.mag_lsb, self.mag_rate_hz)):
+                a = np.ascontiguousarray(data, dtype="<i2").reshape(-1, 3)
+                f.write(struct.pack("<dI", float(rate), len(a)))
+                f.write(a.tobytes())
+        return path
+
+    @staticmethod
+    def read(path: Path | str) -> "ChipTrace":
+        raw = Path(path).read_bytes()
+        if raw[:8] != MAGIC or struct.unpack_from("<I", raw, 8)[0] != VERSION:
+            raise ValueError(f"{path} is not a sphere trace (version {VERSION})")
+        off = 12
+        parts = []
+        for _ in range(3):
+            rate, n = struct.unpack_from("<dI", raw, off)
+            off += 12
+            a = np.frombuffer(raw, dtype="<i2", count=3 * n, offset=off).reshape(n, 3).astype(np.int16)
+            off += 6 * n
+            parts.append((a, rate))
+        return ChipTrace(parts[0][0], parts[1][0], parts[2][0], parts[0][1], parts[1][1], parts[2][1])
+
+
+def resample(x: np.ndarray, rate_in: float, rate_out: float) -> np.ndarray:
+    """Linear interpolation of (N, 3) samples at rate_in onto rate_out, over the same duration."""
+    x = np.asarray(x, dtype=float)
+    n_out = int(np.floor(len(x) * rate_out / rate_in))
+    t_in = np.arange(len(x)) / rate_in
+    t_out = np.arange(n_out) / rate_out
+    return np.stack([np.interp(t_out, t_in, x[:, i]) for i in range(3)], axis=1)
+
+
+def fill_gaps(x: np.ndarray) -> np.ndarray:
+    """Replace non-finite samples by the previous finite one (the first finite one at the start)."""
+    x = np.array(x, dtype=float)
+    ok = np.all(np.isfinite(x), axis=1)
+    if not ok.any():
+        return np.zeros_like(x)
+    idx = np.where(ok, np.arange(len(x)), 0)
+    np.maximum.accumulate(idx, out=idx)
+    first = int(np.argmax(ok))
+    idx[:first] = first
+    return x[idx]
+
+
+def to_chips(m: Motion, accel_rate_hz=ACCEL_RATE_HZ, gyro_rate_hz=GYRO_RATE_HZ, mag_rate_hz=MAG_RATE_HZ) -> ChipTrace:
+    """Resample a motion to the chips' rates and convert it to chip units (quantised, saturated)."""
+    return ChipTrace(
+        chips.accel_m_s2_to_lsb(resample(fill_gaps(m.acc_m_s2), m.rate_hz, accel_rate_hz)),
+        chips.gyro_rad_s_to_lsb(resample(fill_gaps(m.gyr_rad_s), m.rate_hz, gyro_rate_hz)),
+        chips.mag_uT_to_lsb(resample(fill_gaps(m.mag_uT), m.rate_hz, mag_rate_hz)),
+        accel_rate_hz, gyro_rate_hz, mag_rate_hz,
+    )
+
+
+def hold_first(m: Motion, seconds: float) -> Motion:
+    """Prepend ``seconds`` of the first sample with zero rotation (the sphere lying still at power-up)."""
+    n = int(round(seconds * m.rate_hz))
+    if n <= 0:
+        return m
+    def rep(x, zero=False):
+        first = np.zeros(3) if zero else fill_gaps(x)[0]
+        return np.concatenate([np.tile(first, (n, 1)), x])
+    return Motion(m.rate_hz, rep(m.acc_m_s2), rep(m.gyr_rad_s, zero=True), rep(m.mag_uT), m.name)
+
+
+def from_broad(trial, start_s: float = 0.0, seconds: float | None = None) -> Motion:
+    """A BROAD trial (sphere.broad.Trial) or a slice of it, as a motion."""
+    if start_s or seconds is not None:
+        trial = trial.seconds(start_s, seconds if seconds is not None else len(trial) / trial.rate_hz - start_s)
+    return Motion(trial.rate_hz, trial.acc_m_s2, trial.gyr_rad_s, trial.mag_uT, trial.name)
+
+
+# ---------------------------------------------------------------- synthetic sources
+
+SYNTH_RATE_HZ = 1000.0
+
+
+def _from_orientation(q_enu: np.ndarray, gyr_rad_s: np.ndarray, rate_hz: float, name: str,
+                      free_fall: np.ndarray | None = None, extra_acc: np.ndarray | None = None) -> Motion:
+    """Sensor readings for a sensor-to-ENU orientation history: gravity and the field rotated in."""
+    qc = quat.conjugate(q_enu)
+    acc = quat.rotate(qc, np.broadcast_to(GRAVITY_UP_M_S2, (len(q_enu), 3)))
+    if free_fall is not None:
+        acc[free_fall] = 0.0
+    if extra_acc is not None:
+        acc = acc + extra_acc
+    mag = quat.rotate(qc, np.broadcast_to(EARTH_FIELD_ENU_UT, (len(q_enu), 3)))
+    return Motion(rate_hz, acc, gyr_rad_s, mag, name)
+
+
+def _integrate(gyr_rad_s: np.ndarray, rate_hz: float, q0=(1.0, 0.0, 0.0, 0.0)) -> np.ndarray:
+    q = np.empty((len(gyr_rad_s), 4))
+    cur = np.array(q0, dtype=float)
+    dt = 1.0 / rate_hz
+    for i, w in enumerate(gyr_rad_s):
+        q[i] = cur
+        n = np.linalg.norm(w)
+        if n > 0:
+            cur = quat.normalize(quat.multiply(cur, quat.from_axis_angle(w / n, n * dt)))
+    return q
+
+
+def still(seconds: float, rate_hz: float = SYNTH_RATE_HZ) -> Motion:
+    n = int(round(seconds * rate_hz))
+    q = np.tile([1.0, 0.0, 0.0, 0.0], (n, 1))
+    return _from_orientation(q, np.zeros((n, 3)), rate_hz, "still")
+
+
+def rotation(seconds: float, rate_dps: float = 90.0, axis=(0.0, 0.0, 1.0), still_s: float = 1.0,
+             rate_hz: float = SYNTH_RATE_HZ) -> Motion:
+    """Still for ``still_s``, then constant rotation at ``rate_dps`` about a sensor-frame axis."""
+    n = int(round(seconds * rate_hz))
+    a = np.asarray(axis, dtype=float)
+    a = a / np.linalg.norm(a)
+    gyr = np.zeros((n, 3))
+    gyr[int(round(still_s * rate_hz)):] = np.radians(rate_dps) * a
+    return _from_orientation(_integrate(gyr, rate_hz), gyr, rate_hz, f"rotation_{rate_dps:g}dps")
+
+
+def toss(seconds: float = 4.0, toss_at_s: float = 2.0, flight_s: float = 0.4, spin_dps: float = 200.0,
+         rate_hz: float = SYNTH_RATE_HZ) -> Motion:
+    """Still, a throw (1.5 g up for 0.1 s), free flight (0 g, spinning), a catch (3 g for 0.05 s), still."""
+    n = int(round(seconds * rate_hz))
+    t = np.arange(n) / rate_hz
+    throw = (t >= toss_at_s - 0.1) & (t < toss_at_s)
+    flight = (t >= toss_at_s) & (t < toss_at_s + flight_s)
+    catch = (t >= toss_at_s + flight_s) & (t < toss_at_s + flight_s + 0.05)
+    gyr = np.zeros((n, 3))
+    gyr[flight] = np.radians([spin_dps, 0.0, 0.0])
+    q = _integrate(gyr, rate_hz)
+    extra = np.zeros((n, 3))
+    qc = quat.conjugate(q)
+    extra[throw] = quat.rotate(qc[throw], np.broadcast_to(0.5 * GRAVITY_UP_M_S2, (throw.sum(), 3)))
+    extra[catch] = quat.rotate(qc[catch], np.broadcast_to(2.0 * GRAVITY_UP_M_S2, (catch.sum(), 3)))
+    return _from_orientation(q, gyr, rate_hz, "toss", free_fall=flight, extra_acc=extra)
+
+
+def taps(seconds: float = 4.0, at_s=(1.0, 2.0, 2.15), peak_g: float = 4.0, width_s: float = 0.012,
+         axis: int = 2, rate_hz: float = SYNTH_RATE_HZ) -> Motion:
+    """Still, with short half-sine acceleration spikes (taps on the shell) at the given times."""
+    m = still(seconds, rate_hz)
+    t = np.arange(len(m.acc_m_s2)) / rate_hz
+    acc = m.acc_m_s2.copy()
+    for t0 in at_s:
+        s = (t >= t0) & (t < t0 + width_s)
+        acc[s, axis] += peak_g * chips.STANDARD_GRAVITY_M_S2 * np.sin(np.pi * (t[s] - t0) / width_s)
+    return Motion(rate_hz, acc, m.gyr_rad_s, m.mag_uT, "taps")
+
+
+SYNTHETIC = {"still": still, "rotation": rotation, "toss": toss, "taps": taps}
+
+
+def synthetic(spec: str, seconds: float) -> Motion:
+    """``still``, ``rotation[:DPS]``, ``toss``, ``taps`` for ``seconds``."""
+    name, _, arg = spec.partition(":")
+    if name not in SYNTHETIC:
+        raise ValueError(f"unknown synthetic source {name!r}; one of {', '.join(SYNTHETIC)}")
+    if name == "rotation" and arg:
+        return rotation(seconds, rate_dps=float(arg))
+    if name == "toss":
+        return toss(seconds, toss_at_s=min(2.0, seconds / 2))
+    return SYNTHETIC[name](seconds)
