@@ -1,0 +1,192 @@
+"""`sphere sim`: run the real firmware on the virtual board (hardware/sim), fed by recorded or synthetic
+motion, and report its timing, its stream and (with --accuracy) its orientation error."""
+
+from __future__ import annotations
+
+import json
+import math
+import sys
+import tempfile
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+HELP = "run the firmware on the simulated board (simavr) fed by a BROAD trial or a synthetic motion"
+DESCRIPTION = (
+    "Run the firmware image on a simulated ATmega328P at 16 MHz with register-level ADXL345, ITG-3200 "
+    "and HMC5883L models fed by motion: a BROAD trial (a .mat path, a name or its number, e.g. 24), a "
+    "synthetic source (synthetic:still, synthetic:rotation[:DPS], synthetic:toss, synthetic:taps) or a "
+    "prepared trace (.bin). The UART goes into a capture file (--capture, readable by `sphere decode`) "
+    "and/or a pseudo-terminal (--pty, for `sphere capture` or sphere-mouse). Prints the run's figures; "
+    "--stats writes them as JSON. Simulated I2C timing is one microsecond per TWI step (simavr 1.6), not "
+    "real 400 kHz time; the MARG update's cycle counts (from the timing pin D13) are exact."
+)
+
+DEFAULT_BETA = 0.041  # the firmware's DEFAULT_BETA_MILLI (firmware/src/core/marg_filter.h)
+
+
+def add_arguments(p) -> None:
+    p.add_argument("--trace", action="append", required=True, metavar="SOURCE",
+                   help="BROAD trial (.mat, name or number), synthetic:NAME[:ARG], or a prepared .bin trace; "
+                        "repeatable with --accuracy ('all' = every shipped trial)")
+    p.add_argument("--seconds", type=float, default=None,
+                   help="simulated seconds (default: 10; with --accuracy 30 per trial)")
+    p.add_argument("--start", type=float, default=0.0, help="start this far into a BROAD trial (s)")
+    p.add_argument("--hold", type=float, default=0.0,
+                   help="lead-in: hold the first sample still for this long before the motion (s)")
+    p.add_argument("--firmware", default=None,
+                   help="firmware image (default firmware/build/sphere.elf, built with `make -C firmware`); "
+                        "'testfw' = the board's own test sketch")
+    p.add_argument("--capture", metavar="OUT", help="write the UART's byte stream here")
+    p.add_argument("--pty", action="store_true", help="serve the UART on a pseudo-terminal (implies --realtime)")
+    p.add_argument("--realtime", action="store_true", help="pace simulated time to the wall clock")
+    p.add_argument("--stats", metavar="OUT.json", help="write the figures as JSON")
+    p.add_argument("--nack", action="append", default=[], metavar="CHIP:T0:T1",
+                   help="fault: CHIP (adxl345|itg3200|hmc5883l) stops answering from T0 to T1 s (T1 may be inf)")
+    p.add_argument("--stall", action="append", default=[], metavar="T0:T1",
+                   help="fault: the I2C bus is stalled (clock held) from T0 to T1 s")
+    p.add_argument("--send", metavar="FILE", help="bytes for the device's UART, lines 'SECONDS HEX HEX ...'")
+    p.add_argument("--timing-pin", default=None, help="pin high during the MARG update (default B5 = D13)")
+    p.add_argument("--loop-pin", default=None, help="pin high during a whole period's work, if the firmware has one")
+    p.add_argument("--rate", type=float, default=None, help="the firmware's sample rate in Hz (default 200)")
+    p.add_argument("--accuracy", action="store_true",
+                   help="compare the firmware's quaternions with BROAD's optical reference and the host Madgwick")
+    p.add_argument("--beta", type=float, default=DEFAULT_BETA, help="β of the host Madgwick (default the firmware's)")
+    p.add_argument("--jobs", type=int, default=2, help="boards run at once with several traces (default 2)")
+    p.add_argument("--no-build", action="store_true", help="do not run make; fail with the command instead")
+    p.add_argument("--json", action="store_true", help="print the figures as JSON")
+    p.add_argument("-v", "--verbose", action="count", default=0, help="log the bus (twice: every byte)")
+
+
+def prepare(source: str, seconds: float | None, start_s: float, hold_s: float, out: Path):
+    """Write the board's trace for SOURCE; returns (trace path, played seconds, BROAD trial slice or None)."""
+    from sphere.sim import trace as T
+
+    if source.endswith(".bin") and Path(source).exists():
+        ct = T.ChipTrace.read(source)
+        return Path(source), seconds or ct.seconds, None
+    if source.startswith("synthetic:") or source in T.SYNTHETIC:
+        spec = source.split(":", 1)[1] if source.startswith("synthetic:") else source
+        secs = seconds or 10.0
+        m = T.hold_first(T.synthetic(spec, max(secs - hold_s, 0.5)), hold_s)
+        T.to_chips(m).write(out)
+        return out, secs, None
+    from sphere.broad import find_trial, load_trial
+
+    trial = load_trial(find_trial(source))
+    total = len(trial) / trial.rate_hz
+    secs = seconds if seconds is not None else 10.0
+    play = min(max(secs - hold_s, 0.0), total - start_s)
+    sl = trial.seconds(start_s, play)
+    m = T.hold_first(T.from_broad(sl), hold_s)
+    T.to_chips(m).write(out)
+    return out, hold_s + len(sl) / sl.rate_hz, sl
+
+
+def _one(args, source: str, elf, tmp: Path, index: int, multi: bool):
+    from sphere.sim.analysis import accuracy, summarise
+    from sphere.sim.board import run_board
+
+    seconds = args.seconds if args.seconds is not None else (30.0 if args.accuracy else None)
+    trace, secs, trial = prepare(source, seconds, args.start, args.hold, tmp / f"trace{index}.bin")
+    capture = args.capture if (args.capture and not multi) else tmp / f"capture{index}.bin"
+    stats_out = args.stats if (args.stats and not multi) else None
+    run = run_board(elf, trace, secs, capture, interactive=args.pty, pty=args.pty, realtime=args.realtime,
+                    stats=stats_out, nack=args.nack, stall=args.stall, send=args.send,
+                    timing_pin=args.timing_pin, loop_pin=args.loop_pin, rate_hz=args.rate,
+                    verbose=args.verbose, build=not args.no_build)
+    summary = summarise(Path(capture)) if Path(capture).exists() else None
+    stats = dict(run.stats)
+    if summary is not None:
+        dev = summary.as_dict()
+        stats["stream"] = dev
+        if summary.status:
+            stats["device_loop_overruns"] = summary.status[-1].loop_overruns
+    acc = None
+    if args.accuracy:
+        if trial is None:
+            print(f"sphere sim: --accuracy needs a BROAD trial, not {source}", file=sys.stderr)
+        elif summary is not None:
+            acc = accuracy(summary, trial, args.hold, args.beta, bias_s=min(args.hold, 2.0))
+    if stats_out and Path(stats_out).exists():
+        Path(stats_out).write_text(json.dumps(stats, indent=2) + "\n")
+    return source, run, stats, acc
+
+
+def _print_figures(source: str, stats: dict, out=sys.stdout) -> None:
+    def c3(k):
+        d = stats.get(k) or {}
+        return f"min {d.get('min')} / median {d.get('median')} / max {d.get('max')}"
+
+    s = stats.get("stream") or {}
+    dec = s.get("decoder") or {}
+    print(f"sphere sim {source}: {stats.get('simulated_seconds', 0):.2f} simulated s in "
+          f"{stats.get('wall_seconds', 0):.2f} wall s (x{stats.get('speed', 0):.2f})", file=out)
+    print(f"  cycles per MARG update: {c3('cycles_per_update')} (limit 10000)", file=out)
+    print(f"  cycles per loop:        {c3('cycles_per_loop')}  [{stats.get('cpu_load_basis', '')}]", file=out)
+    load = stats.get("cpu_load")
+    print(f"  cpu_load at {stats.get('sample_rate_hz', 200):g} Hz: {load if load is None else f'{load:.3f}'} "
+          f"(max {stats.get('cpu_load_max')}); I2C time here is simulated at 1 us per TWI step, not 400 kHz", file=out)
+    print(f"  overruns {stats.get('overruns')} (timing pin), device loop_overruns {stats.get('device_loop_overruns')}; "
+          f"frames {stats.get('frames_sent')}; I2C transactions {stats.get('i2c_transactions')}, errors {stats.get('i2c_errors')}",
+          file=out)
+    if s:
+        print(f"  stream: raw {s.get('raw_samples')} at {s.get('raw_rate_hz') or 0:.2f} Hz, orientation "
+              f"{s.get('orientations')} at {s.get('orientation_rate_hz') or 0:.2f} Hz, events {s.get('events')}, "
+              f"CRC errors {dec.get('crc_errors')}, seq gaps {dec.get('seq_gaps')}, hellos {s.get('hellos')}", file=out)
+
+
+def run(args) -> int:
+    from sphere.sim.analysis import accuracy_table
+    from sphere.sim.board import BoardUnavailable, firmware_elf, testfw_elf
+
+    sources = list(args.trace)
+    if "all" in sources:
+        from sphere.broad import trial_paths
+        sources = [str(p) for p in trial_paths()]
+    if len(sources) > 1 and not args.accuracy:
+        print("sphere sim: several --trace only with --accuracy", file=sys.stderr)
+        return 2
+    try:
+        if args.firmware == "testfw":
+            elf = testfw_elf(build=not args.no_build)
+        elif args.firmware:
+            elf = Path(args.firmware)
+            if not elf.exists():
+                print(f"sphere sim: no firmware image at {elf}", file=sys.stderr)
+                return 2
+        else:
+            elf = firmware_elf(build=not args.no_build)
+        from sphere.sim.board import board_path
+        board_path(build=not args.no_build)
+    except BoardUnavailable as e:
+        print(f"sphere sim: {e}", file=sys.stderr)
+        return 2
+    multi = len(sources) > 1
+    with tempfile.TemporaryDirectory(prefix="sphere-sim-") as tmpd:
+        tmp = Path(tmpd)
+        try:
+            if multi:
+                with ThreadPoolExecutor(max(1, args.jobs)) as ex:
+                    results = list(ex.map(lambda ia: _one(args, ia[1], elf, tmp, ia[0], True), enumerate(sources)))
+            else:
+                results = [_one(args, sources[0], elf, tmp, 0, False)]
+        except (FileNotFoundError, ValueError) as e:
+            print(f"sphere sim: {e}", file=sys.stderr)
+            return 2
+    rc = 0
+    rows = []
+    for source, brun, stats, acc in results:
+        if brun.returncode != 0:
+            rc = brun.returncode
+            print(f"sphere sim: the board exited with {brun.returncode}: {brun.stderr.strip()[-500:]}", file=sys.stderr)
+        if args.json:
+            print(json.dumps({"source": source, **stats}))
+        else:
+            _print_figures(source, stats)
+        if acc is not None:
+            rows.append(acc)
+    if rows:
+        print()
+        print(f"Orientation error, dataset metric (RMSE over movement samples; β = {args.beta:g} for the host Madgwick):")
+        print(accuracy_table(rows))
+    return rc

@@ -1,0 +1,192 @@
+"""What a capture from the board says: hello, stream rates, events, status, decoder counters; and the
+firmware's orientation against BROAD's optical reference (the dataset's metric) beside the host's
+double-precision Madgwick on the same quantised samples."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from sphere.protocol.decoder import decode_all
+from sphere.protocol.packets import Event, Hello, Orientation, RawSample, Status
+from sphere.protocol.timebase import TimeUnwrapper
+
+
+@dataclass
+class CaptureSummary:
+    hello: Hello | None
+    hellos: int
+    raw: list = field(default_factory=list)
+    orientation: list = field(default_factory=list)
+    events: list = field(default_factory=list)
+    status: list = field(default_factory=list)
+    decoder: dict = field(default_factory=dict)
+
+    @staticmethod
+    def rate_hz(packets) -> float | None:
+        if len(packets) < 2:
+            return None
+        un = TimeUnwrapper()
+        t = [un(p.t_us) for p in packets]
+        return (len(t) - 1) / ((t[-1] - t[0]) * 1e-6) if t[-1] > t[0] else None
+
+    @property
+    def raw_rate_hz(self) -> float | None:
+        return self.rate_hz(self.raw)
+
+    @property
+    def orientation_rate_hz(self) -> float | None:
+        return self.rate_hz(self.orientation)
+
+    def events_named(self, name: str) -> list:
+        return [e for e in self.events if e.event_name == name]
+
+    def as_dict(self) -> dict:
+        h = self.hello
+        return {
+            "hello": h.to_json() if h else None,
+            "hellos": self.hellos,
+            "raw_samples": len(self.raw),
+            "raw_rate_hz": self.raw_rate_hz,
+            "orientations": len(self.orientation),
+            "orientation_rate_hz": self.orientation_rate_hz,
+            "events": {n: len(self.events_named(n)) for n in ("single_tap", "double_tap", "free_fall")},
+            "status_packets": len(self.status),
+            "last_status": self.status[-1].to_json() if self.status else None,
+            "decoder": self.decoder,
+        }
+
+
+def summarise(data: bytes | Path | str) -> CaptureSummary:
+    if not isinstance(data, (bytes, bytearray)):
+        data = Path(data).read_bytes()
+    packets, stats = decode_all(bytes(data))
+    hellos = [p for p in packets if isinstance(p, Hello)]
+    return CaptureSummary(
+        hello=hellos[0] if hellos else None,
+        hellos=len(hellos),
+        raw=[p for p in packets if isinstance(p, RawSample)],
+        orientation=[p for p in packets if isinstance(p, Orientation)],
+        events=[p for p in packets if isinstance(p, Event)],
+        status=[p for p in packets if isinstance(p, Status)],
+        decoder=stats.as_dict(),
+    )
+
+
+# ---------------------------------------------------------------- accuracy against BROAD
+
+
+def _held(t_src_s: np.ndarray, values: np.ndarray, t_query_s: np.ndarray) -> np.ndarray:
+    """The newest value at or before each query time; NaN before the first."""
+    idx = np.searchsorted(t_src_s, t_query_s, side="right") - 1
+    out = np.full((len(t_query_s), values.shape[1]), np.nan)
+    ok = idx >= 0
+    out[ok] = values[idx[ok]]
+    return out
+
+
+def host_madgwick(raw: list, imu_rate_hz: float, beta: float, bias_s: float = 0.0):
+    """The host's double-precision Madgwick on the RAW_SAMPLE values the firmware read.
+
+    Returns (t_s, q_nwu) or None when sphere.fusion.madgwick is not there. ``bias_s`` > 0: subtract
+    the mean gyro of the first ``bias_s`` seconds (as the firmware's power-up bias estimate does).
+    """
+    try:
+        from sphere.fusion.madgwick import Madgwick
+        from sphere.fusion.common import ecompass
+    except ImportError:
+        return None
+    un = TimeUnwrapper()
+    t = np.array([un(p.t_us) for p in raw]) * 1e-6
+    gyr = np.radians(np.array([p.gyro_dps for p in raw], dtype=float))
+    acc = np.array([p.accel_g for p in raw], dtype=float)
+    mag = np.array([p.mag_uT for p in raw], dtype=float)
+    if bias_s > 0:
+        first = t < t[0] + bias_s
+        gyr = gyr - gyr[first].mean(axis=0)
+    q0 = ecompass(*acc[0], *mag[0], frame="NWU")
+    f = Madgwick(beta=beta, q0=q0)
+    q = f.update_batch(gyr, acc, mag, 1.0 / imu_rate_hz)
+    return t, q
+
+
+@dataclass
+class AccuracyRow:
+    trial: str
+    seconds: float
+    firmware: dict | None
+    host: dict | None
+    fw_vs_host_rms_deg: float | None
+    note: str = ""
+
+
+def accuracy(summary: CaptureSummary, trial, offset_s: float, beta: float, bias_s: float = 0.0) -> AccuracyRow:
+    """The dataset's metric for the firmware's quaternions and the host Madgwick's on one trial slice.
+
+    ``trial`` is the slice of the BROAD trial that was played; its sample i was played at simulated
+    time ``offset_s + i / rate`` (``offset_s`` = the still lead-in held before it).
+    """
+    from sphere import quaternion as quat
+    from sphere.broad import orientation_error, error_angles_deg
+
+    t_trial = offset_s + np.arange(len(trial)) / trial.rate_hz
+    notes = []
+    fw = None
+    q_fw_enu = None
+    if summary.orientation:
+        un = TimeUnwrapper()
+        t_o = np.array([un(p.t_us) for p in summary.orientation]) * 1e-6
+        q_o = np.array([p.quat_float for p in summary.orientation], dtype=float)
+        q_fw_enu = quat.nwu_to_enu(quat.normalize(_held(t_o, q_o, t_trial)))
+        try:
+            fw = orientation_error(q_fw_enu, trial).as_dict()
+        except ValueError as e:
+            notes.append(str(e))
+    else:
+        notes.append("no ORIENTATION packets in the capture")
+    host = None
+    q_h_enu = None
+    imu_rate = summary.hello.imu_rate_hz if summary.hello else 200
+    hm = host_madgwick(summary.raw, imu_rate, beta, bias_s) if summary.raw else None
+    if hm is None:
+        notes.append("host Madgwick unavailable (sphere.fusion.madgwick missing or no RAW_SAMPLE packets)")
+    else:
+        t_h, q_h = hm
+        q_h_enu = quat.nwu_to_enu(_held(t_h, q_h, t_trial))
+        try:
+            host = orientation_error(q_h_enu, trial).as_dict()
+        except ValueError as e:
+            notes.append(str(e))
+    diff = None
+    if q_fw_enu is not None and q_h_enu is not None:
+        ok = np.all(np.isfinite(q_fw_enu), axis=1) & np.all(np.isfinite(q_h_enu), axis=1)
+        if ok.any():
+            tot, _, _ = error_angles_deg(q_fw_enu[ok], q_h_enu[ok])
+            diff = float(np.sqrt(np.mean(tot * tot)))
+    return AccuracyRow(trial.name, len(trial) / trial.rate_hz, fw, host, diff, "; ".join(notes))
+
+
+def accuracy_table(rows: list[AccuracyRow]) -> str:
+    def f(d, k):
+        return f"{d[k]:.2f}" if d and d.get(k) is not None and math.isfinite(d[k]) else "–"
+
+    lines = [
+        "| trial | s | firmware total ° | heading ° | inclination ° | host Madgwick total ° | heading ° | inclination ° | firmware vs host RMS ° |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    for r in rows:
+        lines.append(
+            f"| {r.trial} | {r.seconds:.0f} | {f(r.firmware, 'total')} | {f(r.firmware, 'heading')} | "
+            f"{f(r.firmware, 'inclination')} | {f(r.host, 'total')} | {f(r.host, 'heading')} | "
+            f"{f(r.host, 'inclination')} | {'–' if r.fw_vs_host_rms_deg is None else f'{r.fw_vs_host_rms_deg:.2f}'} |")
+    fw = [r.firmware["total"] for r in rows if r.firmware]
+    ho = [r.host["total"] for r in rows if r.host]
+    if len(rows) > 1:
+        lines.append(f"| mean | | {np.mean(fw):.2f} | | | {np.mean(ho):.2f} | | | |" if fw and ho else "| mean | | | | | | | | |")
+    for r in rows:
+        if r.note:
+            lines.append(f"\n{r.trial}: {r.note}")
+    return "\n".join(lines)
