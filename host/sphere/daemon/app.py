@@ -1,0 +1,191 @@
+"""The sphere-mouse daemon loop: source → motion → mode (pointer, tilt, 3-D) → backend, events → actions."""
+
+from __future__ import annotations
+
+import sys
+
+from sphere.daemon.actions import Action, EventActions
+from sphere.daemon.motion import GyroBias, MotionTracker
+from sphere.daemon.pointer import PointerMapper, PointerSettings, TiltMapper, TiltSettings
+from sphere.protocol import Event, Hello, Orientation, RawSample, Status
+
+DEFAULT_SCREEN_WIDTH_PX = 1920
+BUTTONS = {"left_click": "left", "right_click": "right", "middle_click": "middle"}
+
+
+class SphereMouse:
+    """Owns the state of one running daemon. ``handle(DecodedPacket)`` is the whole per-packet work;
+    ``run()`` drives it from the source until the source ends or :meth:`stop` is called."""
+
+    def __init__(self, cfg, source, backend, stream=None, status=None, log=None):
+        self.cfg = cfg
+        self.source = source
+        self.backend = backend
+        self.stream = stream
+        self.status = status
+        self.log = log or (lambda msg: print(f"sphere-mouse: {msg}", file=sys.stderr, flush=True))
+        width = cfg.output.screen_width_px
+        if not width:
+            size = backend.screen_size()
+            width = size[0] if size else DEFAULT_SCREEN_WIDTH_PX
+        self.screen_width_px = width
+        self.mapper = PointerMapper(PointerSettings.from_config(cfg.pointer), width)
+        self.tilt = TiltMapper(TiltSettings.from_config(cfg.tilt, cfg.pointer))
+        g = cfg.gyro
+        self.motion = MotionTracker(cfg.orientation.source, cfg.orientation.use_mag, cfg.orientation.beta,
+                                    GyroBias(g.still_dps, g.still_time_s, g.auto_bias))
+        self.actions = EventActions(cfg.events, cfg.freeze)
+        self.modes = list(cfg.mode.cycle)
+        if cfg.mode.start not in self.modes:
+            self.modes.insert(0, cfg.mode.start)
+        self.mode = cfg.mode.start
+        self.paused = False
+        self.battery_mv = 0
+        self.now_us = None
+        self.hello = None
+        self.moves = 0
+        self.clicks = 0
+        self.mode_changes: list[str] = []
+        self._generation = None
+        self._recentre_tilt = True
+        self._stopped = False
+
+    # -- actions --
+    def set_mode(self, mode: str) -> None:
+        self.mode = mode
+        self.mode_changes.append(mode)
+        self.mapper.reset()
+        self._recentre_tilt = True  # tilt starts from the pose held once the pointer unfreezes
+        self.log(f"mode {mode}")
+        if self.stream is not None:
+            self.stream.publish_mode(mode)
+
+    def next_mode(self) -> None:
+        i = self.modes.index(self.mode) if self.mode in self.modes else -1
+        self.set_mode(self.modes[(i + 1) % len(self.modes)])
+
+    def recentre(self) -> None:
+        if self.motion.quat is not None:
+            self.tilt.recentre(self.motion.quat)
+        if self.stream is not None:
+            self.stream.recentre()
+        if self.mode == "pointer":
+            size = self.backend.screen_size()
+            if size:
+                self.backend.move_to(size[0] // 2, size[1] // 2)
+        self.log("recentred")
+
+    def toggle_pause(self) -> None:
+        self.paused = not self.paused
+        self.mapper.reset()
+        self.log("paused" if self.paused else "resumed")
+
+    def do(self, action: Action) -> None:
+        ux, uy = action.undo
+        if (ux or uy) and self.mode != "3d":
+            self.backend.move(ux, uy)
+        k = action.kind
+        if self.mode == "3d" and k in ("left_click", "right_click", "middle_click", "double_click",
+                                        "double_click_full", "second_click"):
+            if self.stream is not None:
+                self.stream.publish_event(action.event, action.t_us)
+            return
+        if k in BUTTONS:
+            self.backend.click(BUTTONS[k])
+            self.clicks += 1
+        elif k in ("double_click", "double_click_full"):
+            self.backend.click("left", 2)
+            self.clicks += 2
+        elif k == "second_click":
+            self.backend.click("left")
+            self.clicks += 1
+        elif k == "next_mode":
+            self.next_mode()
+        elif k == "recentre":
+            self.recentre()
+        elif k == "pause":
+            self.toggle_pause()
+        if self.stream is not None:
+            self.stream.publish_event(action.event, action.t_us)
+
+    # -- packets --
+    def _move(self, t_us, dx: int, dy: int) -> None:
+        self.backend.move(dx, dy)
+        self.moves += 1
+        self.actions.moved(t_us, dx, dy)
+
+    def _tilt_step(self, t_us, dt: float) -> None:
+        q = self.motion.quat
+        if q is None:
+            return
+        if self._recentre_tilt:
+            self.tilt.recentre(q)
+            self._recentre_tilt = False
+        dx, dy = self.tilt.update(q, dt)
+        if dx or dy:
+            self._move(t_us, dx, dy)
+
+    def handle(self, dp) -> None:
+        p = dp.packet
+        t = dp.t_us
+        typ = p.TYPE
+        if typ == RawSample.TYPE:
+            dt = self.motion.raw(p, t)
+            self.now_us = t
+            if self.actions._pending is not None:
+                for a in self.actions.due(t):
+                    self.do(a)
+            if self.paused or self.actions.frozen(t) or p.flags & 0x10:
+                return
+            if self.mode == "pointer":
+                dx, dy = self.mapper.update(self.motion.gyro_dps, dt, self.motion.up)
+                if dx or dy:
+                    self._move(t, dx, dy)
+            elif self.mode == "tilt" and self.motion.uses_host_filter:
+                self._tilt_step(t, dt)
+            if self.stream is not None and self.motion.uses_host_filter:
+                self.stream.publish_orientation(self.motion.quat, t)
+        elif typ == Orientation.TYPE:
+            dt = self.motion.orientation(p, t)
+            if self.motion.uses_host_filter:
+                return
+            if self.mode == "tilt" and not self.paused and not self.actions.frozen(t):
+                self._tilt_step(t, dt)
+            if self.stream is not None:
+                self.stream.publish_orientation(self.motion.quat, t)
+        elif typ == Event.TYPE:
+            for a in self.actions.on_event(p.event_name, t):
+                self.do(a)
+        elif typ == Status.TYPE:
+            self.battery_mv = p.battery_mv
+        elif typ == Hello.TYPE:
+            self.hello = p
+            self.motion.reset_time()
+
+    # -- loop --
+    def run(self) -> int:
+        source = self.source
+        try:
+            for batch in source:
+                if source.generation != self._generation:
+                    self._generation = source.generation
+                    self.motion.reset_time()
+                    self.mapper.reset()
+                for dp in batch:
+                    self.handle(dp)
+                if self.status is not None:
+                    self.status.tick(self)
+                if self._stopped:
+                    break
+        finally:
+            if self.status is not None:
+                self.status.tick(self, force=True)
+                if self.status.overwrite:
+                    print(file=self.status.stream)
+        return 0
+
+    def stop(self) -> None:
+        self._stopped = True
+        close = getattr(self.source, "close", None)
+        if close:
+            close()

@@ -1,0 +1,199 @@
+"""What the sphere is doing now, from its packets: bias-corrected angular rate, the vertical, orientation.
+
+RAW_SAMPLE gyro values are uncalibrated chip units (14.375 LSB per °/s). :class:`GyroBias` re-estimates
+the bias whenever the sphere lies still, as gyro-mouse software does ("continuous calibration").
+Orientation comes from the host's fusion filter run on the raw samples (``sphere.fusion``), or from
+the firmware's ORIENTATION packets (Q14, sensor-to-NWU).
+"""
+
+from __future__ import annotations
+
+import math
+
+from sphere import chips
+
+G_M_S2 = chips.STANDARD_GRAVITY_M_S2
+DEG = math.pi / 180.0
+MAG_STILL_UT = 2.0  # the compass moves less than this while the sphere lies still (HMC5883L noise ≈ 0.2 µT)
+
+
+class GyroBias:
+    """Gyro bias in °/s, updated at the end of each window of ``still_time_s`` in which the sphere was still."""
+
+    def __init__(self, still_dps: float = 3.0, still_time_s: float = 1.0, enabled: bool = True):
+        self.still_dps = still_dps
+        self.still_time_s = still_time_s
+        self.enabled = enabled
+        self.bias = [0.0, 0.0, 0.0]
+        self.updates = 0
+        self._start()
+
+    def _start(self):
+        self._n = 0
+        self._t = 0.0
+        self._sum = [0.0, 0.0, 0.0]
+        self._lo = [math.inf] * 3
+        self._hi = [-math.inf] * 3
+        self._accel_ok = True
+        self._mlo = [math.inf] * 3
+        self._mhi = [-math.inf] * 3
+
+    def add(self, gyro_dps, accel_g_norm: float, dt_s: float, mag_uT=None) -> None:
+        if not self.enabled:
+            return
+        if mag_uT is not None:
+            # a turn at a constant rate looks like bias to the gyro alone; the compass sees it
+            for i in range(3):
+                v = mag_uT[i]
+                if v < self._mlo[i]:
+                    self._mlo[i] = v
+                if v > self._mhi[i]:
+                    self._mhi[i] = v
+            if max(self._mhi[i] - self._mlo[i] for i in range(3)) > MAG_STILL_UT:
+                self._start()
+                return
+        for i in range(3):
+            v = gyro_dps[i]
+            self._sum[i] += v
+            if v < self._lo[i]:
+                self._lo[i] = v
+            if v > self._hi[i]:
+                self._hi[i] = v
+        if abs(accel_g_norm - 1.0) > 0.15:
+            self._accel_ok = False
+        self._n += 1
+        self._t += dt_s
+        spread = max(self._hi[i] - self._lo[i] for i in range(3))
+        if spread > 2.0 * self.still_dps or not self._accel_ok:
+            self._start()
+            return
+        if self._t >= self.still_time_s:
+            mean = [s / self._n for s in self._sum]
+            self._start()
+            if self.updates and max(abs(m - b) for m, b in zip(mean, self.bias)) > self.still_dps:
+                return  # bias drifts slowly: a jump this big is a slow steady turn, not bias
+            k = 1.0 if self.updates == 0 else 0.5
+            self.bias = [b + k * (m - b) for b, m in zip(self.bias, mean)]
+            self.updates += 1
+
+
+def up_from_quat(q):
+    """The earth's up (z) expressed in sensor coordinates, for a sensor-to-earth quaternion (w, x, y, z)."""
+    w, x, y, z = q
+    return (2.0 * (x * z - w * y), 2.0 * (y * z + w * x), 1.0 - 2.0 * (x * x + y * y))
+
+
+def _host_filter(beta: float):
+    """The best host filter available: sphere.fusion's SphereFilter, else its Madgwick; None if neither."""
+    try:
+        from sphere.fusion.madgwick import Madgwick  # noqa: F401
+    except Exception:  # the fusion package is another module's work and may be absent
+        return None
+    return Madgwick(beta=beta)
+
+
+class MotionTracker:
+    """Feed packets in; read ``gyro_dps`` (bias-corrected, sensor axes), ``up`` and ``quat`` (sensor-to-NWU)."""
+
+    def __init__(self, orientation_source: str = "auto", use_mag: bool = False, beta: float = 0.1,
+                 bias: GyroBias | None = None, imu_rate_hz: float = 200.0):
+        self.bias = bias or GyroBias()
+        self.orientation_source = orientation_source
+        self.use_mag = use_mag
+        self.filter = None
+        if orientation_source in ("auto", "host"):
+            self.filter = _host_filter(beta)
+        self.quat = None  # (w, x, y, z) sensor-to-NWU, or None until known
+        self.up = None  # earth up in sensor axes
+        self.gyro_dps = (0.0, 0.0, 0.0)
+        self.default_dt_s = 1.0 / imu_rate_hz
+        self._last_raw_t = None
+        self._last_ori_t = None
+        self._accel_up = None
+        self._filter_started = False
+        self.raw_seen = False
+
+    @property
+    def uses_host_filter(self) -> bool:
+        return self.filter is not None and self.raw_seen
+
+    def reset_time(self) -> None:
+        """After a reconnect: the next sample starts a new time base."""
+        self._last_raw_t = None
+        self._last_ori_t = None
+
+    def _dt(self, t_us, last):
+        if t_us is None or last is None:
+            return self.default_dt_s
+        dt = (t_us - last) * 1e-6
+        if dt <= 0.0 or dt > 0.1:
+            return self.default_dt_s
+        return dt
+
+    def raw(self, sample, t_us) -> float:
+        """Take a RAW_SAMPLE; returns its dt in seconds."""
+        self.raw_seen = True
+        dt = self._dt(t_us, self._last_raw_t)
+        self._last_raw_t = t_us
+        s = 1.0 / chips.ITG3200_LSB_PER_DPS
+        g = sample.gyro
+        gyro = (g[0] * s, g[1] * s, g[2] * s)
+        a = sample.accel
+        ka = 1.0 / chips.ADXL345_LSB_PER_G
+        ax, ay, az = a[0] * ka, a[1] * ka, a[2] * ka
+        anorm = math.sqrt(ax * ax + ay * ay + az * az)
+        flags = sample.flags
+        tap_active = bool(flags & 0x10)
+        accel_ok = bool(flags & 0x01) and anorm > 0.0
+        km = 1.0 / chips.HMC5883L_LSB_PER_UT
+        m = sample.mag
+        mag_ok = bool(flags & 0x04) and -4096 not in m
+        mag = (m[0] * km, m[1] * km, m[2] * km) if mag_ok else None
+        if accel_ok and not tap_active:
+            self.bias.add(gyro, anorm, dt, mag)
+        b = self.bias.bias
+        self.gyro_dps = (gyro[0] - b[0], gyro[1] - b[1], gyro[2] - b[2])
+        if accel_ok and not tap_active and 0.5 < anorm < 1.5:
+            # low-passed accelerometer as the vertical when no orientation is known
+            if self._accel_up is None:
+                self._accel_up = (ax / anorm, ay / anorm, az / anorm)
+            else:
+                k = 0.05
+                u = self._accel_up
+                self._accel_up = (u[0] + k * (ax / anorm - u[0]), u[1] + k * (ay / anorm - u[1]), u[2] + k * (az / anorm - u[2]))
+        if self.filter is not None and self.orientation_source != "device":
+            if not self._filter_started and accel_ok:
+                self._start_filter(ax, ay, az, sample)
+            if not self.use_mag:
+                mag = None
+            gd = self.gyro_dps
+            q = self.filter.update((gd[0] * DEG, gd[1] * DEG, gd[2] * DEG), (ax * G_M_S2, ay * G_M_S2, az * G_M_S2),
+                                   mag, dt, acc_valid=accel_ok and not tap_active)
+            self.quat = tuple(float(v) for v in q)
+            self.up = up_from_quat(self.quat)
+        elif self.quat is None:
+            self.up = self._accel_up
+        return dt
+
+    def _start_filter(self, ax, ay, az, sample) -> None:
+        """Start the host filter at the accelerometer's tilt (no slow convergence from identity)."""
+        self._filter_started = True
+        try:
+            from sphere.fusion.common import ecompass
+
+            self.filter.quat = ecompass(ax, ay, az, None, None, None, frame="NWU")
+        except Exception:
+            pass
+
+    def orientation(self, packet, t_us) -> float:
+        """Take an ORIENTATION packet; returns its dt in seconds. Ignored while the host filter runs."""
+        dt = self._dt(t_us, self._last_ori_t)
+        self._last_ori_t = t_us
+        if self.uses_host_filter and self.orientation_source != "device":
+            return dt
+        q = packet.quat_float
+        n = math.sqrt(sum(v * v for v in q))
+        if n > 0:
+            self.quat = tuple(v / n for v in q)
+            self.up = up_from_quat(self.quat)
+        return dt

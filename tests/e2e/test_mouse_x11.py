@@ -1,0 +1,164 @@
+"""Acceptance: sphere-mouse under a real X server (Xvfb), pointer read back with xdotool, clicks received
+by a test X client, a toss switching to tilt mode."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+import threading
+import time
+
+import pytest
+
+from sphere.daemon.synthetic import script_bytes
+
+pytestmark = pytest.mark.skipif(
+    shutil.which("Xvfb") is None or shutil.which("xdotool") is None,
+    reason="needs Xvfb and xdotool (apt-get install xvfb xdotool)",
+)
+
+WIDTH, HEIGHT = 1280, 1024
+
+
+@pytest.fixture(scope="module")
+def xvfb():
+    """A private Xvfb on a free display number (Xvfb picks it and writes it to -displayfd)."""
+    r, w = os.pipe()
+    proc = subprocess.Popen(
+        ["Xvfb", "-displayfd", str(w), "-screen", "0", f"{WIDTH}x{HEIGHT}x24", "-nolisten", "tcp", "-noreset"],
+        pass_fds=(w,), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+    )
+    os.close(w)
+    number = b""
+    deadline = time.monotonic() + 15
+    while not number.endswith(b"\n") and time.monotonic() < deadline:
+        chunk = os.read(r, 16)
+        if not chunk:
+            break
+        number += chunk
+    os.close(r)
+    if not number.strip():
+        proc.kill()
+        pytest.fail("Xvfb did not start")
+    display = f":{number.decode().strip()}"
+    yield display
+    proc.terminate()
+    proc.wait(10)
+
+
+def xdotool(display, *args) -> str:
+    env = dict(os.environ, DISPLAY=display)
+    return subprocess.run(["xdotool", *args], env=env, check=True, capture_output=True, text=True, timeout=10).stdout
+
+
+def pointer(display) -> tuple[int, int]:
+    out = xdotool(display, "getmouselocation", "--shell")
+    values = dict(line.split("=", 1) for line in out.split())
+    return int(values["X"]), int(values["Y"])
+
+
+class ClickRecorder:
+    """A test X client: a full-screen window that records the button presses it receives."""
+
+    def __init__(self, display_name: str):
+        from Xlib import X, display
+
+        self.X = X
+        self.d = display.Display(display_name)
+        screen = self.d.screen()
+        self.win = screen.root.create_window(
+            0, 0, WIDTH, HEIGHT, 0, screen.root_depth, X.InputOutput, X.CopyFromParent,
+            event_mask=X.ButtonPressMask | X.ButtonReleaseMask | X.StructureNotifyMask,
+        )
+        self.win.map()
+        self.d.sync()
+        while True:
+            if self.d.next_event().type == X.MapNotify:
+                break
+        self.presses: list[tuple[int, int, int]] = []
+        self.releases = 0
+        self._thread = threading.Thread(target=self._loop, daemon=True)
+        self._thread.start()
+
+    def _loop(self):
+        X = self.X
+        while True:
+            try:
+                e = self.d.next_event()
+            except Exception:
+                return
+            if e.type == X.ButtonPress:
+                self.presses.append((e.detail, e.root_x, e.root_y))
+            elif e.type == X.ButtonRelease:
+                self.releases += 1
+
+
+def run_mouse(display, capture, *extra, timeout=60):
+    env = dict(os.environ, DISPLAY=display)
+    return subprocess.run(
+        [sys.executable, "-m", "sphere.mouse", "--replay", str(capture), "--backend", "x11", "--no-stream",
+         "--config", os.devnull, *extra],
+        env=env, capture_output=True, text=True, timeout=timeout,
+    )
+
+
+def test_replay_moves_pointer_clicks_and_toss_switches_mode(xvfb, tmp_path):
+    capture = tmp_path / "session.bin"
+    capture.write_bytes(script_bytes([
+        ("still", 1.0),                      # gyro bias settles
+        ("turn", (0, 0, 1), 10.0, 1.0),      # 10° to the left: 10/40 of the width = 320 px left
+        ("turn", (0, 1, 0), -10.0, 0.5),     # 5° nose up: 160 px up
+        ("still", 0.3),
+        ("tap", "single_tap"),               # first knock of a double tap: click, the jolt before it undone
+        ("still", 0.2),
+        ("tap", "double_tap"),               # second knock: one more click makes the X double click
+        ("still", 0.4),
+        ("free_fall", 0.3),                  # toss and catch: pointer → tilt
+        ("still", 1.0),
+        ("tilt", (0, 0, 1), -15.0, 0.3),     # turn right by 15° and hold: tilt mode drives the pointer
+        ("still", 1.0),
+    ]))
+    clicks = ClickRecorder(xvfb)
+    xdotool(xvfb, "mousemove", str(WIDTH // 2), str(HEIGHT // 2))
+    assert pointer(xvfb) == (WIDTH // 2, HEIGHT // 2)
+
+    result = run_mouse(xvfb, capture, "--speed", "3", "--set", "pointer.axes=world")
+    assert result.returncode == 0, result.stderr
+    assert "mode tilt" in result.stderr
+
+    time.sleep(0.3)
+    # two presses of button 1 (a double click), at the aimed point (640-320, 512-160), not where the
+    # knocks pushed the sphere
+    assert [c[0] for c in clicks.presses] == [1, 1], clicks.presses
+    for _, x, y in clicks.presses:
+        assert abs(x - 320) <= 2 and abs(y - 352) <= 2, clicks.presses
+    assert clicks.releases == 2
+    # after the toss the sphere is still but turned right by 15°: tilt mode kept moving the pointer right
+    x, y = pointer(xvfb)
+    assert x > 320 + 300, (x, y)
+    assert abs(y - 352) <= 20, (x, y)
+
+
+def test_pointer_mode_position_is_exact(xvfb, tmp_path):
+    """A pure rotation moves the pointer by sensitivity × angle, read back with xdotool."""
+    capture = tmp_path / "turn.bin"
+    capture.write_bytes(script_bytes([("still", 1.0), ("turn", (0, 0, 1), -20.0, 0.5), ("turn", (0, 1, 0), 8.0, 0.5)]))
+    xdotool(xvfb, "mousemove", "100", "100")
+    result = run_mouse(xvfb, capture, "--speed", "0", "--sensitivity", "50")
+    assert result.returncode == 0, result.stderr
+    # 10° right = 256 px, 4° nose down = 102.4 px down (1280 px per 50°)
+    x, y = pointer(xvfb)
+    assert abs(x - (100 + 256)) <= 2 and abs(y - (100 + 102)) <= 2, (x, y)
+
+
+def test_config_error_is_clear(xvfb, tmp_path):
+    bad = tmp_path / "config.toml"
+    bad.write_text("[pointer]\nslow_deg_per_widht = 30\n")
+    env = dict(os.environ, DISPLAY=xvfb)
+    r = subprocess.run([sys.executable, "-m", "sphere.mouse", "--config", str(bad), "--replay", "x"],
+                       env=env, capture_output=True, text=True, timeout=30)
+    assert r.returncode == 2
+    assert "unknown key [pointer] slow_deg_per_widht" in r.stderr
+    assert "did you mean 'slow_deg_per_width'" in r.stderr

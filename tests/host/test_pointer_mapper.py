@@ -1,0 +1,141 @@
+"""PointerMapper and TiltMapper: the pure mapping from motion to pointer steps."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from sphere.daemon.pointer import PointerMapper, PointerSettings, TiltMapper, TiltSettings, pointing_angles_deg
+
+DT = 0.005
+
+
+def run(mapper, rate, seconds, up=None):
+    dx = dy = 0
+    for _ in range(int(round(seconds / DT))):
+        sx, sy = mapper.update(rate, DT, up)
+        dx += sx
+        dy += sy
+    return dx, dy
+
+
+def plain(**kw):
+    base = dict(tightening_dps=0.0, smoothing_dps=0.0)
+    base.update(kw)
+    return PointerSettings(**base)
+
+
+def test_sensitivity_is_degrees_per_screen_width():
+    m = PointerMapper(plain(slow_deg_per_width=40, fast_deg_per_width=40), screen_width_px=1600)
+    # 20 °/s for 2 s = 40°: exactly one screen width, to the left for a left turn (+z)
+    assert run(m, (0, 0, 20.0), 2.0) == (-1600, 0)
+
+
+def test_pitch_down_moves_pointer_down():
+    m = PointerMapper(plain(), 1920)
+    dx, dy = run(m, (0, 10.0, 0), 1.0)
+    assert dx == 0 and dy == pytest.approx(480, abs=1)
+
+
+def test_subpixel_remainders_are_kept():
+    m = PointerMapper(plain(slow_deg_per_width=100, fast_deg_per_width=100), 1000)
+    # 0.5 °/s → 5 px/s → 0.025 px per sample: nothing would move without remainders
+    assert run(m, (0, 0, -0.5), 4.0) == (20, 0)
+
+
+def test_remainders_are_symmetric():
+    m = PointerMapper(plain(), 1920)
+    right = run(m, (0, 0, -3.3), 1.0)
+    m.reset()
+    left = run(m, (0, 0, 3.3), 1.0)
+    assert right[0] == -left[0]
+
+
+def test_acceleration_between_thresholds():
+    s = plain(slow_deg_per_width=60, fast_deg_per_width=20, accel_low_dps=10, accel_high_dps=100)
+    m = PointerMapper(s, 1200)
+    slow = abs(m.rate_px_s((0, 0, 5.0))[0]) / 5.0
+    fast = abs(m.rate_px_s((0, 0, 200.0))[0]) / 200.0
+    mid = abs(m.rate_px_s((0, 0, 55.0))[0]) / 55.0
+    assert slow == pytest.approx(20.0)  # 1200 px / 60°
+    assert fast == pytest.approx(60.0)  # 1200 px / 20°
+    assert mid == pytest.approx(40.0)  # halfway
+
+
+def test_tightening_is_soft_not_a_dead_zone():
+    m = PointerMapper(plain(tightening_dps=4.0), 1920)
+    v_small = abs(m.rate_px_s((0, 0, 1.0))[0])
+    v_big = abs(m.rate_px_s((0, 0, 8.0))[0])
+    plain_small = abs(PointerMapper(plain(), 1920).rate_px_s((0, 0, 1.0))[0])
+    assert 0 < v_small == pytest.approx(plain_small / 4)  # scaled by rate/threshold, not zeroed
+    assert v_big == pytest.approx(abs(PointerMapper(plain(), 1920).rate_px_s((0, 0, 8.0))[0]))
+
+
+def test_smoothing_only_slow_motion():
+    s = plain(smoothing_dps=8.0, smoothing_time_s=0.05)
+    m = PointerMapper(s, 1920)
+    # alternating tremor at 2 °/s is averaged away
+    out = [m.rate_px_s((0, 0, 2.0 if i % 2 else -2.0), None, DT)[0] for i in range(40)]
+    assert max(abs(v) for v in out[10:]) < 0.15 * 2.0 * 48
+    # a fast move passes through at once, without lag
+    m.reset()
+    v = m.rate_px_s((0, 0, 50.0), None, DT)[0]
+    assert v == pytest.approx(-50.0 * 48)
+
+
+def test_world_axes_follow_gravity_when_rolled():
+    """Held rolled by 90° about the pointing axis, turning about the vertical still moves sideways."""
+    local = PointerMapper(plain(axes="local"), 1920)
+    world = PointerMapper(plain(axes="world"), 1920)
+    # rolled 90° to the right about x: the vertical is along sensor -y ... turning left about earth z
+    up = (0.0, 1.0, 0.0)
+    rate = (0.0, 10.0, 0.0)  # rotation about the vertical (sensor +y) = a left turn
+    dxw, dyw = run(world, rate, 1.0, up)
+    dxl, dyl = run(local, rate, 1.0, up)
+    assert dxw == pytest.approx(-480, abs=1) and dyw == 0
+    assert dxl == 0 and dyl != 0  # local axes would see a pitch
+
+
+def test_world_and_local_agree_when_level():
+    a = PointerMapper(plain(axes="world"), 1920)
+    b = PointerMapper(plain(axes="local"), 1920)
+    rate = (3.0, -7.0, 11.0)
+    assert run(a, rate, 0.5, (0, 0, 1)) == run(b, rate, 0.5, (0, 0, 1))
+
+
+def test_invert():
+    m = PointerMapper(plain(invert_x=True, invert_y=True), 1920)
+    dx, dy = run(m, (0, 5.0, 5.0), 1.0)
+    assert dx > 0 and dy < 0
+
+
+def quat_axis_angle(axis, deg):
+    n = math.sqrt(sum(a * a for a in axis))
+    h = math.radians(deg) / 2
+    return (math.cos(h),) + tuple(a / n * math.sin(h) for a in axis)
+
+
+def test_pointing_angles():
+    h, e = pointing_angles_deg(quat_axis_angle((0, 0, 1), 30))
+    assert h == pytest.approx(30) and e == pytest.approx(0, abs=1e-9)
+    h, e = pointing_angles_deg(quat_axis_angle((0, 1, 0), -20))  # nose up
+    assert e == pytest.approx(20) and h == pytest.approx(0, abs=1e-9)
+
+
+def test_tilt_velocity_dead_zone_and_full_speed():
+    t = TiltMapper(TiltSettings(dead_zone_deg=3, full_speed_deg=25, max_speed_px_s=1000, exponent=1.0))
+    t.recentre((1.0, 0, 0, 0))
+    assert t.velocity_px_s(quat_axis_angle((0, 0, 1), 2.0)) == (0.0, 0.0)
+    vx, vy = t.velocity_px_s(quat_axis_angle((0, 0, 1), 40.0))  # left, past full tilt
+    assert vx == pytest.approx(-1000) and vy == pytest.approx(0)
+    vx, vy = t.velocity_px_s(quat_axis_angle((0, 1, 0), -14.0))  # nose up by 14°: half speed, upwards
+    assert vy == pytest.approx(-500) and vx == pytest.approx(0, abs=1e-6)
+
+
+def test_tilt_integrates_with_remainders():
+    t = TiltMapper(TiltSettings(dead_zone_deg=0, full_speed_deg=10, max_speed_px_s=100, exponent=1.0))
+    t.recentre((1.0, 0, 0, 0))
+    q = quat_axis_angle((0, 0, -1), 10.0)  # right, full speed
+    total = sum(t.update(q, DT)[0] for _ in range(200))
+    assert total == 100
