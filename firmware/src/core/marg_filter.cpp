@@ -1,0 +1,165 @@
+#include "marg_filter.h"
+
+#include "fixed_math.h"
+#include "packets.h"
+
+namespace sphere {
+
+void MargFilter::begin(uint16_t dt_us) {
+    q_[0] = ONE_Q30;
+    q_[1] = q_[2] = q_[3] = 0;
+    dt_us_ = dt_us;
+    // ½·dt·(π/180/14.375)·2^32 = dt_us · 2.607355 (exact to 1 in 10^6 before rounding)
+    gyro_k_ = (uint16_t)(2u * dt_us + ((uint32_t)dt_us * 607355ul + 500000ul) / 1000000ul);
+    setBetaMilli(DEFAULT_BETA_MILLI);
+}
+
+void MargFilter::setBetaMilli(uint16_t beta_milli) {
+    beta_milli_ = beta_milli;
+    // β·dt·2^23 = beta_milli · dt_us · 2^23 / 10^9
+    // = p·256/30517.578 with p = beta_milli·dt_us ≤ 2500·5000 (p·256 < 2^32)
+    if (beta_milli > 2500) beta_milli = 2500;
+    uint32_t p = (uint32_t)beta_milli * dt_us_;
+    beta_dt_ = (int32_t)((p * 256ul + 15259ul) / 30518ul);
+}
+
+void MargFilter::setQuaternion(const int32_t q[4]) {
+    for (uint8_t i = 0; i < 4; ++i) q_[i] = q[i];
+}
+
+void MargFilter::quaternionQ14(int16_t out[4]) const {
+    for (uint8_t i = 0; i < 4; ++i) out[i] = (int16_t)((q_[i] + 0x8000l) >> 16);
+}
+
+static inline int16_t r14(int32_t q28) { return (int16_t)((q28 + 8192l) >> 14); }
+static inline int16_t r15(int32_t q28) { return (int16_t)((q28 + 16384l) >> 15); }
+static inline int16_t r13(int32_t q28) { return (int16_t)((q28 + 4096l) >> 13); }
+
+// v (int32) × k (unsigned Q16 scale) → int32, exact to 1 LSB without a 64-bit product
+static inline int32_t scaleQ16(int32_t v, uint16_t k) {
+    int16_t hi = (int16_t)(v >> 16);
+    uint16_t lo = (uint16_t)v;
+    return (int32_t)hi * k + (int32_t)(((uint32_t)lo * k) >> 16);
+}
+
+uint8_t MargFilter::update(const int16_t g[3], const int16_t a[3], const int16_t m[3], bool acc_valid,
+                           bool mag_valid) {
+    uint8_t flags = 0;
+    // state in Q14 for the products (rounded)
+    int16_t q0 = (int16_t)((q_[0] + 0x8000l) >> 16), q1 = (int16_t)((q_[1] + 0x8000l) >> 16),
+            q2 = (int16_t)((q_[2] + 0x8000l) >> 16), q3 = (int16_t)((q_[3] + 0x8000l) >> 16);
+
+    // 1. gyro: ½ q ⊗ [0, ω]·dt, in Q30. Sums in Q14·LSB, |sum| ≤ ‖q‖·‖ω‖ < 2^14·1.0001·56756 < 2^30
+    int32_t d0 = -mul16(q1, g[0]) - mul16(q2, g[1]) - mul16(q3, g[2]);
+    int32_t d1 = mul16(q0, g[0]) + mul16(q2, g[2]) - mul16(q3, g[1]);
+    int32_t d2 = mul16(q0, g[1]) - mul16(q1, g[2]) + mul16(q3, g[0]);
+    int32_t d3 = mul16(q0, g[2]) + mul16(q1, g[1]) - mul16(q2, g[0]);
+    int32_t n0 = q_[0] + scaleQ16(d0, gyro_k_);
+    int32_t n1 = q_[1] + scaleQ16(d1, gyro_k_);
+    int32_t n2 = q_[2] + scaleQ16(d2, gyro_k_);
+    int32_t n3 = q_[3] + scaleQ16(d3, gyro_k_);
+
+    int32_t av[3] = {a[0], a[1], a[2]};
+    int16_t ax, ay, az;
+    {
+        int16_t an[3];
+        if (!acc_valid || !normaliseQ14(av, 3, an)) {
+            flags |= ORI_ACCEL_REJECTED;
+            goto integrate;
+        }
+        ax = an[0];
+        ay = an[1];
+        az = an[2];
+    }
+    {
+        // rotation matrix sensor→earth, Q14 (entries within ±1)
+        int32_t q1q1 = mul16(q1, q1), q2q2 = mul16(q2, q2), q3q3 = mul16(q3, q3);
+        int32_t q0q1 = mul16(q0, q1), q0q2 = mul16(q0, q2), q0q3 = mul16(q0, q3);
+        int32_t q1q2 = mul16(q1, q2), q1q3 = mul16(q1, q3), q2q3 = mul16(q2, q3);
+        int16_t r20 = r13(q1q3 - q0q2), r21 = r13(q0q1 + q2q3), r22 = (int16_t)(16384 - r13(q1q1 + q2q2));
+
+        // gravity objective (eq. 74), Q13
+        int16_t fg0 = (int16_t)((r20 - ax) >> 1), fg1 = (int16_t)((r21 - ay) >> 1),
+                fg2 = (int16_t)((r22 - az) >> 1);
+        // half the Jacobian (a common factor does not change ∇f/‖∇f‖), Q13 entries
+        int16_t c0 = q0 >> 1, c1 = q1 >> 1, c2 = q2 >> 1, c3 = q3 >> 1;
+        // J_gᵀ f_g / 2, Q26
+        int32_t s0 = -mul16(c2, fg0) + mul16(c1, fg1);
+        int32_t s1 = mul16(c3, fg0) + mul16(c0, fg1) - mul16(q1, fg2);
+        int32_t s2 = -mul16(c0, fg0) + mul16(c3, fg1) - mul16(q2, fg2);
+        int32_t s3 = mul16(c1, fg0) + mul16(c2, fg1);
+
+        int32_t mv[3] = {m[0], m[1], m[2]};
+        int16_t mn[3];
+        if (mag_valid && normaliseQ14(mv, 3, mn)) {
+            flags |= ORI_MAG_USED;
+            int16_t mx = mn[0], my = mn[1], mz = mn[2];
+            int16_t r00 = (int16_t)(16384 - r13(q2q2 + q3q3)), r01 = r13(q1q2 - q0q3), r02 = r13(q1q3 + q0q2);
+            int16_t r10 = r13(q1q2 + q0q3), r11 = (int16_t)(16384 - r13(q1q1 + q3q3)), r12 = r13(q2q3 - q0q1);
+            // h = q ⊗ m ⊗ q*, Q14
+            int32_t hv[2] = {mul16(r00, mx) + mul16(r01, my) + mul16(r02, mz),
+                             mul16(r10, mx) + mul16(r11, my) + mul16(r12, mz)};
+            int16_t hz = r14(mul16(r20, mx) + mul16(r21, my) + mul16(r22, mz));
+            // b = [√(hx² + hy²), 0, hz]: the length of (hx, hy) is (hx, hy)·unit(hx, hy)
+            int16_t bx = 0, bz = hz, u[2];
+            if (normaliseQ14(hv, 2, u)) {
+                int32_t l = (hv[0] >> 14) * (int32_t)u[0] + (hv[1] >> 14) * (int32_t)u[1];
+                bx = (int16_t)((l + 8192) >> 14);
+            }
+            // magnetic objective (eq. 76): Rᵀ b − m, Q13
+            int16_t fb0 = (int16_t)((r14(mul16(bx, r00) + mul16(bz, r20)) - mx) >> 1);
+            int16_t fb1 = (int16_t)((r14(mul16(bx, r01) + mul16(bz, r21)) - my) >> 1);
+            int16_t fb2 = (int16_t)((r14(mul16(bx, r02) + mul16(bz, r22)) - mz) >> 1);
+            // half of J_b (eq. 77), Q13: X_i = bx·q_i, Z_i = bz·q_i
+            int16_t X0 = r15(mul16(bx, q0)), X1 = r15(mul16(bx, q1)), X2 = r15(mul16(bx, q2)),
+                    X3 = r15(mul16(bx, q3));
+            int16_t Z0 = r15(mul16(bz, q0)), Z1 = r15(mul16(bz, q1)), Z2 = r15(mul16(bz, q2)),
+                    Z3 = r15(mul16(bz, q3));
+            s0 += -mul16(Z2, fb0) + mul16((int16_t)(Z1 - X3), fb1) + mul16(X2, fb2);
+            s1 += mul16(Z3, fb0) + mul16((int16_t)(X2 + Z0), fb1) + mul16((int16_t)(X3 - 2 * Z1), fb2);
+            s2 += mul16((int16_t)(-2 * X2 - Z0), fb0) + mul16((int16_t)(X1 + Z3), fb1) +
+                  mul16((int16_t)(X0 - 2 * Z2), fb2);
+            s3 += mul16((int16_t)(Z1 - 2 * X3), fb0) + mul16((int16_t)(Z2 - X0), fb1) + mul16(X1, fb2);
+        }
+        int32_t sv[4] = {s0, s1, s2, s3};
+        int16_t sn[4];
+        if (normaliseQ14(sv, 4, sn)) {
+            // q̇ −= β ∇f/‖∇f‖ ; step = ŝ(Q14)·β·dt(2^23) → Q30
+            n0 -= (sn[0] * beta_dt_ + 64) >> 7;
+            n1 -= (sn[1] * beta_dt_ + 64) >> 7;
+            n2 -= (sn[2] * beta_dt_ + 64) >> 7;
+            n3 -= (sn[3] * beta_dt_ + 64) >> 7;
+        }
+    }
+integrate:
+    // renormalise: ‖q‖² = 1 + e is close to 1, so q ← q·(1 − e/2 + 3e²/8)
+    {
+        int16_t h0 = (int16_t)((n0 + 0x8000l) >> 16), h1 = (int16_t)((n1 + 0x8000l) >> 16),
+                h2 = (int16_t)((n2 + 0x8000l) >> 16), h3 = (int16_t)((n3 + 0x8000l) >> 16);
+        int32_t e28 = mul16(h0, h0) + mul16(h1, h1) + mul16(h2, h2) + mul16(h3, h3) - (1l << 28);
+        int32_t e = (e28 + 2048) >> 12;  // Q16; |e| stays below 0.03 (see MARG_FILTER.md)
+        if (e > 16384) e = 16384;
+        if (e < -16384) e = -16384;
+        int16_t e16 = (int16_t)e;
+        int16_t d16 = (int16_t)(-(e16 >> 1) + ((3 * ((mul16(e16, e16) + 32768l) >> 16)) >> 3));
+        q_[0] = n0 + mul16(h0, d16);
+        q_[1] = n1 + mul16(h1, d16);
+        q_[2] = n2 + mul16(h2, d16);
+        q_[3] = n3 + mul16(h3, d16);
+    }
+    return flags;
+}
+
+bool MargFilter::accelPlausible(const int16_t a[3]) {
+    int32_t n2 = mul16(a[0], a[0]) + mul16(a[1], a[1]) + mul16(a[2], a[2]);
+    return n2 >= 128l * 128l && n2 <= 384l * 384l;
+}
+
+bool MargFilter::magPlausible(const int16_t m[3]) {
+    for (uint8_t i = 0; i < 3; ++i)
+        if (m[i] == -4096) return false;  // HMC5883L overflow
+    int32_t n2 = mul16(m[0], m[0]) + mul16(m[1], m[1]) + mul16(m[2], m[2]);
+    return n2 >= 164l * 164l && n2 <= 981l * 981l;
+}
+
+}  // namespace sphere

@@ -1,0 +1,118 @@
+// Packet types and bodies of protocol/spec.md §4–§5 (version 1). Field names are the spec's.
+#pragma once
+#include <stdint.h>
+
+#include "calibration.h"
+
+namespace sphere {
+
+const uint8_t PROTOCOL_VERSION = 1;
+const uint8_t FIRMWARE_VERSION_MAJOR = 0, FIRMWARE_VERSION_MINOR = 1, FIRMWARE_VERSION_PATCH = 0;
+
+enum PacketType : uint8_t {
+    PKT_HELLO = 0x01,
+    PKT_RAW_SAMPLE = 0x02,
+    PKT_ORIENTATION = 0x03,
+    PKT_EVENT = 0x04,
+    PKT_STATUS = 0x05,
+    PKT_REPLY = 0x06,
+    CMD_GET_HELLO = 0x40,
+    CMD_SET_STREAM = 0x41,
+    CMD_SET_TAP = 0x42,
+    CMD_SET_FREE_FALL = 0x43,
+    CMD_SET_FILTER = 0x44,
+    CMD_CALIBRATION_STEP = 0x45,
+    CMD_SET_CALIBRATION = 0x46,
+    CMD_GET_CALIBRATION = 0x47,
+    CMD_SAVE_CALIBRATION = 0x48,
+    CMD_LOAD_CALIBRATION = 0x49,
+    CMD_RESET_CALIBRATION = 0x4A,
+    CMD_IDENTIFY = 0x4B,
+    CMD_REBOOT = 0x4C,
+    CMD_GET_STATUS = 0x4D,
+};
+
+const uint8_t HELLO_LEN = 19, RAW_SAMPLE_LEN = 23, ORIENTATION_LEN = 13, EVENT_LEN = 8, STATUS_LEN = 25;
+const uint8_t REPLY_LEN = 3, REPLY_CALIBRATION_LEN = 3 + CALIBRATION_BLOCK_LEN + 1;
+
+// Body length of a packet type, -1 when this firmware does not know the type. REPLY: the length
+// without data (3); with GET_CALIBRATION's data it is 46.
+int bodyLength(uint8_t type);
+
+// Sensor bits (sensors_found, sensors_ok)
+const uint8_t SENSOR_ADXL345 = 1, SENSOR_ITG3200 = 2, SENSOR_HMC5883L = 4;
+
+// RAW_SAMPLE flags
+const uint8_t RAW_ACCEL_OK = 1, RAW_GYRO_OK = 2, RAW_MAG_OK = 4, RAW_MAG_FRESH = 8, RAW_TAP_ACTIVE = 16;
+// ORIENTATION flags
+const uint8_t ORI_MAG_USED = 1, ORI_ACCEL_REJECTED = 2, ORI_MAG_REJECTED = 4, ORI_CONVERGING = 8;
+// EVENT kinds
+const uint8_t EVENT_SINGLE_TAP = 1, EVENT_DOUBLE_TAP = 2, EVENT_FREE_FALL = 3;
+// stream_mode bits
+const uint8_t STREAM_RAW = 1, STREAM_ORIENTATION = 2, STREAM_STATUS = 4;
+// calibration_state bits
+const uint8_t CAL_GYRO_BIAS_VALID = 1, CAL_ACCEL_CALIBRATED = 2, CAL_MAG_CALIBRATED = 4, CAL_FROM_EEPROM = 8,
+              CAL_EEPROM_INVALID = 16, CAL_GYRO_BIAS_ESTIMATED = 32;
+
+struct Hello {
+    uint8_t protocol_version;
+    uint8_t firmware_version[3];
+    uint8_t sensors_found;
+    uint8_t adxl345_devid;
+    uint8_t itg3200_whoami;
+    uint8_t hmc5883l_id[3];
+    uint16_t imu_rate_hz;
+    uint8_t mag_rate_hz;
+    uint8_t stream_mode;
+    uint16_t raw_rate_hz;
+    uint16_t orientation_rate_hz;
+    uint8_t calibration_state;
+};
+
+struct RawSample {
+    uint32_t t_us;
+    uint8_t flags;
+    int16_t accel[3];
+    int16_t gyro[3];
+    int16_t mag[3];
+};
+
+struct Orientation {
+    uint32_t t_us;
+    uint8_t flags;
+    int16_t quat[4];  // Q14, w x y z, sensor → earth (NWU)
+};
+
+struct Event {
+    uint32_t t_us;
+    uint8_t event;
+    uint8_t int_source;
+    uint8_t act_tap_status;
+    int8_t tap_sign;
+};
+
+struct Status {
+    uint32_t t_us;
+    uint8_t sensors_ok;
+    uint16_t i2c_errors[3];
+    uint16_t i2c_recoveries;
+    uint16_t loop_overruns;
+    uint16_t frames_dropped;
+    uint16_t rx_errors;
+    uint8_t calibration_state;
+    uint8_t calibration_step;
+    uint16_t cpu_load;
+    uint16_t battery_mv;
+};
+
+// Each writes the body into `out` and returns its length.
+uint8_t writeHello(const Hello& p, uint8_t* out);
+uint8_t writeRawSample(const RawSample& p, uint8_t* out);
+uint8_t writeOrientation(const Orientation& p, uint8_t* out);
+uint8_t writeEvent(const Event& p, uint8_t* out);
+uint8_t writeStatus(const Status& p, uint8_t* out);
+// REPLY; `data` may be null when data_len is 0.
+uint8_t writeReply(uint8_t cmd_seq, uint8_t cmd_type, uint8_t result, const uint8_t* data, uint8_t data_len,
+                   uint8_t* out);
+
+}  // namespace sphere
