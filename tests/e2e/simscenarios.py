@@ -1,0 +1,121 @@
+"""Scenarios for the end-to-end tests on the virtual board (hardware/sim): each one runs the board once
+per test session (results cached) and returns the decoded capture and the board's stats.
+
+Wall time: the board runs about 1.2 to 2.5 simulated seconds per wall second on this project's
+2-core machines (`sphere sim` prints the ratio), so the scenarios are a few simulated seconds each.
+"""
+
+from __future__ import annotations
+
+import functools
+import shutil
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+
+import pytest
+
+from sphere.sim import trace as T
+from sphere.sim.analysis import CaptureSummary, summarise
+from sphere.sim.board import FIRMWARE_ELF, BoardUnavailable, board_path, run_board, testfw_elf
+
+TAPPING_TRIAL = "24_disturbed_tapping_A"
+TAPPING_START_S = 48.0  # taps at 50.05, 52.99 and 56.50 s of the trial
+TAPPING_HOLD_S = 1.0
+
+
+@dataclass
+class Scenario:
+    name: str
+    summary: CaptureSummary
+    stats: dict
+    capture: bytes
+    returncode: int
+    stderr: str
+    trial: object = None
+
+
+def need_board() -> Path:
+    try:
+        return board_path(build=True)
+    except BoardUnavailable as e:
+        pytest.skip(f"virtual board unavailable: {e}")
+
+
+def need_firmware() -> Path:
+    if not FIRMWARE_ELF.exists():
+        pytest.skip(f"no firmware image at {FIRMWARE_ELF}: `make -C firmware` makes it")
+    return FIRMWARE_ELF
+
+
+def need_testfw() -> Path:
+    if shutil.which("avr-g++") is None or not Path("/usr/share/arduino/hardware/arduino/avr/cores/arduino").is_dir():
+        pytest.skip("avr-g++ or Debian's arduino-core-avr missing: cannot build the board's test sketch")
+    try:
+        return testfw_elf(build=True)
+    except BoardUnavailable as e:
+        pytest.skip(str(e))
+
+
+def _run(name: str, elf: Path, motion: T.Motion, seconds: float, **kw) -> Scenario:
+    with tempfile.TemporaryDirectory(prefix=f"sphere-e2e-{name}-") as tmp:
+        trace = T.to_chips(motion).write(Path(tmp) / "trace.bin")
+        cap = Path(tmp) / "capture.bin"
+        r = run_board(elf, trace, seconds, cap, **kw)
+        data = cap.read_bytes() if cap.exists() else b""
+    return Scenario(name, summarise(data), r.stats, data, r.returncode, r.stderr)
+
+
+def tapping_motion():
+    from sphere.broad import BroadMissing, find_trial, load_trial
+
+    try:
+        trial = load_trial(find_trial(TAPPING_TRIAL))
+    except BroadMissing as e:
+        pytest.skip(str(e))
+    sl = trial.seconds(TAPPING_START_S, 9.0)
+    return T.hold_first(T.from_broad(sl), TAPPING_HOLD_S), trial
+
+
+def tap_times_sim_s(trial, threshold_g: float = 3.0) -> list[float]:
+    """Simulated times of the taps in the played slice: starts of |accel| spikes over threshold_g."""
+    import numpy as np
+
+    a = np.abs(trial.acc_m_s2) / 9.80665
+    idx = np.where(a.max(axis=1) > threshold_g)[0]
+    starts = [i for k, i in enumerate(idx) if k == 0 or i - idx[k - 1] > int(0.3 * trial.rate_hz)]
+    t = [i / trial.rate_hz for i in starts]
+    return [TAPPING_HOLD_S + x - TAPPING_START_S for x in t if TAPPING_START_S <= x < TAPPING_START_S + 9.0]
+
+
+@functools.lru_cache(maxsize=None)
+def firmware_scenario(name: str) -> Scenario:
+    need_board()
+    elf = need_firmware()
+    if name == "tapping":
+        motion, trial = tapping_motion()
+        s = _run(name, elf, motion, 10.0)
+        s.trial = trial
+        return s
+    if name == "toss":
+        return _run(name, elf, T.toss(5.0, toss_at_s=2.5, flight_s=0.4), 5.0)
+    if name == "mag_fault":
+        return _run(name, elf, T.still(8.0), 8.0, nack=["hmc5883l:3:5"])
+    if name == "stall":
+        return _run(name, elf, T.still(6.0), 6.0, stall=["2.5:2.7"])
+    raise KeyError(name)
+
+
+@functools.lru_cache(maxsize=None)
+def sketch_scenario(name: str) -> Scenario:
+    need_board()
+    elf = need_testfw()
+    if name == "taps":
+        return _run(name, elf, T.taps(4.0, at_s=(1.0, 2.0, 2.15)), 4.0)
+    if name == "toss":
+        return _run(name, elf, T.toss(4.0, toss_at_s=2.0), 4.0)
+    if name == "nack":
+        return _run(name, elf, T.still(5.0), 5.0, nack=["itg3200:1.5:3"])
+    if name == "stall":
+        return _run(name, elf, T.still(4.0), 4.0, stall=["1.5:1.6"])
+    raise KeyError(name)
