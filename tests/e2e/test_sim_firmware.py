@@ -1,0 +1,120 @@
+"""End to end: the real firmware image (firmware/build/sphere.elf) on the virtual board, its UART
+capture decoded by sphere.protocol. Skips with the reason when the image, simavr or BROAD is missing;
+CI builds the firmware and the board before the tests (scripts/test)."""
+
+from __future__ import annotations
+
+import pytest
+
+from simscenarios import firmware_scenario, tap_times_sim_s
+
+pytestmark = pytest.mark.slow
+
+
+def _ok(s):
+    assert s.returncode == 0, s.stderr
+    assert not s.stats.get("crashed"), s.stderr
+
+
+def test_hello_packet():
+    s = firmware_scenario("tapping")
+    _ok(s)
+    h = s.summary.hello
+    assert h is not None, "no HELLO in the capture"
+    assert h.protocol_version == 1
+    assert h.sensors_found == 0b111
+    assert h.adxl345_devid == 0xE5
+    assert h.itg3200_whoami & 0x7E == 0x68
+    assert bytes(h.hmc5883l_id) == b"H43"
+    assert h.imu_rate_hz == 200 and h.mag_rate_hz == 75
+    assert s.summary.hellos == 1, "the device restarted"
+
+
+def test_frame_rates_within_one_percent():
+    s = firmware_scenario("tapping")
+    h = s.summary.hello
+    assert h is not None
+    checked = 0
+    if h.stream_mode & 1:
+        assert s.summary.raw_rate_hz == pytest.approx(h.raw_rate_hz, rel=0.01)
+        checked += 1
+    if h.stream_mode & 2:
+        assert s.summary.orientation_rate_hz == pytest.approx(h.orientation_rate_hz, rel=0.01)
+        checked += 1
+    assert checked, f"stream_mode {h.stream_mode} streams neither raw samples nor orientation"
+
+
+def test_zero_crc_errors_and_sequence_gaps():
+    s = firmware_scenario("tapping")
+    d = s.summary.decoder
+    assert d["frames_ok"] > 1000
+    assert d["crc_errors"] == 0
+    assert d["framing_errors"] == 0 and d["oversize"] == 0 and d["bad_lengths"] == 0
+    assert d["seq_gaps"] == 0
+    assert s.stats["frames_sent"] == d["frames_ok"]
+
+
+def test_status_once_a_second_all_sensors_ok():
+    s = firmware_scenario("tapping")
+    st = s.summary.status
+    assert len(st) >= 8, f"{len(st)} STATUS packets in 10 s"
+    assert all(x.sensors_ok == 0b111 for x in st)
+    assert st[-1].loop_overruns == 0
+
+
+def test_events_on_the_tapping_trials_taps():
+    s = firmware_scenario("tapping")
+    taps = tap_times_sim_s(s.trial)
+    assert len(taps) == 3, taps
+    ev = [e for e in s.summary.events if e.event_name in ("single_tap", "double_tap")]
+    for t in taps:
+        near = [e for e in ev if -0.05 <= e.t_us / 1e6 - t <= 0.5]
+        assert near, f"no tap event within 0.5 s after the tap at {t:.3f} s (events at {[e.t_us / 1e6 for e in ev]})"
+    # nothing while the sphere lies still before the first tap
+    assert not [e for e in ev if e.t_us / 1e6 < taps[0] - 0.1]
+
+
+def test_free_fall_on_a_synthetic_toss():
+    s = firmware_scenario("toss")
+    _ok(s)
+    ff = [e.t_us / 1e6 for e in s.summary.events if e.event_name == "free_fall"]
+    assert ff, f"no free_fall event (events: {[(e.event_name, e.t_us) for e in s.summary.events]})"
+    assert all(2.5 <= t <= 3.0 for t in ff), ff  # flight from 2.5 s to 2.9 s
+
+
+def test_magnetometer_fault_flags_and_recovery():
+    s = firmware_scenario("mag_fault")  # HMC5883L NACKs from 3 s to 5 s
+    _ok(s)
+    st = s.summary.status
+    before = [x for x in st if x.t_us / 1e6 < 2.9]
+    during = [x for x in st if 3.2 < x.t_us / 1e6 < 4.9]
+    after = [x for x in st if x.t_us / 1e6 > 6.0]
+    assert before and all(x.sensors_ok == 0b111 for x in before)
+    assert during and all(x.sensors_ok == 0b011 for x in during), [x.sensors_ok for x in during]
+    assert during[-1].i2c_errors[2] > 0
+    assert after and all(x.sensors_ok == 0b111 for x in after), [x.sensors_ok for x in after]
+    raw_during = [r for r in s.summary.raw if 3.2 < r.t_us / 1e6 < 4.9]
+    if raw_during:
+        assert not any(r.flags & 0x04 for r in raw_during)  # mag_ok clear
+        assert all(r.flags & 0x03 == 0x03 for r in raw_during)  # accel and gyro still fine
+    ori_during = [o for o in s.summary.orientation if 3.3 < o.t_us / 1e6 < 4.9]
+    if ori_during:
+        assert not any(o.flags & 0x01 for o in ori_during)  # gravity-only, no mag_used
+    assert s.summary.hellos == 1, "the device restarted instead of recovering"
+
+
+def test_bus_stall_does_not_stop_the_stream():
+    s = firmware_scenario("stall")  # bus stalled from 2.5 s to 2.7 s
+    _ok(s)
+    times = [p.t_us / 1e6 for p in (s.summary.raw or s.summary.orientation)]
+    assert any(t > 3.5 for t in times), "nothing streamed after the stall"
+    late = [x for x in s.summary.status if x.t_us / 1e6 > 4.0]
+    assert late and late[-1].sensors_ok == 0b111
+
+
+def test_marg_update_is_timed_from_the_timing_pin():
+    s = firmware_scenario("tapping")
+    c = s.stats["cycles_per_update"]
+    assert c["count"] > 1000, "the timing pin D13 did not pulse once per update"
+    assert 0 < c["min"] <= c["median"] <= c["max"]
+    print(f"cycles per MARG update: {c}; cpu_load {s.stats['cpu_load']}")
