@@ -461,6 +461,24 @@ static void twi_send(board_t *b, uint8_t msg, uint8_t addr, uint8_t data)
 	avr_raise_irq(b->irq + TWI_IRQ_INPUT, avr_twi_irq_msg(msg, addr, data));
 }
 
+/* Real bus timing: simavr finishes every TWI step 1 us after it starts. One cycle after a byte step
+ * starts, move the TWI's pending step timer to 9 SCL periods after the start, SCL = F_CPU / (16 + 2 TWBR 4^TWPS). */
+static avr_cycle_count_t twi_stretch(avr_t *avr, avr_cycle_count_t when, void *param)
+{
+	board_t *b = param;
+	uint8_t twbr = avr->data[0xB8], twps = avr->data[0xB9] & 3;
+	avr_cycle_count_t scl = 16 + 2ULL * twbr * (1ULL << (2 * twps));
+	avr_cycle_count_t want = b->msg_cycle + 9 * scl;
+	for (avr_cycle_timer_slot_p s = avr->cycle_timers.timer; s; s = s->next) {
+		if (s->param == b->twi) {
+			if (s->when < want)
+				avr_cycle_timer_register(avr, want - avr->cycle, s->timer, b->twi);
+			break;
+		}
+	}
+	return 0;
+}
+
 static void twi_hook(struct avr_irq_t *irq, uint32_t value, void *param)
 {
 	(void)irq;
@@ -468,6 +486,10 @@ static void twi_hook(struct avr_irq_t *irq, uint32_t value, void *param)
 	avr_twi_msg_irq_t v;
 	v.u.v = value;
 	uint8_t msg = v.u.twi.msg;
+	if (b->real_timing && b->twi && (msg & (TWI_COND_START | TWI_COND_WRITE | TWI_COND_READ))) {
+		b->msg_cycle = b->avr->cycle;
+		avr_cycle_timer_register(b->avr, 1, twi_stretch, b);
+	}
 
 	if (msg & TWI_COND_STOP) {
 		if (b->cur_chip >= 0)

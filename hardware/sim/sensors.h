@@ -95,6 +95,9 @@ typedef struct board_t {
 	int start_armed;         /* the next START opens a sample period's work (loop timing fallback) */
 	avr_cycle_count_t first_start_cycle;
 	int stalled;             /* fault: the bus is stalled */
+	void *twi;               /* simavr's TWI module (the parameter of its step timer) */
+	int real_timing;         /* stretch each TWI byte step to 9 SCL periods at the TWBR rate */
+	avr_cycle_count_t msg_cycle;
 	uint32_t stalled_ops;
 	uint32_t events_single_tap, events_double_tap, events_free_fall;
 	int verbose;

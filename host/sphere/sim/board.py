@@ -96,7 +96,7 @@ class BoardRun:
 
 def board_command(elf, trace, seconds: float, capture=None, pty=False, realtime=False, stats=None,
                   nack=(), stall=(), send=None, timing_pin=None, loop_pin=None, rate_hz=None,
-                  verbose=0, build=True) -> list[str]:
+                  verbose=0, build=True, i2c_real_timing=False) -> list[str]:
     cmd = [str(board_path(build)), str(elf), "--trace", str(trace), "--seconds", f"{seconds:g}"]
     if capture:
         cmd += ["--capture", str(capture)]
@@ -118,6 +118,8 @@ def board_command(elf, trace, seconds: float, capture=None, pty=False, realtime=
         cmd += ["--loop-pin", loop_pin]
     if rate_hz:
         cmd += ["--rate", f"{rate_hz:g}"]
+    if i2c_real_timing:
+        cmd.append("--i2c-real-timing")
     cmd += ["-v"] * verbose
     return cmd
 
