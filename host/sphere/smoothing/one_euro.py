@@ -1,0 +1,43 @@
+"""The 1€ filter (Casiez, Roussel, Vogel, CHI 2012): a first-order low-pass whose cutoff rises with
+speed, so slow motion is smoothed and fast motion is not delayed.
+
+    cutoff = min_cutoff_hz + beta · |dx/dt (smoothed at d_cutoff_hz)|
+    alpha  = 1 / (1 + τ/dt),  τ = 1 / (2π · cutoff)
+"""
+
+from __future__ import annotations
+
+import math
+
+
+def _alpha(cutoff_hz: float, dt_s: float) -> float:
+    tau = 1.0 / (2.0 * math.pi * cutoff_hz)
+    return 1.0 / (1.0 + tau / dt_s)
+
+
+class OneEuroFilter:
+    def __init__(self, min_cutoff_hz: float = 1.0, beta: float = 0.007, d_cutoff_hz: float = 1.0):
+        if min_cutoff_hz <= 0 or d_cutoff_hz <= 0 or beta < 0:
+            raise ValueError("min_cutoff_hz and d_cutoff_hz must be > 0, beta ≥ 0")
+        self.min_cutoff_hz, self.beta, self.d_cutoff_hz = min_cutoff_hz, beta, d_cutoff_hz
+        self.reset()
+
+    def reset(self) -> None:
+        self._x = None
+        self._dx = None
+
+    def update(self, x, dt_s: float):
+        if self._x is None or dt_s <= 0:
+            self._x = list(x)
+            self._dx = [0.0] * len(x)
+            return tuple(self._x)
+        a_d = _alpha(self.d_cutoff_hz, dt_s)
+        speed2 = 0.0
+        for i, xi in enumerate(x):
+            d = (xi - self._x[i]) / dt_s
+            self._dx[i] += a_d * (d - self._dx[i])
+            speed2 += self._dx[i] * self._dx[i]
+        a = _alpha(self.min_cutoff_hz + self.beta * math.sqrt(speed2), dt_s)
+        for i, xi in enumerate(x):
+            self._x[i] += a * (xi - self._x[i])
+        return tuple(self._x)
