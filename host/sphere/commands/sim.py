@@ -29,8 +29,11 @@ def add_arguments(p) -> None:
                    help="BROAD trial (.mat, name or number), synthetic:NAME[:ARG], or a prepared .bin trace; "
                         "repeatable with --accuracy ('all' = every shipped trial)")
     p.add_argument("--seconds", type=float, default=None,
-                   help="simulated seconds (default: 10; with --accuracy 30 per trial)")
-    p.add_argument("--start", type=float, default=0.0, help="start this far into a BROAD trial (s)")
+                   help="simulated seconds (default: 10; with --accuracy 60 per trial)")
+    p.add_argument("--start", default=None,
+                   help="start this far into a BROAD trial (s), or 'auto': 10 s before its first movement "
+                        "(default 0; with --accuracy auto)")
+    p.add_argument("--full", action="store_true", help="play the whole BROAD trial (overrides --seconds and --start)")
     p.add_argument("--hold", type=float, default=0.0,
                    help="lead-in: hold the first sample still for this long before the motion (s)")
     p.add_argument("--firmware", default=None,
@@ -59,7 +62,7 @@ def add_arguments(p) -> None:
     p.add_argument("-v", "--verbose", action="count", default=0, help="log the bus (twice: every byte)")
 
 
-def prepare(source: str, seconds: float | None, start_s: float, hold_s: float, out: Path):
+def prepare(source: str, seconds: float | None, start_s, hold_s: float, out: Path, full: bool = False):
     """Write the board's trace for SOURCE; returns (trace path, played seconds, BROAD trial slice or None)."""
     from sphere.sim import trace as T
 
@@ -74,9 +77,20 @@ def prepare(source: str, seconds: float | None, start_s: float, hold_s: float, o
         return out, secs, None
     from sphere.broad import find_trial, load_trial
 
+    import numpy as np
+
     trial = load_trial(find_trial(source))
     total = len(trial) / trial.rate_hz
+    if start_s in (None, ""):
+        start_s = 0.0
+    elif start_s == "auto":
+        first = int(np.argmax(trial.movement)) / trial.rate_hz if trial.movement.any() else 0.0
+        start_s = max(0.0, first - 10.0)
+    else:
+        start_s = float(start_s)
     secs = seconds if seconds is not None else 10.0
+    if full:
+        start_s, secs = 0.0, hold_s + total
     play = min(max(secs - hold_s, 0.0), total - start_s)
     sl = trial.seconds(start_s, play)
     m = T.hold_first(T.from_broad(sl), hold_s)
@@ -88,8 +102,9 @@ def _one(args, source: str, elf, tmp: Path, index: int, multi: bool):
     from sphere.sim.analysis import accuracy, summarise
     from sphere.sim.board import run_board
 
-    seconds = args.seconds if args.seconds is not None else (30.0 if args.accuracy else None)
-    trace, secs, trial = prepare(source, seconds, args.start, args.hold, tmp / f"trace{index}.bin")
+    seconds = args.seconds if args.seconds is not None else (60.0 if args.accuracy else None)
+    start = args.start if args.start is not None else ("auto" if args.accuracy else 0.0)
+    trace, secs, trial = prepare(source, seconds, start, args.hold, tmp / f"trace{index}.bin", args.full)
     capture = args.capture if (args.capture and not multi) else tmp / f"capture{index}.bin"
     stats_out = args.stats if (args.stats and not multi) else None
     run = run_board(elf, trace, secs, capture, interactive=args.pty, pty=args.pty, realtime=args.realtime,
