@@ -103,7 +103,31 @@ def firmware_scenario(name: str) -> Scenario:
         return _run(name, elf, T.still(8.0), 8.0, nack=["hmc5883l:3:5"])
     if name == "stall":
         return _run(name, elf, T.still(6.0), 6.0, stall=["2.5:2.7"])
+    if name == "commands":
+        return _run_with_commands(name, elf, T.still(4.0), 4.0)
     raise KeyError(name)
+
+
+def _command_lines(commands) -> str:
+    from sphere.protocol import encode_frame
+
+    return "".join(f"{t:.3f} {encode_frame(p, seq).hex(' ')}\n" for seq, (t, p) in enumerate(commands))
+
+
+def _commands():
+    from sphere.protocol import GetStatus, SetStream
+
+    # at 1.5 s: orientation only at 50 Hz plus status; at 2.5 s: a bad rate (must change nothing); then GET_STATUS
+    return [(1.5, SetStream(stream_mode=0b110, raw_rate_hz=0, orientation_rate_hz=50)),
+            (2.5, SetStream(stream_mode=0b110, raw_rate_hz=0, orientation_rate_hz=7)),
+            (3.0, GetStatus())]
+
+
+def _run_with_commands(name, elf, motion, seconds) -> Scenario:
+    with tempfile.TemporaryDirectory(prefix=f"sphere-e2e-{name}-") as tmp:
+        send = Path(tmp) / "send.txt"
+        send.write_text(_command_lines(_commands()))
+        return _run(name, elf, motion, seconds, send=send)
 
 
 @functools.lru_cache(maxsize=None)

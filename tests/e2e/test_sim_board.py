@@ -65,3 +65,38 @@ def test_bus_stall_is_survived():
     raw = s.summary.raw
     assert any(r.t_us / 1e6 > 2.0 for r in raw), "no samples after the stall"
     assert any(not (r.flags & 0x07 == 0x07) for r in raw if 1.5 < r.t_us / 1e6 < 1.7), "the stall was not seen"
+
+
+STATS_KEYS = {"cycles_per_update", "cycles_per_loop", "cpu_load", "overruns", "frames_sent", "i2c_transactions",
+              "i2c_errors", "simulated_seconds"}
+
+
+def test_sphere_sim_command_writes_the_stats(tmp_path, capsys):
+    import json
+
+    from sphere.cli import main
+    from simscenarios import need_board, need_testfw
+
+    need_board()
+    need_testfw()
+    stats = tmp_path / "stats.json"
+    cap = tmp_path / "cap.bin"
+    rc = main(["sim", "--trace", "synthetic:rotation:90", "--seconds", "2", "--firmware", "testfw",
+               "--capture", str(cap), "--stats", str(stats)])
+    assert rc == 0
+    d = json.loads(stats.read_text())
+    assert STATS_KEYS <= set(d)
+    for k in ("cycles_per_update", "cycles_per_loop"):
+        assert {"min", "median", "max"} <= set(d[k]) and d[k]["median"] > 0
+    assert 0 < d["cpu_load"] < 1
+    assert d["simulated_seconds"] == pytest.approx(2.0)
+    assert d["frames_sent"] > 350 and d["i2c_errors"] == 0
+    assert cap.stat().st_size > 0
+    out = capsys.readouterr().out
+    assert "cycles per MARG update" in out
+    # the rotation reached the gyro: 90 °/s about z after the first second
+    from sphere.sim.analysis import summarise
+
+    raw = summarise(cap).raw
+    late = [r for r in raw if r.t_us > 1.2e6]
+    assert late and all(r.gyro[2] == round(90 * 14.375) for r in late)

@@ -118,3 +118,21 @@ def test_marg_update_is_timed_from_the_timing_pin():
     assert c["count"] > 1000, "the timing pin D13 did not pulse once per update"
     assert 0 < c["min"] <= c["median"] <= c["max"]
     print(f"cycles per MARG update: {c}; cpu_load {s.stats['cpu_load']}")
+
+
+def test_commands_over_the_uart():
+    from sphere.protocol import Reply, Result
+    from sphere.protocol.decoder import decode_all
+
+    s = firmware_scenario("commands")
+    _ok(s)
+    packets, _ = decode_all(s.capture)
+    replies = [p for p in packets if isinstance(p, Reply)]
+    assert [(r.cmd_seq, r.cmd_type) for r in replies] == [(0, 0x41), (1, 0x41), (2, 0x4D)], replies
+    assert replies[0].result == Result.OK
+    assert replies[1].result == Result.BAD_VALUE
+    assert replies[2].result == Result.OK
+    ori_late = [o for o in s.summary.orientation if o.t_us / 1e6 > 1.7]
+    raw_late = [r for r in s.summary.raw if r.t_us / 1e6 > 1.7]
+    assert not raw_late, "raw samples still streamed after SET_STREAM turned them off"
+    assert s.summary.rate_hz(ori_late) == pytest.approx(50, rel=0.01)
