@@ -11,54 +11,89 @@
 
 namespace sphere {
 
-// 1/√X at the middle of each of 24 intervals of width 1/32 covering [0.25, 1), Q14.
-static const uint16_t INV_SQRT_SEED[24] SPHERE_TABLE = {
-    31790, 30070, 28602, 27330, 26214, 25225, 24339, 23541, 22817, 22155, 21548, 20988, 20470, 19988, 19539, 19119, 18725, 18354, 18004, 17674, 17361, 17064, 16782, 16514};
+// 1/√X at the middle of each of the 192 steps of 1/256 covering [0.25, 1), Q14 (seed within 0.4 %).
+static const uint16_t INV_SQRT_SEED[192] SPHERE_TABLE = {
+    32641, 32391, 32146, 31907, 31673, 31445, 31221, 31002, 30787, 30577, 30371, 30169,
+    29972, 29778, 29587, 29401, 29217, 29038, 28861, 28688, 28518, 28350, 28186, 28024,
+    27866, 27709, 27556, 27405, 27256, 27110, 26966, 26825, 26686, 26548, 26413, 26280,
+    26149, 26020, 25893, 25767, 25644, 25522, 25402, 25283, 25167, 25051, 24938, 24826,
+    24715, 24606, 24498, 24392, 24287, 24184, 24081, 23980, 23881, 23782, 23685, 23589,
+    23494, 23400, 23307, 23216, 23125, 23036, 22947, 22860, 22774, 22688, 22604, 22520,
+    22437, 22356, 22275, 22195, 22116, 22037, 21960, 21883, 21808, 21732, 21658, 21585,
+    21512, 21440, 21368, 21298, 21228, 21159, 21090, 21022, 20955, 20888, 20822, 20757,
+    20692, 20628, 20564, 20501, 20439, 20377, 20316, 20255, 20195, 20135, 20076, 20017,
+    19959, 19902, 19845, 19788, 19732, 19676, 19621, 19566, 19512, 19458, 19405, 19352,
+    19299, 19247, 19196, 19144, 19093, 19043, 18993, 18943, 18894, 18845, 18797, 18749,
+    18701, 18653, 18606, 18560, 18513, 18467, 18422, 18376, 18331, 18287, 18242, 18198,
+    18155, 18111, 18068, 18025, 17983, 17941, 17899, 17857, 17816, 17775, 17734, 17694,
+    17654, 17614, 17574, 17535, 17496, 17457, 17418, 17380, 17342, 17304, 17267, 17229,
+    17192, 17155, 17119, 17082, 17046, 17010, 16974, 16939, 16904, 16869, 16834, 16799,
+    16765, 16731, 16697, 16663, 16629, 16596, 16563, 16530, 16497, 16465, 16432, 16400};
 
 uint16_t invSqrtQ14(uint16_t x) {
-    // seed within 1.6 %, then two Newton steps y ← y(3 − X·y²)/2: error below 1e-5 before rounding
-    uint16_t y = SPHERE_READ_U16(&INV_SQRT_SEED[(uint16_t)(x - 16384u) >> 11]);
-    for (uint8_t it = 0; it < 2; ++it) {
-        uint32_t y2 = ((uint32_t)y * y) >> 14;                    // Q14, ≤ 65536
-        if (y2 > 65535u) y2 = 65535u;
-        uint16_t t = (uint16_t)(((uint32_t)x * (uint16_t)y2) >> 16);  // X·y², Q14, ≈ 16384
-        uint32_t r = ((uint32_t)y * (uint16_t)(49152u - t) + 16384u) >> 15;
-        y = r > 32768u ? 32768u : (uint16_t)r;
+    // seed within 0.4 %, then one Newton step y ← y(3 − X·y²)/2: error about 2e-5
+    uint16_t y = SPHERE_READ_U16(&INV_SQRT_SEED[(uint8_t)((x >> 8) - 64)]);
+    uint16_t y2 = hi16u(umul16(y, y) << 2);  // y², Q14 (y < 2 here, so no overflow)
+    uint16_t t = hi16u(umul16(x, y2));       // X·y², Q14, ≈ 16384
+    uint32_t r = umul16(y, (uint16_t)(49152u - t)) + 16384u;
+    r = (uint32_t)hi16u(r << 1);
+    return r > 32768u ? 32768u : (uint16_t)r;
+}
+
+bool normaliseQ14(const int16_t* v, uint8_t n, int16_t* out) {
+    uint16_t m = 0;
+    for (uint8_t i = 0; i < n; ++i) {
+        uint16_t a = v[i] < 0 ? (uint16_t)(-v[i]) : (uint16_t)v[i];
+        if (a > m) m = a;
     }
-    return y;
+    if (m == 0) return false;
+    // block floating point: bring the largest component into [2^13, 2^14]
+    int16_t w[4];
+    uint8_t up = 0, down = 0;
+    while (m < (1u << 13)) { m <<= 1; ++up; }
+    while (m > (1u << 14)) { m >>= 1; ++down; }
+    for (uint8_t i = 0; i < n; ++i) w[i] = (int16_t)(down ? (v[i] >> down) : (int16_t)((uint16_t)v[i] << up));
+    uint32_t N = 0;  // in [2^26, 2^30]
+    for (uint8_t i = 0; i < n; ++i) N += (uint32_t)mul16(w[i], w[i]);
+    // x = N·4^k in [2^28, 2^30); X = x/2^30 in [0.25, 1); 1/√N = (1/√X)·2^k/2^15
+    bool k = N < (1ul << 28);
+    if (k) N <<= 2;
+    uint16_t xq = N >= (1ul << 30) ? 0xFFFFu : (uint16_t)((N << 2) >> 16);
+    uint16_t yu = invSqrtQ14(xq);
+    int16_t y = (int16_t)(yu > 32767u ? 32767u : yu);  // Q14 (≤ 2.0), as a signed operand
+    for (uint8_t i = 0; i < n; ++i) {
+        int32_t p = mul16(w[i], y);  // |p| < 2^29
+        out[i] = k ? rshift14(p) : rshift15(p);
+    }
+    return true;
 }
 
 bool normaliseQ14(const int32_t* v, uint8_t n, int16_t* out) {
+    // reduce to 16 bits on a shared exponent: whole bytes first, then at most seven single bits
     uint32_t m = 0;
     for (uint8_t i = 0; i < n; ++i) {
         uint32_t a = v[i] < 0 ? (uint32_t)(-v[i]) : (uint32_t)v[i];
         if (a > m) m = a;
     }
-    if (m == 0) return false;
-    // block floating point: bring the largest component into [2^13, 2^14)
-    int8_t sh = 0;
-    while (m >= (1ul << 14)) { m >>= 1; ++sh; }
-    while (m < (1ul << 13)) { m <<= 1; --sh; }
+    uint8_t bytes = 0, bits = 0;
+    while (m >= (1ul << 22)) { m >>= 8; ++bytes; }
+    while (m >= (1ul << 14)) { m >>= 1; ++bits; }
     int16_t w[4];
     for (uint8_t i = 0; i < n; ++i) {
-        int32_t x = v[i];
-        if (sh > 0) x = (x + (1l << (sh - 1))) >> sh;
-        else if (sh < 0) x = x << (-sh);
-        w[i] = (int16_t)x;
+        int32_t t = v[i];
+        for (uint8_t b = 0; b < bytes; ++b) t >>= 8;
+        int16_t u = bits ? (int16_t)(t >> 8) : (int16_t)t;  // when bits > 0, |t| < 2^22: keep 16 bits
+        if (bits) {
+            // t >> bits, done as (t >> 8) << (8 − bits) on 16-bit values plus the dropped byte's bits
+            uint8_t lo = (uint8_t)t;
+            for (uint8_t b = bits; b < 8; ++b) {
+                u = (int16_t)((uint16_t)u << 1) | (lo >> 7);
+                lo <<= 1;
+            }
+        }
+        w[i] = u;
     }
-    uint32_t N = 0;  // in [2^26, 2^30]
-    for (uint8_t i = 0; i < n; ++i) N += (uint32_t)mul16(w[i], w[i]);
-    // x = N·4^k in [2^28, 2^30); X = x/2^30 in [0.25, 1); 1/√N = (1/√X)·2^k/2^15
-    uint8_t k = 0;
-    if (N < (1ul << 28)) { N <<= 2; k = 1; }
-    if (N >= (1ul << 30)) N = (1ul << 30) - 1;
-    uint16_t y = invSqrtQ14((uint16_t)(N >> 14));
-    uint8_t s = (uint8_t)(15 - k);
-    for (uint8_t i = 0; i < n; ++i) {
-        int32_t p = (int32_t)w[i] * (int32_t)y;  // |p| < 2^29
-        out[i] = (int16_t)((p + (1l << (s - 1))) >> s);
-    }
-    return true;
+    return normaliseQ14(w, n, out);
 }
 
 }  // namespace sphere

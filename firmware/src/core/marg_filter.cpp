@@ -10,7 +10,7 @@ void MargFilter::begin(uint16_t dt_us) {
     q_[1] = q_[2] = q_[3] = 0;
     dt_us_ = dt_us;
     // ½·dt·(π/180/14.375)·2^32 = dt_us · 2.607355 (exact to 1 in 10^6 before rounding)
-    gyro_k_ = (uint16_t)(2u * dt_us + ((uint32_t)dt_us * 607355ul + 500000ul) / 1000000ul);
+    gyro_k_ = (int16_t)(2u * dt_us + ((uint32_t)dt_us * 607355ul + 500000ul) / 1000000ul);
     setBetaMilli(DEFAULT_BETA_MILLI);
 }
 
@@ -31,23 +31,23 @@ void MargFilter::quaternionQ14(int16_t out[4]) const {
     for (uint8_t i = 0; i < 4; ++i) out[i] = (int16_t)((q_[i] + 0x8000l) >> 16);
 }
 
-static inline int16_t r14(int32_t q28) { return (int16_t)((q28 + 8192l) >> 14); }
-static inline int16_t r15(int32_t q28) { return (int16_t)((q28 + 16384l) >> 15); }
-static inline int16_t r13(int32_t q28) { return (int16_t)((q28 + 4096l) >> 13); }
+static inline int16_t r14(int32_t q28) { return rshift14(q28); }
+static inline int16_t r15(int32_t q28) { return rshift15(q28); }
+static inline int16_t r13(int32_t q28) { return rshift13(q28); }
+static inline int16_t q14of(int32_t q30) { return hi16(q30 + 0x8000l); }
 
-// v (int32) × k (unsigned Q16 scale) → int32, exact to 1 LSB without a 64-bit product
-static inline int32_t scaleQ16(int32_t v, uint16_t k) {
-    int16_t hi = (int16_t)(v >> 16);
+// v (int32) × k/2^16 (k < 2^15) → int32, exact to 1 LSB without a 64-bit product
+static inline int32_t scaleQ16(int32_t v, int16_t k) {
+    int16_t hi = hi16(v);
     uint16_t lo = (uint16_t)v;
-    return (int32_t)hi * k + (int32_t)(((uint32_t)lo * k) >> 16);
+    return mul16(hi, k) + (int32_t)(uint16_t)(((uint32_t)lo * (uint16_t)k) >> 16);
 }
 
 uint8_t MargFilter::update(const int16_t g[3], const int16_t a[3], const int16_t m[3], bool acc_valid,
                            bool mag_valid) {
     uint8_t flags = 0;
     // state in Q14 for the products (rounded)
-    int16_t q0 = (int16_t)((q_[0] + 0x8000l) >> 16), q1 = (int16_t)((q_[1] + 0x8000l) >> 16),
-            q2 = (int16_t)((q_[2] + 0x8000l) >> 16), q3 = (int16_t)((q_[3] + 0x8000l) >> 16);
+    int16_t q0 = q14of(q_[0]), q1 = q14of(q_[1]), q2 = q14of(q_[2]), q3 = q14of(q_[3]);
 
     // 1. gyro: ½ q ⊗ [0, ω]·dt, in Q30. Sums in Q14·LSB, |sum| ≤ ‖q‖·‖ω‖ < 2^14·1.0001·56756 < 2^30
     int32_t d0 = -mul16(q1, g[0]) - mul16(q2, g[1]) - mul16(q3, g[2]);
@@ -59,11 +59,10 @@ uint8_t MargFilter::update(const int16_t g[3], const int16_t a[3], const int16_t
     int32_t n2 = q_[2] + scaleQ16(d2, gyro_k_);
     int32_t n3 = q_[3] + scaleQ16(d3, gyro_k_);
 
-    int32_t av[3] = {a[0], a[1], a[2]};
     int16_t ax, ay, az;
     {
         int16_t an[3];
-        if (!acc_valid || !normaliseQ14(av, 3, an)) {
+        if (!acc_valid || !normaliseQ14(a, 3, an)) {
             flags |= ORI_ACCEL_REJECTED;
             goto integrate;
         }
@@ -89,22 +88,20 @@ uint8_t MargFilter::update(const int16_t g[3], const int16_t a[3], const int16_t
         int32_t s2 = -mul16(c0, fg0) + mul16(c3, fg1) - mul16(q2, fg2);
         int32_t s3 = mul16(c1, fg0) + mul16(c2, fg1);
 
-        int32_t mv[3] = {m[0], m[1], m[2]};
         int16_t mn[3];
-        if (mag_valid && normaliseQ14(mv, 3, mn)) {
+        if (mag_valid && normaliseQ14(m, 3, mn)) {
             flags |= ORI_MAG_USED;
             int16_t mx = mn[0], my = mn[1], mz = mn[2];
             int16_t r00 = (int16_t)(16384 - r13(q2q2 + q3q3)), r01 = r13(q1q2 - q0q3), r02 = r13(q1q3 + q0q2);
             int16_t r10 = r13(q1q2 + q0q3), r11 = (int16_t)(16384 - r13(q1q1 + q3q3)), r12 = r13(q2q3 - q0q1);
             // h = q ⊗ m ⊗ q*, Q14
-            int32_t hv[2] = {mul16(r00, mx) + mul16(r01, my) + mul16(r02, mz),
-                             mul16(r10, mx) + mul16(r11, my) + mul16(r12, mz)};
+            int16_t hv[2] = {r14(mul16(r00, mx) + mul16(r01, my) + mul16(r02, mz)),
+                             r14(mul16(r10, mx) + mul16(r11, my) + mul16(r12, mz))};
             int16_t hz = r14(mul16(r20, mx) + mul16(r21, my) + mul16(r22, mz));
             // b = [√(hx² + hy²), 0, hz]: the length of (hx, hy) is (hx, hy)·unit(hx, hy)
             int16_t bx = 0, bz = hz, u[2];
             if (normaliseQ14(hv, 2, u)) {
-                int32_t l = (hv[0] >> 14) * (int32_t)u[0] + (hv[1] >> 14) * (int32_t)u[1];
-                bx = (int16_t)((l + 8192) >> 14);
+                bx = r14(mul16(hv[0], u[0]) + mul16(hv[1], u[1]));
             }
             // magnetic objective (eq. 76): Rᵀ b − m, Q13
             int16_t fb0 = (int16_t)((r14(mul16(bx, r00) + mul16(bz, r20)) - mx) >> 1);
@@ -125,23 +122,22 @@ uint8_t MargFilter::update(const int16_t g[3], const int16_t a[3], const int16_t
         int16_t sn[4];
         if (normaliseQ14(sv, 4, sn)) {
             // q̇ −= β ∇f/‖∇f‖ ; step = ŝ(Q14)·β·dt(2^23) → Q30
-            n0 -= (sn[0] * beta_dt_ + 64) >> 7;
-            n1 -= (sn[1] * beta_dt_ + 64) >> 7;
-            n2 -= (sn[2] * beta_dt_ + 64) >> 7;
-            n3 -= (sn[3] * beta_dt_ + 64) >> 7;
+            n0 -= ((sn[0] * beta_dt_ + 128) >> 8) << 1;
+            n1 -= ((sn[1] * beta_dt_ + 128) >> 8) << 1;
+            n2 -= ((sn[2] * beta_dt_ + 128) >> 8) << 1;
+            n3 -= ((sn[3] * beta_dt_ + 128) >> 8) << 1;
         }
     }
 integrate:
     // renormalise: ‖q‖² = 1 + e is close to 1, so q ← q·(1 − e/2 + 3e²/8)
     {
-        int16_t h0 = (int16_t)((n0 + 0x8000l) >> 16), h1 = (int16_t)((n1 + 0x8000l) >> 16),
-                h2 = (int16_t)((n2 + 0x8000l) >> 16), h3 = (int16_t)((n3 + 0x8000l) >> 16);
+        int16_t h0 = q14of(n0), h1 = q14of(n1), h2 = q14of(n2), h3 = q14of(n3);
         int32_t e28 = mul16(h0, h0) + mul16(h1, h1) + mul16(h2, h2) + mul16(h3, h3) - (1l << 28);
-        int32_t e = (e28 + 2048) >> 12;  // Q16; |e| stays below 0.03 (see MARG_FILTER.md)
-        if (e > 16384) e = 16384;
-        if (e < -16384) e = -16384;
-        int16_t e16 = (int16_t)e;
-        int16_t d16 = (int16_t)(-(e16 >> 1) + ((3 * ((mul16(e16, e16) + 32768l) >> 16)) >> 3));
+        // Q16; |e| stays below 0.03 (see MARG_FILTER.md), clamped to ±0.25 for safety
+        if (e28 > (1l << 26)) e28 = 1l << 26;
+        if (e28 < -(1l << 26)) e28 = -(1l << 26);
+        int16_t e16 = hi16((int32_t)((uint32_t)(e28 + 2048) << 4));
+        int16_t d16 = (int16_t)(-(e16 >> 1) + ((3 * hi16(mul16(e16, e16) + 32768l)) >> 3));
         q_[0] = n0 + mul16(h0, d16);
         q_[1] = n1 + mul16(h1, d16);
         q_[2] = n2 + mul16(h2, d16);
