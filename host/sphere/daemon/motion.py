@@ -14,7 +14,7 @@ from sphere import chips
 
 G_M_S2 = chips.STANDARD_GRAVITY_M_S2
 DEG = math.pi / 180.0
-MAG_STILL_UT = 2.0  # the compass moves less than this while the sphere lies still (HMC5883L noise ≈ 0.2 µT)
+MAG_STILL_UT = 1.0  # the compass moves less than this while the sphere lies still (HMC5883L noise ≈ 0.2 µT)
 
 
 class GyroBias:

@@ -157,6 +157,7 @@ class SerialSource(_Decoding):
         self.connects = 0
         self.losses = 0
         self._stop = False
+        self._iterating = False
         self._tx_seq = 0
         self._warned: set[str] = set()
 
@@ -265,6 +266,14 @@ class SerialSource(_Decoding):
         self.state = "looking for the sphere (link lost)"
 
     def __iter__(self) -> Iterator[list[DecodedPacket]]:
+        self._iterating = True
+        try:
+            yield from self._batches()
+        finally:
+            self._iterating = False
+            self._close_port()
+
+    def _batches(self) -> Iterator[list[DecodedPacket]]:
         import serial
 
         last_try = -1e9
@@ -302,14 +311,19 @@ class SerialSource(_Decoding):
                     self._lose(f"no data for {self.link_timeout_s:g} s")
                 yield []
 
-    def close(self):
-        self._stop = True
+    def _close_port(self):
         if self.serial is not None:
             try:
                 self.serial.close()
             except Exception:
                 pass
             self.serial = None
+
+    def close(self):
+        """Stop: the reading loop closes the port when it sees this (safe from another thread or a signal)."""
+        self._stop = True
+        if not self._iterating:
+            self._close_port()
 
 
 # ---- HID ---------------------------------------------------------------------------------------

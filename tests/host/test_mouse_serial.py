@@ -1,0 +1,207 @@
+"""The serial path end to end through a pty: discovery by HELLO, GET_HELLO when no HELLO comes, an unplug
+(the pty closes) and a re-plug on the same path, a protocol-version mismatch."""
+
+from __future__ import annotations
+
+import os
+import select
+import threading
+import time
+import tty
+
+import pytest
+
+from sphere.daemon.app import SphereMouse
+from sphere.daemon.backends.memory import RecordingBackend
+from sphere.daemon.config import Config
+from sphere.daemon.sources import SerialSource, SourceError
+from sphere.daemon.synthetic import ScriptedSphere, hello_packet
+from sphere.protocol import FrameDecoder, encode_frame
+
+
+class FakeSphere:
+    """A sphere behind a pty, reached through the symlink ``link`` (like udev's /dev/sphere).
+
+    Like a Bluetooth module it sends nothing until the host asks with GET_HELLO; then a HELLO and the
+    frames of ``script``. ``unplug()`` closes the pty."""
+
+    def __init__(self, link, script, protocol_version=1, answer=True):
+        self.link = str(link)
+        self.master, slave = os.openpty()
+        tty.setraw(slave)
+        self.slave_name = os.ttyname(slave)
+        os.close(slave)
+        if os.path.lexists(self.link):
+            os.unlink(self.link)
+        os.symlink(self.slave_name, self.link)
+        self.script = script
+        self.protocol_version = protocol_version
+        self.answer = answer
+        self.get_hellos = 0
+        self._stop = threading.Event()
+        self.thread = threading.Thread(target=self._run, daemon=True)
+        self.thread.start()
+
+    def _run(self):
+        decoder = FrameDecoder("host")
+        while not self._stop.is_set():
+            try:
+                r, _, _ = select.select([self.master], [], [], 0.05)
+                if not r:
+                    continue
+                data = os.read(self.master, 256)
+            except OSError:
+                time.sleep(0.02)  # nobody has the slave open yet
+                continue
+            for p in decoder.feed(data):
+                if p.NAME == "GET_HELLO" and self.answer:
+                    self.get_hellos += 1
+                    self._stream()
+                    return
+
+    def _stream(self):
+        sphere = ScriptedSphere()
+        hello = hello_packet()
+        hello.protocol_version = self.protocol_version
+        frames = [sphere.frame(hello)] + [f for _, f in sphere.steps(self.script)]
+        data = b"".join(frames)
+        try:
+            for i in range(0, len(data), 512):
+                if self._stop.is_set():
+                    return
+                os.write(self.master, data[i : i + 512])
+                time.sleep(0.002)
+        except OSError:
+            pass
+
+    def unplug(self):
+        self._stop.set()
+        self.thread.join(2)
+        os.close(self.master)
+        os.unlink(self.link)
+
+
+def start_daemon(source, backend=None):
+    cfg = Config().with_overrides({"stream": {"enabled": False}, "gyro": {"still_time_s": 0.3}}, "test")
+    backend = backend or RecordingBackend()
+    daemon = SphereMouse(cfg, source, backend, log=lambda m: None)
+    t = threading.Thread(target=daemon.run, daemon=True)
+    t.start()
+    return daemon, backend, t
+
+
+def wait_for(cond, timeout=10.0):
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if cond():
+            return True
+        time.sleep(0.02)
+    return cond()
+
+
+def fast_serial(port, **kw):
+    args = dict(hello_timeout_s=0.15, discovery_timeout_s=1.0, link_timeout_s=1.0, reconnect_interval_s=0.1)
+    args.update(kw)
+    return SerialSource(port, **args)
+
+
+# 10 °/s to the left for 0.5 s at 1920 px per 40°: 240 px
+LEFT = [("still", 0.4), ("turn", (0, 0, 1), 10.0, 0.5), ("still", 0.2)]
+RIGHT = [("still", 0.4), ("turn", (0, 0, 1), -10.0, 0.5), ("still", 0.2)]
+
+
+def test_unplug_and_replug_without_restart(tmp_path):
+    link = tmp_path / "sphere"
+    logs = []
+    dev = FakeSphere(link, LEFT)
+    source = fast_serial(str(link), log=logs.append, link_timeout_s=30.0)  # only the unplug may end the link
+    daemon, backend, thread = start_daemon(source)
+    try:
+        assert wait_for(lambda: backend.x <= -238), (backend.x, logs)
+        assert abs(backend.x + 240) <= 2 and backend.y == 0
+        assert dev.get_hellos >= 1  # nothing came by itself: the host asked
+        dev.unplug()
+        assert wait_for(lambda: source.losses == 1), logs
+        assert source.serial is None
+        time.sleep(0.3)  # unplugged for a while: the daemon keeps looking, does not end
+        assert thread.is_alive()
+        dev = FakeSphere(link, RIGHT)  # plugged in again: a new pty behind the same path
+        assert wait_for(lambda: source.connects == 2), logs
+        assert wait_for(lambda: backend.x >= -2), (backend.x, logs)
+        assert abs(backend.x) <= 4
+        assert any("reconnected" in m for m in logs) and any("lost the sphere" in m for m in logs)
+    finally:
+        daemon.stop()
+        thread.join(5)
+        dev._stop.set()
+    assert not thread.is_alive()
+
+
+def test_discovery_picks_the_port_that_answers_hello(tmp_path):
+    silent = FakeSphere(tmp_path / "ttyFAKE0", LEFT, answer=False)  # some other serial device
+    sphere = FakeSphere(tmp_path / "ttyFAKE1", LEFT)
+    source = fast_serial("auto", candidates=[str(tmp_path / "ttyFAKE*")], discovery_timeout_s=0.5)
+    daemon, backend, thread = start_daemon(source)
+    try:
+        assert wait_for(lambda: source.port_name is not None)
+        assert source.port_name == str(tmp_path / "ttyFAKE1")
+        assert wait_for(lambda: backend.x <= -238)
+    finally:
+        daemon.stop()
+        thread.join(5)
+        silent.unplug()
+        sphere.unplug()
+
+
+def test_protocol_version_mismatch_stops_with_what_to_update(tmp_path):
+    dev = FakeSphere(tmp_path / "sphere", LEFT, protocol_version=2)
+    source = fast_serial(str(tmp_path / "sphere"))
+    with pytest.raises(SourceError, match="protocol version 2.*update the host software"):
+        for _ in source:
+            pass
+    dev.unplug()
+
+
+def test_link_timeout_counts_as_lost(tmp_path):
+    """A Bluetooth link that drops delivers no error, only silence: after link_timeout_s it is reopened."""
+    link = tmp_path / "rfcomm0"
+    dev = FakeSphere(link, [("still", 0.2)])
+    source = fast_serial(str(link), link_timeout_s=0.4)
+    daemon, backend, thread = start_daemon(source)
+    try:
+        assert wait_for(lambda: source.connects == 1)
+        assert wait_for(lambda: source.losses >= 1, timeout=5)
+    finally:
+        daemon.stop()
+        thread.join(5)
+        dev.unplug()
+
+
+def test_frame_bytes_in_any_chunking_and_junk_before_hello(tmp_path):
+    """Bootloader noise after a DTR reset precedes the HELLO; the source still finds it."""
+    master, slave = os.openpty()
+    tty.setraw(slave)
+    name = os.ttyname(slave)
+    os.close(slave)
+    source = fast_serial(name, hello_timeout_s=5.0)
+
+    def board():
+        time.sleep(0.2)
+        sphere = ScriptedSphere()
+        os.write(master, b"\xff\x30\x20\x14\x10 bootloader junk \x00")
+        os.write(master, encode_frame(hello_packet(), 0))
+        for _, f in sphere.steps([("still", 0.1)]):
+            os.write(master, f)
+
+    t = threading.Thread(target=board, daemon=True)
+    t.start()
+    it = iter(source)
+    got = []
+    deadline = time.monotonic() + 5
+    while time.monotonic() < deadline and len(got) < 10:
+        got += next(it)
+    source.close()
+    t.join(5)
+    os.close(master)
+    assert got[0].packet.NAME == "HELLO"
+    assert source.connects == 1
