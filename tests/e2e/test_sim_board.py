@@ -135,3 +135,22 @@ def test_pty_works_with_sphere_capture(tmp_path):
     # joining a running stream, the first chunk may be the tail of a frame: the decoder drops it (spec §2.1)
     assert stats.crc_errors + stats.framing_errors <= 1 and stats.bytes_skipped < 66
     assert stats.frames_ok > 100 and stats.seq_gaps == 0  # about 200 frames a second in real time, none lost
+
+
+def test_send_delivers_bytes_to_the_uart(tmp_path):
+    from sphere.sim import trace as T
+    from sphere.sim.analysis import summarise
+    from sphere.sim.board import run_board
+    from simscenarios import need_board, need_testfw
+
+    need_board()
+    elf = need_testfw()
+    trace = T.to_chips(T.still(2.5)).write(tmp_path / "still.bin")
+    send = tmp_path / "send.txt"
+    send.write_text("# seconds, bytes\n0.5 01 02 03 04 05\n1.2 " + " ".join(["aa"] * 100) + "\n")
+    cap = tmp_path / "cap.bin"
+    r = run_board(elf, trace, 2.5, cap, send=send)
+    assert r.returncode == 0, r.stderr
+    st = summarise(cap).status
+    # the sketch reports the bytes it received in STATUS rx_errors
+    assert [x.rx_errors for x in st] == [5, 105], [(x.t_us, x.rx_errors) for x in st]

@@ -3,6 +3,7 @@
 //
 // Reads the three chips' IDs and data at 200 Hz over Wire and sends protocol/spec.md frames:
 // HELLO at start, RAW_SAMPLE every period, EVENT on ADXL345 INT1 (D2), STATUS once a second.
+// STATUS rx_errors counts every byte received on the UART (to test the board's --send).
 // D13 (PB5) is high during a dummy "update" of a fixed length, so the board's timing is testable.
 #include <Arduino.h>
 #include <Wire.h>
@@ -44,7 +45,7 @@ static bool rd(uint8_t a, uint8_t r, uint8_t *b, uint8_t n) {
 static volatile bool int1;
 static void on_int1() { int1 = true; }
 static uint8_t found, devid, whoami, hid[3];
-static uint16_t errs[3];
+static uint16_t errs[3], rx_bytes;
 static void put16(uint8_t *b, int16_t v) { b[0] = v & 0xFF; b[1] = (uint16_t)v >> 8; }
 static void put32(uint8_t *b, uint32_t v) { for (uint8_t i = 0; i < 4; i++) b[i] = v >> (8 * i); }
 
@@ -104,11 +105,13 @@ void loop() {
     e[4] = (src & 0x20) ? 2 : (src & 0x40) ? 1 : (src & 0x04) ? 3 : 0; e[5] = src; e[6] = ts; e[7] = 0;
     if (e[4]) send(0x04, e, 8);
   }
+  while (Serial.available()) { Serial.read(); rx_bytes++; }
   if (t - last_status >= 1000000UL) {
     last_status = t;
     uint8_t s[25] = {0};
     put32(s, t); s[4] = ok;
     for (uint8_t i = 0; i < 3; i++) put16(s + 5 + 2 * i, errs[i]);
+    put16(s + 17, rx_bytes);
     send(0x05, s, 25);
   }
 }
