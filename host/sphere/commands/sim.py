@@ -118,6 +118,8 @@ def _one(args, source: str, elf, tmp: Path, index: int, multi: bool):
         stats["stream"] = dev
         if summary.status:
             stats["device_loop_overruns"] = summary.status[-1].loop_overruns
+            # the firmware's own figure: the longest period's work in each second / the period (per mille)
+            stats["device_cpu_load_max"] = max(x.cpu_load for x in summary.status) / 1000.0
     acc = None
     if args.accuracy:
         if trial is None:
@@ -143,6 +145,8 @@ def _print_figures(source: str, stats: dict, out=sys.stdout) -> None:
     load = stats.get("cpu_load")
     print(f"  cpu_load at {stats.get('sample_rate_hz', 200):g} Hz: {load if load is None else f'{load:.3f}'} "
           f"(max {stats.get('cpu_load_max')}); {stats.get('i2c_timing_note', '')}", file=out)
+    if stats.get("device_cpu_load_max") is not None:
+        print(f"  device's own cpu_load (STATUS, longest period per second): max {stats['device_cpu_load_max']:.3f}", file=out)
     print(f"  overruns {stats.get('overruns')} (timing pin), device loop_overruns {stats.get('device_loop_overruns')}; "
           f"frames {stats.get('frames_sent')}; I2C transactions {stats.get('i2c_transactions')}, errors {stats.get('i2c_errors')}",
           file=out)
