@@ -247,6 +247,9 @@ static double wall_now(void)
 	return ts.tv_sec + ts.tv_nsec * 1e-9;
 }
 
+static uint32_t resets;
+static void on_reset(avr_t *avr) { (void)avr; resets++; }
+
 static void no_sleep(avr_t *avr, avr_cycle_count_t howLong) { (void)avr; (void)howLong; }
 
 static void stats3(FILE *f, const char *name, vec_t *v)
@@ -383,6 +386,7 @@ int main(int argc, char **argv)
 	avr_load_firmware(avr, &fw);
 	avr->frequency = 16000000; /* a Nano's crystal, whatever the ELF says */
 	avr->sleep = no_sleep;     /* sleep is simulated time, never wall time */
+	avr->reset = on_reset;     /* counts resets after power-up (the watchdog's) */
 
 	board_t board;
 	board_init(&board, avr, &trace, verbose);
@@ -545,6 +549,7 @@ int main(int argc, char **argv)
 		fprintf(sf, "  \"simulated_seconds\": %.6f,\n", sim_s);
 		fprintf(sf, "  \"wall_seconds\": %.3f,\n", wall);
 		fprintf(sf, "  \"speed\": %.3f,\n", wall > 0 ? sim_s / wall : 0);
+		fprintf(sf, "  \"resets\": %u,\n", resets);
 		fprintf(sf, "  \"crashed\": %s\n", state == cpu_Crashed ? "true" : "false");
 		fprintf(sf, "}\n");
 		fclose(sf);
