@@ -28,6 +28,7 @@ def test_hello_packet():
     assert bytes(h.hmc5883l_id) == b"H43"
     assert h.imu_rate_hz == 200 and h.mag_rate_hz == 75
     assert s.summary.hellos == 1, "the device restarted"
+    assert s.stats["resets"] == 0
 
 
 def test_frame_rates_within_one_percent():
