@@ -197,6 +197,8 @@ static void adxl_engine(board_t *b, uint64_t now_us, double t_s)
 				}
 			}
 			/* a tap ending during latency without suppress is ignored */
+		} else if (e->second == 2) {
+			e->second = 0; /* the second event lasted longer than DUR: invalid double tap */
 		}
 	}
 
