@@ -19,10 +19,14 @@ Figures:
   unfiltered pointer velocity over movement samples, searched over 0–200 ms.
 - ``overshoot_px``: mean over stops (motion → rest) of how far past the unfiltered stopping point the
   filtered pointer goes, along the last direction of motion, in the 0.5 s after the stop.
+- ``slow_gain``: on constant slow turns of 1, 2 and 4 °/s (3 s each, same gyro noise, synthetic), the
+  filtered pointer's displacement over the true one after the first second: what tightening or a dead
+  zone takes away from deliberate slow motion (1.0 = nothing; lag does not lower it).
 - ``us_per_sample``: time of one filter update in this process.
 
 Tuning rule (fixed, the same for every filter family): the setting with the least lag among those with
-jitter below 0.3 px; ties and the case where none qualifies go to the least jitter.
+jitter below 0.3 px that keep slow motion (slow gain ≥ 0.9 — otherwise "least lag" would reward
+swallowing slow moves); lag ties go to the least jitter, and if none qualifies, the least jitter wins.
 """
 
 from __future__ import annotations
@@ -80,7 +84,6 @@ def with_breaks_trials(directory=None):
 
 def make_track(path, noise_dps: float, seconds: float | None, seed: int = 7) -> Track:
     from sphere.broad import load_trial
-    from sphere.daemon.pointer import PointerMapper, PointerSettings
 
     trial = load_trial(path)
     t_src = np.arange(len(trial)) / trial.rate_hz
@@ -93,21 +96,59 @@ def make_track(path, noise_dps: float, seconds: float | None, seed: int = 7) -> 
     gyro = gyro + rng.normal(0.0, noise_dps, gyro.shape)
     if (~movement).any():
         gyro = gyro - gyro[~movement].mean(axis=0)
+    return track_from_gyro(path.stem, gyro, movement)
+
+
+def track_from_gyro(name: str, gyro_dps: np.ndarray, movement: np.ndarray) -> Track:
+    """The unfiltered pointer path: the daemon's mapper with smoothing, tightening and acceleration off."""
+    from sphere.daemon.pointer import PointerMapper, PointerSettings
+
     mapper = PointerMapper(PointerSettings(tightening_dps=0.0, smoothing_dps=0.0, axes="local"))
     mapper.settings.fast_deg_per_width = mapper.settings.slow_deg_per_width
     dt = 1.0 / RATE_HZ
-    velocity = np.array([mapper.rate_px_s(g, None, dt) for g in gyro])
-    position = np.cumsum(velocity * dt, axis=0)
-    return Track(path.stem, position, movement, gyro)
+    velocity = np.array([mapper.rate_px_s(g, None, dt) for g in gyro_dps])
+    return Track(name, np.cumsum(velocity * dt, axis=0), movement, gyro_dps)
 
 
-def jsm_reference_path(track: Track) -> np.ndarray:
-    """The daemon's PointerMapper with its default smoothing and tightening (JoyShockMapper's ideas)."""
+SLOW_RATES_DPS = (1.0, 2.0, 4.0)
+
+
+def slow_sweeps(noise_dps: float, seed: int = 11) -> list[Track]:
+    """Constant slow turns (1, 2, 4 °/s about the sensor's z axis for 3 s) with the same gyro noise."""
+    rng = np.random.default_rng(seed)
+    n = int(3.0 * RATE_HZ)
+    tracks = []
+    for rate in SLOW_RATES_DPS:
+        gyro = np.zeros((n, 3))
+        gyro[:, 2] = rate
+        tracks.append(track_from_gyro(f"sweep_{rate:g}dps", gyro + rng.normal(0.0, noise_dps, gyro.shape), np.ones(n, bool)))
+    return tracks
+
+
+def slow_gain(paths: list[np.ndarray], sweeps: list[Track]) -> float:
+    """How much of slow, deliberate motion survives: on each constant slow sweep, the filtered pointer's
+    displacement over the true (noise-free) one between 1 s and 3 s, averaged over the sweeps (1.0 = kept
+    whole; tightening and dead zones lower it, lag does not)."""
+    a, b = int(1.0 * RATE_HZ), -1
+    gains = []
+    for path, sweep, rate in zip(paths, sweeps, SLOW_RATES_DPS):
+        from sphere.daemon.pointer import PointerSettings
+
+        true_px = rate * (len(sweep.position) - 1 - a) / RATE_HZ * 1920.0 / PointerSettings().slow_deg_per_width
+        gains.append(abs(float(path[b, 0] - path[a, 0])) / true_px)
+    return float(np.mean(gains))
+
+
+#: The daemon mapper's smoothing and tightening (JoyShockMapper's ideas), tuned by the same rule.
+JSM_GRID = {"tightening_dps": [0.0, 0.5, 1.0, 2.0], "smoothing_dps": [0.0, 4.0, 8.0], "smoothing_time_s": [0.03, 0.06]}
+
+
+def jsm_path(track: Track, **params) -> np.ndarray:
     from sphere.daemon.pointer import PointerMapper, PointerSettings
 
-    defaults = PointerSettings(axes="local")
-    defaults.fast_deg_per_width = defaults.slow_deg_per_width
-    mapper = PointerMapper(defaults)
+    settings = PointerSettings(axes="local", **params)
+    settings.fast_deg_per_width = settings.slow_deg_per_width
+    mapper = PointerMapper(settings)
     dt = 1.0 / RATE_HZ
     v = np.array([mapper.rate_px_s(g, None, dt) for g in track.gyro_dps])
     return np.cumsum(v * dt, axis=0)
@@ -178,6 +219,9 @@ def overshoot_px(filtered: np.ndarray, raw: np.ndarray, movement: np.ndarray) ->
     return float(np.mean(values)) if values else 0.0
 
 
+SLOW_GAIN_MIN = 0.9
+
+
 def run_filter(factory, params: dict, path: np.ndarray) -> tuple[np.ndarray, float]:
     f = factory(**params)
     dt = 1.0 / RATE_HZ
@@ -209,15 +253,20 @@ def measure(tracks: list[Track], paths: list[np.ndarray], us: float) -> dict:
     }
 
 
+def acceptable(r: dict) -> bool:
+    return r["jitter_px"] < JITTER_LIMIT_PX and r["slow_gain"] >= SLOW_GAIN_MIN
+
+
 def pick(rows: list[dict]) -> dict:
-    """The tuning rule: least lag with jitter below the limit; otherwise least jitter."""
-    ok = [r for r in rows if r["jitter_px"] < JITTER_LIMIT_PX]
+    """The tuning rule: least lag among settings with jitter below the limit that keep slow motion
+    (slow gain ≥ 0.9); lag ties (to 0.1 ms) go to the least jitter; if none qualifies, the least jitter."""
+    ok = [r for r in rows if acceptable(r)]
     if ok:
         return min(ok, key=lambda r: (round(r["lag_ms"], 1), r["jitter_px"]))
     return min(rows, key=lambda r: r["jitter_px"])
 
 
-def evaluate(tracks: list[Track], families: list[str]) -> dict[str, list[dict]]:
+def evaluate(tracks: list[Track], families: list[str], sweeps: list[Track]) -> dict[str, list[dict]]:
     from sphere.smoothing.registry import FILTERS, grid
 
     results: dict[str, list[dict]] = {}
@@ -230,17 +279,24 @@ def evaluate(tracks: list[Track], families: list[str]) -> dict[str, list[dict]]:
                 out, us = run_filter(factory, params, track.position)
                 outs.append(out)
                 times.append(us)
-            rows.append({**measure(tracks, outs, float(np.median(times))), "params": params})
+            swept = [run_filter(factory, params, sw.position)[0] for sw in sweeps]
+            rows.append({**measure(tracks, outs, float(np.median(times))), "slow_gain": slow_gain(swept, sweeps), "params": params})
         results[family] = rows
-    # JoyShockMapper-style reference: the daemon mapper's own smoothing + tightening
-    t0 = time.perf_counter()
-    jsm = [jsm_reference_path(t) for t in tracks]
-    us = (time.perf_counter() - t0) / sum(len(t.position) for t in tracks) * 1e6
-    from dataclasses import asdict
+    # JoyShockMapper-style reference: the daemon mapper's own smoothing + tightening, over its grid
+    import itertools
 
-    from sphere.daemon.pointer import PointerSettings
-
-    results["jsm-mapper"] = [{**measure(tracks, jsm, us), "params": {k: v for k, v in asdict(PointerSettings()).items() if k in ("tightening_dps", "smoothing_dps", "smoothing_time_s")}}]
+    rows = []
+    keys = list(JSM_GRID)
+    for values in itertools.product(*(JSM_GRID[k] for k in keys)):
+        params = dict(zip(keys, values))
+        if params["smoothing_dps"] == 0.0 and params["smoothing_time_s"] != JSM_GRID["smoothing_time_s"][0]:
+            continue  # smoothing off: its time does not matter
+        t0 = time.perf_counter()
+        paths = [jsm_path(t, **params) for t in tracks]
+        us = (time.perf_counter() - t0) / sum(len(t.position) for t in tracks) * 1e6
+        swept = [jsm_path(sw, **params) for sw in sweeps]
+        rows.append({**measure(tracks, paths, us), "slow_gain": slow_gain(swept, sweeps), "params": params})
+    results["jsm-mapper"] = rows
     return results
 
 
@@ -259,11 +315,11 @@ def run(args) -> int:
         print(f"sphere bench pointer: unknown filter {', '.join(unknown)}; choose from {', '.join(FILTERS)}", file=sys.stderr)
         return 2
     tracks = [make_track(p, args.gyro_noise_dps, args.seconds) for p in paths]
-    results = evaluate(tracks, families)
+    results = evaluate(tracks, families, slow_sweeps(args.gyro_noise_dps))
     picks = {family: pick(rows) for family, rows in results.items()}
     smoothing = {f: r for f, r in picks.items() if f not in ("none",)}
     default = min(
-        (f for f, r in smoothing.items() if r["jitter_px"] < JITTER_LIMIT_PX),
+        (f for f, r in smoothing.items() if acceptable(r)),
         key=lambda f: (round(smoothing[f]["lag_ms"], 1), smoothing[f]["jitter_px"]),
         default=min(smoothing, key=lambda f: smoothing[f]["jitter_px"]),
     )
@@ -271,22 +327,22 @@ def run(args) -> int:
 
     print(
         f"pointer quality on {', '.join(t.name for t in tracks)} at 200 Hz; {PointerSettings().slow_deg_per_width:g}° per "
-        f"1920-px screen width; added gyro noise {args.gyro_noise_dps:g} °/s RMS; rule: least lag with jitter < {JITTER_LIMIT_PX} px"
+        f"1920-px screen width; added gyro noise {args.gyro_noise_dps:g} °/s RMS; rule: least lag with jitter < {JITTER_LIMIT_PX} px and slow gain ≥ {SLOW_GAIN_MIN}"
     )
-    header = f"{'filter':<22} {'jitter px':>9} {'lag ms':>7} {'overshoot px':>12} {'µs/sample':>9}  setting"
+    header = f"{'filter':<22} {'jitter px':>9} {'lag ms':>7} {'overshoot px':>12} {'slow gain':>9} {'µs/sample':>9}  setting"
     print(header)
     for family, rows in results.items():
         shown = rows if args.all_settings else [picks[family]]
         for r in shown:
             mark = "*" if family == default and r is picks[family] else " "
             params = " ".join(f"{k}={v:g}" for k, v in r["params"].items())
-            print(f"{mark}{family:<21} {r['jitter_px']:9.3f} {r['lag_ms']:7.1f} {r['overshoot_px']:12.2f} {r['us_per_sample']:9.1f}  {params}")
+            print(f"{mark}{family:<21} {r['jitter_px']:9.3f} {r['lag_ms']:7.1f} {r['overshoot_px']:12.2f} {r['slow_gain']:9.2f} {r['us_per_sample']:9.1f}  {params}")
     print(f"* default (the rule's pick across families): {default}")
     if args.json:
-        out = {"filters": {}, "default": default, "rule": f"least lag with jitter < {JITTER_LIMIT_PX} px",
+        out = {"filters": {}, "default": default, "rule": f"least lag with jitter < {JITTER_LIMIT_PX} px and slow gain >= {SLOW_GAIN_MIN}",
                "gyro_noise_dps": args.gyro_noise_dps, "trials": [t.name for t in tracks]}
         for family, r in picks.items():
-            out["filters"][family] = {k: r[k] for k in ("jitter_px", "lag_ms", "overshoot_px", "us_per_sample")} | {
+            out["filters"][family] = {k: r[k] for k in ("jitter_px", "lag_ms", "overshoot_px", "slow_gain", "us_per_sample")} | {
                 "params": r["params"], "settings_tried": len(results[family])}
         with open(args.json, "w") as f:
             json.dump(out, f, indent=2)
