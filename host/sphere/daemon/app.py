@@ -49,6 +49,8 @@ class SphereMouse:
         self._generation = None
         self._recentre_tilt = True
         self._stopped = False
+        if stream is not None:
+            stream.mode = self.mode
 
     # -- actions --
     def set_mode(self, mode: str) -> None:

@@ -1,0 +1,138 @@
+"""The 3-D stream: orientation (and events, mode changes) as JSON over a WebSocket on 127.0.0.1, and
+the built-in page that shows a 3-D object turning with the sphere.
+
+    http://127.0.0.1:8765/      the page (sphere.daemon.page)
+    ws://127.0.0.1:8765/ws      one JSON object per message:
+        {"type": "orientation", "t_us": ..., "quat": [w, x, y, z], "frame": "NWU", "mode": "3d", "position": null}
+        {"type": "event", "event": "single_tap", "t_us": ...}
+        {"type": "mode", "mode": "tilt"}
+        {"type": "recentre", "quat": [w, x, y, z]}
+
+The server runs its own asyncio loop in a thread; the daemon's calls (``publish_*``) only store the
+newest value or queue a message, so they cost the pointer path next to nothing. Orientation goes out
+at most ``rate_hz`` times a second, only when it changed.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import collections
+import http
+import json
+import threading
+
+
+class OrientationStream:
+    def __init__(self, host: str = "127.0.0.1", port: int = 8765, rate_hz: float = 60.0, log=None):
+        self.host = host
+        self.port = port
+        self.rate_hz = rate_hz
+        self.log = log or (lambda m: None)
+        self.mode = None
+        self.position = None
+        self.clients = set()
+        self.sent = 0
+        self._quat = None
+        self._t_us = None
+        self._dirty = False
+        self._queue: collections.deque = collections.deque(maxlen=256)
+        self._loop = None
+        self._thread = None
+        self._started = threading.Event()
+        self._error: BaseException | None = None
+        self._stop_event = None
+
+    # -- daemon side (any thread) --
+    def publish_orientation(self, quat, t_us=None) -> None:
+        if quat is None:
+            return
+        self._quat = quat
+        self._t_us = t_us
+        self._dirty = True
+
+    def publish_event(self, event: str, t_us=None) -> None:
+        self._queue.append({"type": "event", "event": event, "t_us": t_us})
+
+    def publish_mode(self, mode: str) -> None:
+        self.mode = mode
+        self._queue.append({"type": "mode", "mode": mode})
+
+    def recentre(self) -> None:
+        q = self._quat
+        self._queue.append({"type": "recentre", "quat": [round(float(v), 6) for v in q] if q is not None else None})
+
+    # -- server --
+    def start(self, timeout_s: float = 5.0) -> None:
+        self._thread = threading.Thread(target=self._run, name="sphere-mouse-stream", daemon=True)
+        self._thread.start()
+        if not self._started.wait(timeout_s):
+            raise RuntimeError("the stream server did not start")
+        if self._error is not None:
+            raise RuntimeError(f"cannot listen on {self.host}:{self.port}: {self._error}")
+
+    def _run(self) -> None:
+        try:
+            asyncio.run(self._main())
+        except BaseException as e:  # report bind errors to start()
+            self._error = e
+            self._started.set()
+
+    def _process_request(self, connection, request):
+        from sphere.daemon.page import PAGE_HTML
+
+        path = request.path.split("?", 1)[0]
+        if path == "/ws":
+            return None  # go on with the WebSocket handshake
+        if path in ("/", "/index.html"):
+            response = connection.respond(http.HTTPStatus.OK, PAGE_HTML)
+            del response.headers["Content-Type"]
+            response.headers["Content-Type"] = "text/html; charset=utf-8"
+            response.headers["Cache-Control"] = "no-store"
+            return response
+        return connection.respond(http.HTTPStatus.NOT_FOUND, "not found: the page is at / and the WebSocket at /ws\n")
+
+    async def _handler(self, ws) -> None:
+        self.clients.add(ws)
+        try:
+            if self.mode is not None:
+                await ws.send(json.dumps({"type": "mode", "mode": self.mode}))
+            async for _ in ws:  # messages from clients are ignored
+                pass
+        except Exception:
+            pass
+        finally:
+            self.clients.discard(ws)
+
+    async def _main(self) -> None:
+        from websockets.asyncio.server import broadcast, serve
+
+        self._loop = asyncio.get_running_loop()
+        self._stop_event = asyncio.Event()
+        async with serve(self._handler, self.host, self.port, process_request=self._process_request,
+                         compression=None, close_timeout=1.0) as server:
+            self.port = server.sockets[0].getsockname()[1]
+            self._started.set()
+            period = 1.0 / self.rate_hz
+            while not self._stop_event.is_set():
+                try:
+                    await asyncio.wait_for(self._stop_event.wait(), period)
+                except asyncio.TimeoutError:
+                    pass
+                messages = []
+                while self._queue:
+                    messages.append(self._queue.popleft())
+                if self._dirty and self._quat is not None:
+                    self._dirty = False
+                    messages.append({"type": "orientation", "t_us": self._t_us,
+                                     "quat": [round(float(v), 6) for v in self._quat], "frame": "NWU",
+                                     "mode": self.mode, "position": self.position})
+                if messages and self.clients:
+                    for m in messages:
+                        broadcast(self.clients, json.dumps(m))
+                        self.sent += 1
+
+    def stop(self) -> None:
+        if self._loop is not None and self._stop_event is not None:
+            self._loop.call_soon_threadsafe(self._stop_event.set)
+        if self._thread is not None:
+            self._thread.join(5)
