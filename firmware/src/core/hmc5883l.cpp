@@ -1,0 +1,34 @@
+#include "hmc5883l.h"
+
+namespace sphere {
+
+void Hmc5883l::decode(const uint8_t r[6], int16_t out[3]) {
+    out[0] = (int16_t)(((uint16_t)r[0] << 8) | r[1]);  // X
+    out[2] = (int16_t)(((uint16_t)r[2] << 8) | r[3]);  // Z
+    out[1] = (int16_t)(((uint16_t)r[4] << 8) | r[5]);  // Y
+}
+
+bool Hmc5883l::begin() {
+    id_[0] = id_[1] = id_[2] = 0;
+    if (!bus_.readRegisters(ADDRESS, ID_A, id_, 3)) {
+        id_[0] = id_[1] = id_[2] = 0;
+        return false;
+    }
+    if (!idValid(id_)) return false;
+    return bus_.writeRegister(ADDRESS, CONFIG_A, CONFIG_A_75HZ) && bus_.writeRegister(ADDRESS, CONFIG_B, CONFIG_B_GAIN1) &&
+           bus_.writeRegister(ADDRESS, MODE, MODE_CONTINUOUS);
+}
+
+bool Hmc5883l::poll(int16_t out[3], bool& fresh) {
+    fresh = false;
+    uint8_t status;
+    if (!bus_.readRegister(ADDRESS, STATUS, status)) return false;
+    if (!(status & STATUS_RDY)) return true;
+    uint8_t raw[6];
+    if (!bus_.readRegisters(ADDRESS, DATA_X_MSB, raw, 6)) return false;
+    decode(raw, out);
+    fresh = true;
+    return true;
+}
+
+}  // namespace sphere

@@ -1,0 +1,32 @@
+#include "itg3200.h"
+
+namespace sphere {
+
+void Itg3200::decode(const uint8_t raw[6], int16_t out[3]) {
+    for (uint8_t i = 0; i < 3; ++i) out[i] = (int16_t)(((uint16_t)raw[2 * i] << 8) | raw[2 * i + 1]);
+}
+
+bool Itg3200::begin() {
+    whoami_ = 0;
+    const uint8_t candidates[2] = {ADDRESS_AD0_LOW, ADDRESS_AD0_HIGH};
+    for (uint8_t i = 0; i < 2; ++i) {
+        uint8_t id;
+        if (!bus_.readRegister(candidates[i], WHO_AM_I, id)) continue;
+        whoami_ = id;
+        if (!whoamiValid(id)) continue;
+        address_ = candidates[i];
+        return bus_.writeRegister(address_, PWR_MGM, PWR_MGM_PLL_X) &&
+               bus_.writeRegister(address_, SMPLRT_DIV, SMPLRT_DIV_200HZ) &&
+               bus_.writeRegister(address_, DLPF_FS, DLPF_FS_2000DPS_98HZ) && bus_.writeRegister(address_, INT_CFG, 0);
+    }
+    return false;
+}
+
+bool Itg3200::readGyro(int16_t out[3]) {
+    uint8_t raw[6];
+    if (!bus_.readRegisters(address_, GYRO_XOUT_H, raw, 6)) return false;
+    decode(raw, out);
+    return true;
+}
+
+}  // namespace sphere

@@ -1,0 +1,378 @@
+#include "sphere_device.h"
+
+namespace sphere {
+
+SphereDevice::SphereDevice(I2cBus& bus, DeviceHal& hal)
+    : bus_(bus), hal_(hal), adxl_(bus), itg_(bus), hmc_(bus), filter_(MargFilter::DEFAULT_DT_US) {
+    cal_.setDefaults();
+    tap_ = Adxl345::DEFAULT_TAP;
+    ff_ = Adxl345::DEFAULT_FREE_FALL;
+    Status zero = {};
+    status_ = zero;
+    for (uint8_t i = 0; i < 3; ++i) raw_accel_[i] = raw_gyro_[i] = raw_mag_[i] = 0;
+    sample_t_us_ = 0;
+    ticks_ = 0;
+    phase_ = 0;
+    retry_ = 0;
+    sensors_found_ = sensors_ok_ = 0;
+    raw_flags_ = ori_flags_ = 0;
+    mag_seen_ = mag_fresh_since_raw_ = tap_active_ = false;
+    stream_mode_ = STREAM_RAW | STREAM_ORIENTATION | STREAM_STATUS;
+    raw_rate_hz_ = 200;
+    orientation_rate_hz_ = 100;
+    beta_milli_ = MargFilter::DEFAULT_BETA_MILLI;
+    cal_state_ = 0;
+    cal_step_ = 0;
+    bias_at_startup_ = false;
+    bias_tries_ = 0;
+    max_work_us_ = 0;
+}
+
+void SphereDevice::probe(uint8_t sensor) {
+    bool ok = false;
+    if (sensor == SENSOR_ADXL345) ok = adxl_.begin(tap_, ff_);
+    else if (sensor == SENSOR_ITG3200) ok = itg_.begin();
+    else if (sensor == SENSOR_HMC5883L) ok = hmc_.begin();
+    if (ok) sensors_ok_ |= sensor;
+    else sensors_ok_ &= (uint8_t)~sensor;
+}
+
+void SphereDevice::begin() {
+    probe(SENSOR_ADXL345);
+    probe(SENSOR_ITG3200);
+    probe(SENSOR_HMC5883L);
+    sensors_found_ = sensors_ok_;
+    guard_.setThreshold(tap_.thresh_tap);
+    loadCalibration(true);
+    filter_.begin(MargFilter::DEFAULT_DT_US);
+    filter_.setBetaMilli(MargFilter::STARTUP_BETA_MILLI);
+    if (sensors_ok_ & SENSOR_ITG3200) {
+        bias_est_.start(STARTUP_BIAS_SAMPLES);
+        bias_at_startup_ = true;
+        bias_tries_ = 1;
+    }
+    uint8_t zero = 0;
+    hal_.send(&zero, 1);  // ends any partial frame in the receiver's buffer
+    sendHello();
+}
+
+void SphereDevice::loadCalibration(bool at_start) {
+    uint8_t image[CALIBRATION_EEPROM_LEN];
+    hal_.eepromRead(image, CALIBRATION_EEPROM_LEN);
+    Calibration c;
+    if (readCalibrationImage(image, c)) {
+        cal_ = c;
+        cal_state_ = (uint8_t)((cal_state_ & ~(CAL_EEPROM_INVALID | CAL_GYRO_BIAS_ESTIMATED)) | CAL_FROM_EEPROM |
+                               CAL_GYRO_BIAS_VALID);
+    } else if (at_start) {
+        cal_.setDefaults();
+        cal_state_ = (uint8_t)((cal_state_ & ~(CAL_FROM_EEPROM | CAL_GYRO_BIAS_VALID)) | CAL_EEPROM_INVALID);
+    }
+    updateCalState();
+}
+
+void SphereDevice::updateCalState() {
+    cal_state_ &= (uint8_t)~(CAL_ACCEL_CALIBRATED | CAL_MAG_CALIBRATED);
+    if (!cal_.accelIsDefault()) cal_state_ |= CAL_ACCEL_CALIBRATED;
+    if (!cal_.magIsDefault()) cal_state_ |= CAL_MAG_CALIBRATED;
+}
+
+void SphereDevice::i2cError(uint8_t i) {
+    ++status_.i2c_errors[i];
+    sensors_ok_ &= (uint8_t)~(1u << i);
+}
+
+void SphereDevice::readSensors(uint32_t t_us) {
+    sample_t_us_ = t_us;
+    raw_flags_ = 0;
+    if (sensors_ok_ & SENSOR_ADXL345) {
+        if (adxl_.readAccel(raw_accel_)) raw_flags_ |= RAW_ACCEL_OK;
+        else i2cError(0);
+    }
+    if (sensors_ok_ & SENSOR_ITG3200) {
+        if (itg_.readGyro(raw_gyro_)) raw_flags_ |= RAW_GYRO_OK;
+        else i2cError(1);
+    }
+    if (sensors_ok_ & SENSOR_HMC5883L) {
+        bool fresh = false;
+        if (hmc_.poll(raw_mag_, fresh)) {
+            if (fresh) {
+                mag_seen_ = true;
+                mag_fresh_since_raw_ = true;
+            }
+            if (mag_seen_) raw_flags_ |= RAW_MAG_OK;
+        } else {
+            i2cError(2);
+        }
+    }
+    // a missing sensor's values are 0
+    if (!(raw_flags_ & RAW_ACCEL_OK)) raw_accel_[0] = raw_accel_[1] = raw_accel_[2] = 0;
+    if (!(raw_flags_ & RAW_GYRO_OK)) raw_gyro_[0] = raw_gyro_[1] = raw_gyro_[2] = 0;
+    if (!(raw_flags_ & RAW_MAG_OK)) {
+        raw_mag_[0] = raw_mag_[1] = raw_mag_[2] = 0;
+        mag_seen_ = false;
+    }
+    // pick missing sensors up again once a second
+    if (++retry_ >= RETRY_TICKS) {
+        retry_ = 0;
+        for (uint8_t s = SENSOR_ADXL345; s <= SENSOR_HMC5883L; s = (uint8_t)(s << 1))
+            if (!(sensors_ok_ & s)) probe(s);
+    }
+}
+
+void SphereDevice::handleEvents() {
+    uint32_t t_ev;
+    if (!hal_.adxlInterrupt(t_ev)) return;
+    if (!(sensors_ok_ & SENSOR_ADXL345)) return;
+    uint8_t src, act;
+    if (!adxl_.readEvent(src, act)) {
+        i2cError(0);
+        return;
+    }
+    if (src & (Adxl345::INT_SINGLE_TAP | Adxl345::INT_DOUBLE_TAP)) guard_.onTapInterrupt();
+    Event ev[2];
+    uint8_t n = tapEvents(t_ev, src, act, guard_, ev);
+    uint8_t body[EVENT_LEN];
+    for (uint8_t i = 0; i < n; ++i) sendPacket(PKT_EVENT, body, writeEvent(ev[i], body));
+}
+
+void SphereDevice::runFilter() {
+    int16_t g[3], a[3], m[3];
+    applyGyro(cal_, raw_gyro_, g);
+    applyAccel(cal_, raw_accel_, a);
+    applyMag(cal_, raw_mag_, m);
+    bool acc_ok = (raw_flags_ & RAW_ACCEL_OK) && !tap_active_ && MargFilter::accelPlausible(a);
+    bool mag_present = (raw_flags_ & RAW_MAG_OK) != 0;
+    bool mag_ok = mag_present && MargFilter::magPlausible(m);
+    if (ticks_ == STARTUP_CONVERGE_TICKS) filter_.setBetaMilli(beta_milli_);
+    hal_.margPin(true);
+    uint8_t f = filter_.update(g, a, m, acc_ok, mag_ok);
+    hal_.margPin(false);
+    if (mag_present && !mag_ok) f |= ORI_MAG_REJECTED;
+    if (ticks_ < STARTUP_CONVERGE_TICKS) f |= ORI_CONVERGING;
+    ori_flags_ = f;
+}
+
+void SphereDevice::tick() {
+    uint32_t t0 = hal_.micros();
+    readSensors(t0);
+    handleEvents();
+    if (raw_flags_ & RAW_ACCEL_OK) tap_active_ = guard_.update(raw_accel_);
+    else tap_active_ = false;
+    if (tap_active_) raw_flags_ |= RAW_TAP_ACTIVE;
+
+    if (bias_est_.running()) {
+        int8_t r = (raw_flags_ & RAW_GYRO_OK) ? bias_est_.update(raw_gyro_, raw_accel_) : -1;
+        if (r > 0) {
+            for (uint8_t i = 0; i < 3; ++i) cal_.gyro_bias[i] = bias_est_.bias()[i];
+            cal_state_ |= CAL_GYRO_BIAS_VALID | CAL_GYRO_BIAS_ESTIMATED;
+            cal_state_ &= (uint8_t)~CAL_FROM_EEPROM;
+        }
+        if (r != 0) {
+            if (r < 0 && bias_at_startup_ && bias_tries_ < STARTUP_BIAS_TRIES && (raw_flags_ & RAW_GYRO_OK)) {
+                ++bias_tries_;
+                bias_est_.start(STARTUP_BIAS_SAMPLES);  // moved: try again
+            } else {
+                bias_at_startup_ = false;
+                if (cal_step_ == 1) cal_step_ = 0;
+            }
+        }
+    }
+
+    runFilter();
+    stream(t0);
+    if (ticks_ < 0xFFFF) ++ticks_;
+    if (++phase_ >= IMU_RATE_HZ) phase_ = 0;
+
+    uint32_t work = hal_.micros() - t0;
+    if (work > 0xFFFF) work = 0xFFFF;
+    if (work > max_work_us_) max_work_us_ = (uint16_t)work;
+}
+
+void SphereDevice::stream(uint32_t t_us) {
+    uint8_t body[STATUS_LEN];
+    if ((stream_mode_ & STREAM_RAW) && raw_rate_hz_ && phase_ % (IMU_RATE_HZ / raw_rate_hz_) == 0) {
+        RawSample r;
+        r.t_us = t_us;
+        r.flags = (uint8_t)(raw_flags_ | (mag_fresh_since_raw_ ? RAW_MAG_FRESH : 0));
+        for (uint8_t i = 0; i < 3; ++i) {
+            r.accel[i] = raw_accel_[i];
+            r.gyro[i] = raw_gyro_[i];
+            r.mag[i] = raw_mag_[i];
+        }
+        mag_fresh_since_raw_ = false;
+        sendPacket(PKT_RAW_SAMPLE, body, writeRawSample(r, body));
+    }
+    if ((stream_mode_ & STREAM_ORIENTATION) && orientation_rate_hz_ &&
+        phase_ % (IMU_RATE_HZ / orientation_rate_hz_) == 0) {
+        Orientation o;
+        o.t_us = t_us;
+        o.flags = ori_flags_;
+        filter_.quaternionQ14(o.quat);
+        sendPacket(PKT_ORIENTATION, body, writeOrientation(o, body));
+    }
+    if ((stream_mode_ & STREAM_STATUS) && phase_ == IMU_RATE_HZ / 2) sendStatus();
+}
+
+void SphereDevice::sendPacket(uint8_t type, const uint8_t* body, uint8_t len) {
+    uint8_t frame[MAX_FRAME];
+    uint8_t n = (uint8_t)FrameEncoder::encodeWithSeq(type, encoder_.nextSeq(), body, len, frame);
+    // a dropped frame still uses its sequence number, so the host sees the loss as a gap
+    encoder_.setNextSeq((uint8_t)(encoder_.nextSeq() + 1));
+    if (!n || !hal_.send(frame, n)) ++status_.frames_dropped;
+}
+
+void SphereDevice::sendHello() {
+    Hello h;
+    h.protocol_version = PROTOCOL_VERSION;
+    h.firmware_version[0] = FIRMWARE_VERSION_MAJOR;
+    h.firmware_version[1] = FIRMWARE_VERSION_MINOR;
+    h.firmware_version[2] = FIRMWARE_VERSION_PATCH;
+    h.sensors_found = sensors_found_;
+    h.adxl345_devid = adxl_.devid();
+    h.itg3200_whoami = itg_.whoami();
+    for (uint8_t i = 0; i < 3; ++i) h.hmc5883l_id[i] = hmc_.id()[i];
+    h.imu_rate_hz = IMU_RATE_HZ;
+    h.mag_rate_hz = MAG_RATE_HZ;
+    h.stream_mode = stream_mode_;
+    h.raw_rate_hz = raw_rate_hz_;
+    h.orientation_rate_hz = orientation_rate_hz_;
+    h.calibration_state = cal_state_;
+    uint8_t body[HELLO_LEN];
+    sendPacket(PKT_HELLO, body, writeHello(h, body));
+}
+
+void SphereDevice::sendStatus() {
+    status_.t_us = hal_.micros();
+    status_.sensors_ok = sensors_ok_;
+    status_.i2c_recoveries = hal_.i2cRecoveries();
+    status_.rx_errors = (uint16_t)(decoder_.oversize + decoder_.framing_errors + decoder_.crc_errors);
+    status_.calibration_state = cal_state_;
+    status_.calibration_step = cal_step_;
+    uint32_t load = (uint32_t)max_work_us_ * 1000u / MargFilter::DEFAULT_DT_US;
+    status_.cpu_load = (uint16_t)(load > 65535u ? 65535u : load);
+    max_work_us_ = 0;
+    status_.battery_mv = hal_.batteryMv();
+    uint8_t body[STATUS_LEN];
+    sendPacket(PKT_STATUS, body, writeStatus(status_, body));
+}
+
+void SphereDevice::receive(uint8_t byte) {
+    if (decoder_.push(byte) == FRAME_OK) execute(decoder_.payload(), decoder_.payloadLength());
+}
+
+void SphereDevice::execute(const uint8_t* payload, uint8_t len) {
+    Command c;
+    uint8_t result = CommandParser::parse(payload, len, c);
+    if (result == RESULT_OK) result = executeCommand(c);
+    uint8_t body[REPLY_CALIBRATION_LEN];
+    uint8_t n;
+    if (result == RESULT_OK && c.type == CMD_GET_CALIBRATION) {
+        uint8_t data[CALIBRATION_BLOCK_LEN + 1];
+        writeCalibrationBlock(cal_, data);
+        data[CALIBRATION_BLOCK_LEN] = cal_state_;
+        n = writeReply(c.seq, c.type, result, data, sizeof data, body);
+    } else {
+        n = writeReply(c.seq, c.type, result, 0, 0, body);
+    }
+    sendPacket(PKT_REPLY, body, n);
+    if (result != RESULT_OK) return;
+    if (c.type == CMD_GET_HELLO) sendHello();
+    else if (c.type == CMD_GET_STATUS) sendStatus();
+    else if (c.type == CMD_REBOOT) hal_.reboot();
+}
+
+uint8_t SphereDevice::executeCommand(const Command& c) {
+    switch (c.type) {
+        case CMD_SET_STREAM:
+            stream_mode_ = c.set_stream.stream_mode;
+            raw_rate_hz_ = c.set_stream.raw_rate_hz;
+            orientation_rate_hz_ = c.set_stream.orientation_rate_hz;
+            return RESULT_OK;
+        case CMD_SET_TAP: {
+            if (!(sensors_ok_ & SENSOR_ADXL345)) return RESULT_SENSOR_MISSING;
+            TapSettings t = {c.set_tap.thresh_tap, c.set_tap.dur, c.set_tap.latent, c.set_tap.window,
+                             c.set_tap.tap_axes};
+            if (!adxl_.writeTap(t)) {
+                i2cError(0);
+                adxl_.writeTap(tap_);  // best effort: back to the settings in use
+                return RESULT_FAILED;
+            }
+            tap_ = t;
+            guard_.setThreshold(t.thresh_tap);
+            return RESULT_OK;
+        }
+        case CMD_SET_FREE_FALL: {
+            if (!(sensors_ok_ & SENSOR_ADXL345)) return RESULT_SENSOR_MISSING;
+            FreeFallSettings f = {c.set_free_fall.thresh_ff, c.set_free_fall.time_ff};
+            if (!adxl_.writeFreeFall(f)) {
+                i2cError(0);
+                adxl_.writeFreeFall(ff_);
+                return RESULT_FAILED;
+            }
+            ff_ = f;
+            return RESULT_OK;
+        }
+        case CMD_SET_FILTER:
+            beta_milli_ = c.set_filter.beta;
+            if (ticks_ >= STARTUP_CONVERGE_TICKS) filter_.setBetaMilli(beta_milli_);
+            return RESULT_OK;
+        case CMD_CALIBRATION_STEP: {
+            uint8_t step = c.calibration_step.step;
+            if (c.calibration_step.action == 0) {  // stop ends any step
+                if (cal_step_ == 1 || bias_at_startup_) bias_est_.stop();
+                bias_at_startup_ = false;
+                cal_step_ = 0;
+                return RESULT_OK;
+            }
+            if (cal_step_ != 0 && cal_step_ != step) return RESULT_BUSY;
+            static const uint8_t needs[4] = {0, SENSOR_ITG3200, SENSOR_ADXL345, SENSOR_HMC5883L};
+            if (!(sensors_ok_ & needs[step])) return RESULT_SENSOR_MISSING;
+            cal_step_ = step;
+            if (step == 1) {
+                bias_at_startup_ = false;
+                bias_est_.start(STEP_BIAS_SAMPLES);
+            }
+            return RESULT_OK;
+        }
+        case CMD_SET_CALIBRATION:
+            cal_ = c.calibration;
+            cal_state_ = (uint8_t)((cal_state_ & ~(CAL_FROM_EEPROM | CAL_GYRO_BIAS_ESTIMATED)) | CAL_GYRO_BIAS_VALID);
+            updateCalState();
+            return RESULT_OK;
+        case CMD_SAVE_CALIBRATION: {
+            uint8_t image[CALIBRATION_EEPROM_LEN], back[CALIBRATION_EEPROM_LEN];
+            writeCalibrationImage(cal_, image);
+            bool ok = hal_.eepromWrite(image, CALIBRATION_EEPROM_LEN);
+            hal_.eepromRead(back, CALIBRATION_EEPROM_LEN);
+            for (uint8_t i = 0; i < CALIBRATION_EEPROM_LEN; ++i)
+                if (back[i] != image[i]) ok = false;
+            if (!ok) return RESULT_STORAGE_ERROR;
+            cal_state_ = (uint8_t)((cal_state_ & ~CAL_EEPROM_INVALID) | CAL_FROM_EEPROM);
+            return RESULT_OK;
+        }
+        case CMD_LOAD_CALIBRATION: {
+            uint8_t image[CALIBRATION_EEPROM_LEN];
+            hal_.eepromRead(image, CALIBRATION_EEPROM_LEN);
+            Calibration cal;
+            if (!readCalibrationImage(image, cal)) return RESULT_STORAGE_ERROR;
+            cal_ = cal;
+            cal_state_ = (uint8_t)((cal_state_ & ~(CAL_EEPROM_INVALID | CAL_GYRO_BIAS_ESTIMATED)) | CAL_FROM_EEPROM |
+                                   CAL_GYRO_BIAS_VALID);
+            updateCalState();
+            return RESULT_OK;
+        }
+        case CMD_RESET_CALIBRATION:
+            cal_.setDefaults();
+            cal_state_ &= (uint8_t)~(CAL_FROM_EEPROM | CAL_GYRO_BIAS_VALID | CAL_GYRO_BIAS_ESTIMATED);
+            updateCalState();
+            return RESULT_OK;
+        case CMD_IDENTIFY:
+            hal_.identify(c.identify.seconds);
+            return RESULT_OK;
+        default:  // GET_HELLO, GET_CALIBRATION, GET_STATUS, REBOOT: the reply and what follows it
+            return RESULT_OK;
+    }
+}
+
+}  // namespace sphere

@@ -1,0 +1,125 @@
+// Register-map fakes of the three chips on one I²C bus, and a fake board for SphereDevice.
+#pragma once
+#include <cstring>
+#include <vector>
+
+#include "framing.h"
+#include "sphere_device.h"
+
+struct FakeChip {
+    uint8_t addr = 0;
+    bool present = true;
+    uint8_t regs[128] = {};
+    std::vector<std::pair<uint8_t, uint8_t>> writes;  // (reg, value)
+};
+
+struct FakeBus : sphere::I2cBus {
+    FakeChip adxl, itg, hmc;
+    int transactions = 0;
+    FakeBus() {
+        adxl.addr = 0x53;
+        adxl.regs[0x00] = 0xE5;
+        itg.addr = 0x68;
+        itg.regs[0x00] = 0x69;  // WHO_AM_I as shipped (AD0 bit reads back as 1 on many boards)
+        hmc.addr = 0x1E;
+        hmc.regs[0x0A] = 'H';
+        hmc.regs[0x0B] = '4';
+        hmc.regs[0x0C] = '3';
+    }
+    FakeChip* chip(uint8_t a) {
+        for (FakeChip* c : {&adxl, &itg, &hmc})
+            if (c->addr == a && c->present) return c;
+        return nullptr;
+    }
+    bool writeRegisters(uint8_t addr, uint8_t reg, const uint8_t* d, uint8_t n) override {
+        ++transactions;
+        FakeChip* c = chip(addr);
+        if (!c) return false;
+        for (uint8_t i = 0; i < n; ++i) {
+            c->regs[(reg + i) & 127] = d[i];
+            c->writes.push_back({(uint8_t)(reg + i), d[i]});
+        }
+        return true;
+    }
+    bool readRegisters(uint8_t addr, uint8_t reg, uint8_t* out, uint8_t n) override {
+        ++transactions;
+        FakeChip* c = chip(addr);
+        if (!c) return false;
+        for (uint8_t i = 0; i < n; ++i) out[i] = c->regs[(reg + i) & 127];
+        if (c == &adxl && reg == 0x30) adxl.regs[0x30] &= 0x83;  // INT_SOURCE read clears the events
+        if (c == &hmc && reg == 0x03) hmc.regs[0x09] &= ~1;       // reading the data clears RDY
+        return true;
+    }
+    // sensor values in chip units, written into the registers as each chip lays them out
+    void setAccel(int16_t x, int16_t y, int16_t z) {
+        int16_t v[3] = {x, y, z};
+        for (int i = 0; i < 3; ++i) {
+            adxl.regs[0x32 + 2 * i] = (uint8_t)v[i];
+            adxl.regs[0x33 + 2 * i] = (uint8_t)((uint16_t)v[i] >> 8);
+        }
+    }
+    void setGyro(int16_t x, int16_t y, int16_t z) {
+        int16_t v[3] = {x, y, z};
+        for (int i = 0; i < 3; ++i) {
+            itg.regs[0x1D + 2 * i] = (uint8_t)((uint16_t)v[i] >> 8);
+            itg.regs[0x1E + 2 * i] = (uint8_t)v[i];
+        }
+    }
+    void setMag(int16_t x, int16_t y, int16_t z) {
+        int16_t v[3] = {x, z, y};  // the chip's order: X, Z, Y
+        for (int i = 0; i < 3; ++i) {
+            hmc.regs[0x03 + 2 * i] = (uint8_t)((uint16_t)v[i] >> 8);
+            hmc.regs[0x04 + 2 * i] = (uint8_t)v[i];
+        }
+        hmc.regs[0x09] |= 1;
+    }
+};
+
+struct FakeHal : sphere::DeviceHal {
+    uint32_t now = 0;
+    std::vector<uint8_t> wire;
+    uint8_t eeprom[1024];
+    bool eeprom_fails = false;
+    int pin_high = 0, pin_pulses = 0;
+    bool interrupt = false;
+    uint32_t interrupt_t = 0;
+    int identify_s = 0, reboots = 0;
+    bool tx_full = false;
+    FakeHal() { std::memset(eeprom, 0xFF, sizeof eeprom); }
+    uint32_t micros() override { return now += 4; }
+    bool send(const uint8_t* f, uint8_t n) override {
+        if (tx_full) return false;
+        wire.insert(wire.end(), f, f + n);
+        return true;
+    }
+    void eepromRead(uint8_t* out, uint8_t n) override { std::memcpy(out, eeprom, n); }
+    bool eepromWrite(const uint8_t* d, uint8_t n) override {
+        if (eeprom_fails) return false;
+        std::memcpy(eeprom, d, n);
+        return true;
+    }
+    void margPin(bool h) override {
+        if (h) ++pin_pulses;
+        pin_high = h;
+    }
+    bool adxlInterrupt(uint32_t& t) override {
+        if (!interrupt) return false;
+        interrupt = false;
+        t = interrupt_t;
+        return true;
+    }
+    void identify(uint8_t s) override { identify_s = s; }
+    void reboot() override { ++reboots; }
+    uint16_t i2cRecoveries() override { return 0; }
+    uint16_t batteryMv() override { return 0; }
+
+    // frames sent since the last call, as CRC-good payloads
+    std::vector<std::vector<uint8_t>> frames() {
+        std::vector<std::vector<uint8_t>> out;
+        sphere::FrameDecoder d;
+        for (uint8_t b : wire)
+            if (d.push(b) == sphere::FRAME_OK) out.emplace_back(d.payload(), d.payload() + d.payloadLength());
+        wire.clear();
+        return out;
+    }
+};
