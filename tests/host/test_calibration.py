@@ -1,0 +1,104 @@
+"""Calibration math recovers known synthetic parameters."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from sphere import calibration as cal
+from sphere import chips
+
+
+def _rotations(n, rng):
+    q = rng.normal(size=(n, 4))
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    w, x, y, z = q.T
+    return np.stack([
+        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
+        np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
+        np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
+    ], 1)
+
+
+def test_gyro_bias_is_the_still_mean_and_motion_is_refused():
+    rng = np.random.default_rng(0)
+    bias = np.array([12.0, -30.0, 5.0])
+    g = bias + rng.normal(0, 2.0, (2000, 3))
+    r = cal.gyro_bias(np.rint(g))
+    assert np.allclose(r.bias_lsb, bias, atol=0.3)
+    assert np.all(r.noise_lsb < 3.0)
+    moving = g + np.outer(np.sin(np.linspace(0, 20, 2000)), [500, 0, 0])
+    with pytest.raises(ValueError, match="moved"):
+        cal.gyro_bias(moving)
+
+
+def test_accel_six_position_recovers_offset_and_gain():
+    rng = np.random.default_rng(1)
+    offset = np.array([7.0, -12.0, 20.0])
+    sens = np.array([250.0, 262.0, 245.0])  # LSB per g of each axis
+    poses = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1],
+                      [0.6, 0.8, 0], [0, -0.6, 0.8]], float)
+    means = poses * sens + offset + rng.normal(0, 0.3, poses.shape)
+    r = cal.accel_six_position(means)
+    assert np.allclose(r.offset_lsb, offset, atol=1.0)
+    assert np.allclose(r.gain, chips.ADXL345_LSB_PER_G / sens, rtol=3e-3)
+    assert r.residual_lsb < 1.0
+    corrected = r.apply(poses[0] * sens + offset)
+    assert abs(np.linalg.norm(corrected) - 256.0) < 1.5
+
+
+def test_accel_needs_every_axis_up_and_down():
+    with pytest.raises(ValueError, match="up and once down"):
+        cal.accel_six_position(np.array([[256, 0, 0], [0, 256, 0], [0, 0, 256]] * 2, float))
+
+
+def test_mag_ellipsoid_recovers_hard_and_soft_iron():
+    rng = np.random.default_rng(2)
+    field = np.array([200.0, 0.0, -450.0])  # an earth field in LSB (gain 1: ~45 µT)
+    R = _rotations(3000, rng)
+    true_field = R @ field
+    soft = np.array([[1.15, 0.08, -0.03], [0.08, 0.92, 0.05], [-0.03, 0.05, 1.02]])
+    hard = np.array([-80.0, 35.0, 120.0])
+    raw = true_field @ soft.T + hard + rng.normal(0, 2.0, true_field.shape)
+    r = cal.mag_ellipsoid(np.rint(raw))
+    assert np.allclose(r.hard_iron_lsb, hard, atol=3.0)
+    # the recovered W undoes soft iron up to a scale: W·soft ∝ a rotation-free identity (W symmetric)
+    Ws = r.soft_iron @ soft
+    Ws /= np.cbrt(np.linalg.det(Ws))
+    assert np.allclose(Ws, np.eye(3), atol=0.02)
+    assert r.residual < 0.01
+    assert r.norm_after[1] < 0.2 * r.norm_before[1]
+    assert abs(r.radius_lsb - np.linalg.norm(field)) / np.linalg.norm(field) < 0.1
+
+
+def test_mag_ellipsoid_refuses_a_flat_cloud():
+    rng = np.random.default_rng(3)
+    t = rng.uniform(0, 2 * np.pi, 500)
+    flat = np.stack([300 * np.cos(t), 300 * np.sin(t), np.zeros_like(t)], 1) + rng.normal(0, 1, (500, 3))
+    with pytest.raises(ValueError, match="orientations"):
+        cal.mag_ellipsoid(flat)
+
+
+def test_from_capture_finds_still_poses_and_all_three_parts():
+    rng = np.random.default_rng(4)
+    rate = 100.0
+    offset, sens = np.array([5.0, -8.0, 10.0]), np.array([255.0, 258.0, 250.0])
+    gbias = np.array([20.0, -15.0, 7.0])
+    acc, gyr, mag = [], [], []
+    field, hard = np.array([200.0, 0.0, -450.0]), np.array([40.0, -60.0, 15.0])
+    for d in np.vstack([np.eye(3), -np.eye(3)]):
+        n = 300  # 3 s still
+        acc.append(d * sens + offset + rng.normal(0, 1.5, (n, 3)))
+        gyr.append(gbias + rng.normal(0, 2.0, (n, 3)))
+        mag.append(np.tile(field, (n, 1)) + hard)
+        # 2 s of turning between poses
+        m = 200
+        acc.append(rng.normal(0, 150, (m, 3)))
+        gyr.append(rng.normal(0, 3000, (m, 3)))
+        mag.append(_rotations(m, rng) @ field + hard)
+    acc, gyr, mag = np.vstack(acc), np.vstack(gyr), np.vstack(mag)
+    c = cal.from_capture(acc, gyr, mag, rate)
+    assert c.gyro is not None and np.allclose(c.gyro.bias_lsb, gbias, atol=0.5)
+    assert c.accel is not None and c.accel.poses == 6
+    assert np.allclose(c.accel.offset_lsb, offset, atol=1.0)
+    assert c.mag is not None and np.allclose(c.mag.hard_iron_lsb, hard, atol=5.0)

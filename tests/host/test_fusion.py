@@ -1,0 +1,166 @@
+"""Fusion filters: hand-checked Madgwick steps, batch == per-sample, and accuracy on a real BROAD slice."""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+import pytest
+
+from sphere import broad
+from sphere import quaternion as quat
+from sphere.fusion.common import ecompass
+from sphere.fusion.kalman import DissertationKF
+from sphere.fusion.madgwick import Madgwick, madgwick_step
+from sphere.fusion.sphere_filter import SphereFilter
+
+
+def _trial(name: str, start_s: float, seconds: float) -> broad.Trial:
+    try:
+        path = broad.find_trial(name)
+    except broad.BroadMissing as e:
+        pytest.skip(f"BROAD trials not available: {e}")
+    return broad.load_trial(path).seconds(start_s, seconds)
+
+
+def _synthetic(n=600, dt=0.01, seed=1):
+    rng = np.random.default_rng(seed)
+    t = np.arange(n) * dt
+    gyr = np.stack([0.5 * np.sin(t), 0.3 * np.cos(0.7 * t), 0.8 * np.sin(0.3 * t)], axis=1) + rng.normal(0, 0.01, (n, 3))
+    acc = np.array([0.5, -0.3, 9.7]) + rng.normal(0, 0.2, (n, 3))
+    mag = np.array([20.0, 3.0, -40.0]) + rng.normal(0, 0.5, (n, 3))
+    return gyr, acc, mag, dt
+
+
+# -- Madgwick, checked by hand against eq. 74–77 -------------------------------------------------------
+
+def test_madgwick_gyro_only_step_is_half_q_times_omega():
+    q = madgwick_step((1.0, 0.0, 0.0, 0.0), 0.0, 0.0, 1.0, 0.0, 0.0, 9.8, None, None, None, 0.01, 0.1,
+                      acc_valid=False)
+    expected = np.array([1.0, 0.0, 0.0, 0.005]) / math.hypot(1.0, 0.005)
+    assert np.allclose(q, expected, atol=1e-15)
+
+
+def test_madgwick_gravity_step_by_hand():
+    # q = identity, gravity measured along sensor x: f_g = [-1, 0, 1], J_gᵀ f_g = [0, 0, 2, 0]
+    beta, dt = 0.1, 0.01
+    q = madgwick_step((1.0, 0.0, 0.0, 0.0), 0.0, 0.0, 0.0, 9.81, 0.0, 0.0, None, None, None, dt, beta)
+    expected = np.array([1.0, 0.0, -beta * dt, 0.0])
+    assert np.allclose(q, expected / np.linalg.norm(expected), atol=1e-15)
+
+
+def test_madgwick_magnetic_step_by_hand():
+    # level (a = z), field along sensor y: h = m, b = [0, 1, 0, 0], f_b = [1, −1, 0], J_bᵀ f_b = [0, 0, 0, 2]
+    beta, dt = 0.2, 0.005
+    q = madgwick_step((1.0, 0.0, 0.0, 0.0), 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 30.0, 0.0, dt, beta)
+    expected = np.array([1.0, 0.0, 0.0, -beta * dt])
+    assert np.allclose(q, expected / np.linalg.norm(expected), atol=1e-15)
+    # the same sample flagged mag_valid=False is a gravity-only step: level, so no correction at all
+    q = madgwick_step((1.0, 0.0, 0.0, 0.0), 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 30.0, 0.0, dt, beta, mag_valid=False)
+    assert q == (1.0, 0.0, 0.0, 0.0)
+
+
+def test_madgwick_zero_acc_means_no_feedback_and_converged_state_stays():
+    q0 = (1.0, 0.0, 0.0, 0.0)
+    assert madgwick_step(q0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 30.0, 0.0, 0.01, 0.5) == q0
+    # already aligned with gravity (z) and north (x in NWU): f = 0, nothing moves
+    assert np.allclose(madgwick_step(q0, 0.0, 0.0, 0.0, 0.0, 0.0, 9.8, 20.0, 0.0, -40.0, 0.01, 0.5), q0)
+
+
+def test_madgwick_converges_to_the_ecompass_orientation():
+    acc, mag = (1.0, -2.0, 9.5), (15.0, 8.0, -40.0)
+    f = Madgwick(beta=0.1)
+    for _ in range(3000):
+        f.update((0.0, 0.0, 0.0), acc, mag, 0.01)
+    # the normalised step chatters by about β·dt = 0.06° around the zero of the objective
+    assert quat.angle_between_deg(f.quat, np.array(ecompass(*acc, *mag, frame="NWU"))) < 0.15
+
+
+# -- batch == per sample ------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("make", [lambda: Madgwick(0.05), lambda: DissertationKF(0.05, robust="huber"), SphereFilter])
+def test_batch_equals_per_sample(make):
+    gyr, acc, mag, dt = _synthetic()
+    av = np.ones(len(gyr), bool)
+    av[100:130] = False
+    mv = np.ones(len(gyr), bool)
+    mv[300:400] = False
+    batch = make().update_batch(gyr, acc, mag, dt, acc_valid=av, mag_valid=mv)
+    f = make()
+    per = np.array([np.array(f.update(g, a, m, dt, acc_valid=bool(x), mag_valid=bool(y)), float)
+                    for g, a, m, x, y in zip(gyr, acc, mag, av, mv)])
+    assert np.array_equal(batch, per)
+    assert np.allclose(np.linalg.norm(batch, axis=1), 1.0)
+
+
+@pytest.mark.parametrize("make", [lambda: Madgwick(0.05), lambda: DissertationKF(0.05), SphereFilter])
+def test_missing_magnetometer_is_accepted(make):
+    gyr, acc, _, dt = _synthetic(200)
+    q = make().update_batch(gyr, acc, None, dt)
+    assert q.shape == (200, 4) and np.all(np.isfinite(q))
+
+
+def test_filters_state_their_earth_frame():
+    assert Madgwick.earth_frame == "NWU" and DissertationKF.earth_frame == "NWU" and SphereFilter.earth_frame == "ENU"
+
+
+# -- Kalman filter pieces --------------------------------------------------------------------------------
+
+def test_kf_gate_rejects_a_spike_and_huber_limits_it():
+    acc, mag = np.array([0.0, 0.0, 9.8]), np.array([20.0, 0.0, -40.0])
+    jump = {}
+    for robust in ("gate", "huber", "none"):
+        f = DissertationKF(0.05, robust=robust, threshold=1.0)
+        for _ in range(500):
+            f.update((0.0, 0.0, 0.0), acc, mag, 0.01)
+        f.update((0.0, 0.0, 0.0), np.array([9.8, 0.0, 0.0]), mag, 0.01)  # a 90° spike in the measurement
+        jump[robust] = float(quat.angle_between_deg(f.quat, np.array([1.0, 0.0, 0.0, 0.0])))
+        if robust == "gate":
+            assert f.rejected == 1
+    assert jump["gate"] < 1e-6
+    assert 0.0 < jump["huber"] < 0.5 * jump["none"], jump
+
+
+# -- real data ------------------------------------------------------------------------------------------
+
+def _err(f, t, q0=True):
+    q = f.update_batch(t.gyr_rad_s, t.acc_m_s2, t.mag_uT, t.dt_s)
+    q = quat.nwu_to_enu(q) if f.earth_frame == "NWU" else q
+    return broad.orientation_error(q, t)
+
+
+def test_kf_beats_madgwick_on_a_fast_rotation_slice():
+    from sphere.fusion import registry
+
+    t = _trial("07", 30.0, 60.0)
+    e0 = (t.acc_m_s2[0], t.mag_uT[0])
+    mad = _err(registry.make("madgwick", t.dt_s, *e0), t)
+    kf = _err(registry.make("dissertation-kf", t.dt_s, *e0), t)
+    assert kf.total < mad.total, (kf, mad)
+
+
+def test_sphere_filter_accuracy_on_a_real_slice():
+    t = _trial("02", 0.0, 90.0)
+    e = _err(SphereFilter(), t)
+    assert e.total < 2.5 and e.inclination < 1.0, e
+
+
+def test_sphere_filter_holds_heading_through_a_magnet():
+    t = _trial("32", 0.0, 90.0)
+    f = SphereFilter()
+    e = _err(f, t)
+    assert e.total < 6.0, e
+
+
+def test_sphere_filter_is_fast_enough_for_live_use():
+    gyr, acc, mag, dt = _synthetic(3000)
+    f = SphereFilter()
+    g, a, m = gyr.tolist(), acc.tolist(), mag.tolist()
+    best = math.inf
+    for _ in range(3):
+        t0 = time.perf_counter()
+        for i in range(len(g)):
+            f.update(g[i], a[i], m[i], dt)
+        best = min(best, (time.perf_counter() - t0) / len(g))
+    assert best < 100e-6, f"{best * 1e6:.1f} µs per sample"
