@@ -1,0 +1,62 @@
+"""The accuracy comparison of `sphere sim --accuracy` (sphere.sim.analysis.accuracy) on a stream made
+in Python: ORIENTATION packets that carry BROAD's own optical reference (turned to NWU, Q14) must score
+close to zero with the dataset's metric, which checks the time alignment and the frame conversion; the
+host Madgwick column runs on RAW_SAMPLE packets made from the same slice as the board's models make them."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from sphere import quaternion as quat
+from sphere.protocol import Hello, Orientation, RawSample
+from sphere.sim import trace as T
+from sphere.sim.analysis import CaptureSummary, accuracy, accuracy_table
+
+
+def _slice():
+    from sphere.broad import BroadMissing, find_trial, load_trial
+
+    try:
+        trial = load_trial(find_trial("02"))
+    except BroadMissing as e:
+        pytest.skip(str(e))
+    return trial.seconds(38.0, 20.0)
+
+
+def test_reference_as_firmware_output_scores_near_zero():
+    sl = _slice()
+    hold = 1.0
+    # ORIENTATION at 100 Hz: the reference at the newest BROAD sample, NWU, Q14
+    t_o = np.arange(0, hold + 20.0, 0.01)
+    idx = np.clip(np.floor((t_o - hold) * sl.rate_hz).astype(int), 0, len(sl) - 1)
+    q_ref = sl.opt_quat.copy()
+    ok = np.all(np.isfinite(q_ref), axis=1)
+    q_ref[~ok] = q_ref[np.argmax(ok)]
+    q_nwu = quat.multiply(quat.conjugate(quat.Q_NWU_TO_ENU), q_ref[idx])
+    ori = [Orientation(t_us=int(round(t * 1e6)), flags=1, quat=[int(round(v * 16384)) for v in q])
+           for t, q in zip(t_o, q_nwu)]
+    # RAW_SAMPLE at 200 Hz from the board's conversion of the same slice (after a still lead-in)
+    ct = T.to_chips(T.hold_first(T.from_broad(sl), hold))
+    n = min(len(ct.accel_lsb), len(ct.gyro_lsb))
+    mag_idx = np.minimum((np.arange(n) / 200.0 * ct.mag_rate_hz).astype(int), len(ct.mag_lsb) - 1)
+    raw = [RawSample(t_us=int(i * 5000), flags=7, accel=list(map(int, ct.accel_lsb[i])),
+                     gyro=list(map(int, ct.gyro_lsb[i])), mag=list(map(int, ct.mag_lsb[mag_idx[i]])))
+           for i in range(n)]
+    hello = Hello(protocol_version=1, firmware_version=[0, 0, 0], sensors_found=7, adxl345_devid=0xE5,
+                  itg3200_whoami=0x68, hmc5883l_id=[72, 52, 51], imu_rate_hz=200, mag_rate_hz=75,
+                  stream_mode=3, raw_rate_hz=200, orientation_rate_hz=100, calibration_state=0)
+    summary = CaptureSummary(hello=hello, hellos=1, raw=raw, orientation=ori)
+    row = accuracy(summary, sl, hold, beta=0.041, bias_s=1.0)
+    assert row.firmware is not None, row.note
+    assert row.firmware["total"] < 0.5, row.firmware
+    print(accuracy_table([row]))
+    table = accuracy_table([row])
+    assert sl.name in table
+    try:
+        import sphere.fusion.madgwick  # noqa: F401
+    except ImportError:
+        assert row.host is None
+        return
+    assert row.host is not None and row.host["total"] < 10.0, row.host
+    assert row.fw_vs_host_rms_deg is not None
