@@ -162,3 +162,24 @@ def test_config_error_is_clear(xvfb, tmp_path):
     assert r.returncode == 2
     assert "unknown key [pointer] slow_deg_per_widht" in r.stderr
     assert "did you mean 'slow_deg_per_width'" in r.stderr
+
+
+def test_pynput_backend_under_xvfb(xvfb, tmp_path):
+    import importlib.util
+
+    if importlib.util.find_spec("pynput") is None:  # importing it needs a display, so only look it up
+        pytest.skip("pynput is not installed (pip install pynput)")
+    capture = tmp_path / "p.bin"
+    capture.write_bytes(script_bytes([("still", 1.0), ("turn", (0, 0, 1), 10.0, 0.5), ("still", 0.2),
+                                      ("tap", "single_tap"), ("still", 0.3)]))
+    clicks = ClickRecorder(xvfb)
+    xdotool(xvfb, "mousemove", "700", "500")
+    env = dict(os.environ, DISPLAY=xvfb)
+    r = subprocess.run([sys.executable, "-m", "sphere.mouse", "--replay", str(capture), "--speed", "0",
+                        "--backend", "pynput", "--no-stream", "--config", os.devnull],
+                       env=env, capture_output=True, text=True, timeout=60)
+    assert r.returncode == 0, r.stderr
+    time.sleep(0.3)
+    x, y = pointer(xvfb)
+    assert abs(x - (700 - 160)) <= 2 and y == 500  # 5° left at 1280 px / 40°
+    assert [c[0] for c in clicks.presses] == [1] and abs(clicks.presses[0][1] - 540) <= 2

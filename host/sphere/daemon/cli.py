@@ -99,8 +99,12 @@ def open_source(cfg, log):
                          link_timeout_s=s.link_timeout_s, reconnect_interval_s=s.reconnect_interval_s)
     if kind == "simulate":
         if sources.simulator_available():
-            return sources.SimulatorSource(s.sim_trace, log=log, **serial_kwargs)
-        log("the virtual board (sphere sim) is not installed here; using the built-in scripted sphere")
+            try:
+                return sources.SimulatorSource(s.sim_trace, log=log, **serial_kwargs)
+            except sources.SourceError as e:
+                log(f"the virtual board cannot run here ({e}); using the built-in scripted sphere")
+        else:
+            log("the virtual board (sphere sim) is not installed here; using the built-in scripted sphere")
         return sources.ScriptedSource(speed=s.speed or 1.0)
     if kind == "hid":
         return sources.HidSource(s.hid_vendor_id, s.hid_product_id, s.hid_product,

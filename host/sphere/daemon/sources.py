@@ -16,6 +16,7 @@ import os
 import re
 import subprocess
 import sys
+import threading
 import time
 from typing import Callable, Iterator
 
@@ -465,28 +466,38 @@ def simulator_available() -> bool:
         return False
 
 
-PTY_RE = re.compile(r"(/dev/pts/\d+|/dev/tty\w+|/\S*pty\S*)")
+PTY_RE = re.compile(r"(/dev/pts/\d+)")
+DEFAULT_SIM_TRACE = "synthetic:rotation"
 
 
-def start_simulator(trace: str = "", log=None, timeout_s: float = 20.0):
-    """Start ``sphere sim --pty [--trace FILE]``; returns (process, pty path). The simulator prints the pty's
-    path on its standard output."""
-    cmd = [sys.executable, "-m", "sphere.cli", "sim", "--pty"]
-    if trace:
-        cmd += ["--trace", trace]
+def simulator_command(trace: str = "", seconds: float = 24 * 3600) -> list[str]:
+    """How --simulate starts the virtual board: ``sphere sim --trace TRACE --pty --seconds S``."""
+    return [sys.executable, "-m", "sphere.cli", "sim", "--trace", trace or DEFAULT_SIM_TRACE, "--pty",
+            "--seconds", f"{seconds:g}"]
+
+
+def start_simulator(trace: str = "", log=None, timeout_s: float = 120.0):
+    """Start the virtual board; returns (process, pty path). The board prints ``... UART on /dev/pts/N``;
+    the rest of its output is read and dropped so that it never blocks on a full pipe. The first start
+    may build the firmware and the board (make), hence the long timeout."""
+    cmd = simulator_command(trace)
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     deadline = time.monotonic() + timeout_s
+    tail: list[str] = []
     while time.monotonic() < deadline:
         line = proc.stdout.readline()
         if not line:
             if proc.poll() is not None:
                 break
             continue
+        tail = (tail + [line.rstrip()])[-8:]
         m = PTY_RE.search(line)
         if m and os.path.exists(m.group(1)):
+            threading.Thread(target=lambda: [None for _ in proc.stdout], daemon=True).start()
             return proc, m.group(1)
-    proc.kill()
-    raise SourceError(f"`{' '.join(cmd[2:])}` did not announce its pty within {timeout_s:g} s")
+    if proc.poll() is None:
+        proc.kill()
+    raise SourceError(f"`sphere {' '.join(cmd[3:])}` did not open its pty: " + " | ".join(tail[-4:]))
 
 
 class SimulatorSource(SerialSource):
@@ -497,6 +508,13 @@ class SimulatorSource(SerialSource):
         serial_kwargs.setdefault("reset_on_open", False)
         super().__init__(port=path, log=log, **serial_kwargs)
         self.state = f"simulated sphere on {path}"
+
+    def _batches(self):
+        for batch in super()._batches():
+            yield batch
+            if self.serial is None and self.proc.poll() is not None:
+                self.log(f"the simulated sphere stopped (exit status {self.proc.returncode})")
+                return
 
     def close(self):
         super().close()

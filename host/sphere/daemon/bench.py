@@ -1,0 +1,177 @@
+"""Latency and CPU benchmark of sphere-mouse's serial path (prints figures; not a unit test).
+
+    python -m sphere.daemon.bench [--seconds 10] [--rate 200]
+
+1. **Latency**, in process: a writer thread plays a sphere on a pty at ``--rate`` RAW_SAMPLE frames/s
+   (a steady turn, so every sample moves the pointer); the daemon (SerialSource → SphereMouse) runs in
+   another thread with a backend that notes ``time.perf_counter_ns()`` when it is called. Reported:
+   from the moment the frame's last byte was written into the pty to the backend call (p50, p99,
+   max), and the part of it after the source's read returned.
+2. **CPU**, out of process: the real ``sphere-mouse --port PTY --backend log`` as a subprocess fed at
+   the same rate; its user + system CPU time from /proc over the run, as % of one core.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import select
+import subprocess
+import sys
+import threading
+import time
+import tty
+
+from sphere.daemon.synthetic import ScriptedSphere, hello_packet
+from sphere.protocol import FrameDecoder
+
+
+class PtySphere:
+    """A sphere behind a pty: answers GET_HELLO with HELLO, then writes one RAW_SAMPLE per period."""
+
+    def __init__(self, rate_hz: float, seconds: float, orientation: bool = False):
+        self.master, slave = os.openpty()
+        tty.setraw(slave)
+        self.path = os.ttyname(slave)
+        os.close(slave)
+        self.rate_hz = rate_hz
+        self.seconds = seconds
+        self.sphere = ScriptedSphere(imu_rate_hz=int(rate_hz), orientation_every=2 if orientation else 10**9,
+                                     status_every_s=1.0)
+        self.written_ns: dict[int, int] = {}  # device t_us of the sample → perf_counter_ns after its last byte
+        self.frames = 0
+        self.started = threading.Event()
+        self.done = threading.Event()
+        self.thread = threading.Thread(target=self._run, daemon=True)
+        self.thread.start()
+
+    def _run(self):
+        dec = FrameDecoder("host")
+        while True:
+            try:
+                r, _, _ = select.select([self.master], [], [], 0.05)
+                if r and any(p.NAME == "GET_HELLO" for p in dec.feed(os.read(self.master, 256))):
+                    break
+            except OSError:
+                time.sleep(0.01)
+        os.write(self.master, self.sphere.frame(hello_packet(int(self.rate_hz), 0)))
+        self.started.set()
+        period = 1.0 / self.rate_hz
+        n = int(self.seconds * self.rate_hz)
+        t_next = time.perf_counter() + 0.2
+        for i in range(n):
+            rate = (0.0, 8.0, 50.0)  # a steady turn: every sample moves the pointer
+            frames = self.sphere.sample(rate)
+            wait = t_next - time.perf_counter()
+            if wait > 0:
+                time.sleep(wait)
+            t_next += period
+            for t_us, f in frames:
+                os.write(self.master, f)
+                self.frames += 1
+            self.written_ns[frames[0][0]] = time.perf_counter_ns()
+        self.done.set()
+
+    def close(self):
+        try:
+            os.close(self.master)
+        except OSError:
+            pass
+
+
+def percentile(sorted_values, p):
+    if not sorted_values:
+        return float("nan")
+    k = min(len(sorted_values) - 1, max(0, int(round(p / 100.0 * (len(sorted_values) - 1)))))
+    return sorted_values[k]
+
+
+def latency(seconds: float, rate: float, orientation: bool):
+    from sphere.daemon.app import SphereMouse
+    from sphere.daemon.backends.memory import RecordingBackend
+    from sphere.daemon.config import Config
+    from sphere.daemon.sources import SerialSource
+
+    dev = PtySphere(rate, seconds, orientation)
+    source = SerialSource(dev.path, hello_timeout_s=0.1, link_timeout_s=5.0)
+    cfg = Config().with_overrides({"stream": {"enabled": False}, "gyro": {"auto_bias": False}}, "bench")
+    calls = []  # (device t_us being handled, call ns, source arrival ns)
+    backend = RecordingBackend()
+    daemon = SphereMouse(cfg, source, backend, log=lambda m: None)
+    backend.on_call = lambda ns: calls.append((daemon.now_us, ns, source.arrival_ns))
+    t = threading.Thread(target=daemon.run, daemon=True)
+    t.start()
+    dev.started.wait(10)
+    wall0 = time.perf_counter()
+    dev.done.wait(seconds + 10)
+    time.sleep(0.2)
+    wall = time.perf_counter() - wall0
+    daemon.stop()
+    t.join(5)
+    dev.close()
+    total = []
+    after_read = []
+    for t_us, call_ns, arrival_ns in calls:
+        w = dev.written_ns.get(t_us)
+        if w is None:
+            continue
+        total.append((call_ns - w) / 1000.0)
+        after_read.append((call_ns - arrival_ns) / 1000.0)
+    total.sort()
+    after_read.sort()
+    return {"frames": dev.frames, "calls": len(total), "wall_s": wall, "total": total, "after_read": after_read}
+
+
+def proc_cpu_s(pid: int) -> float:
+    with open(f"/proc/{pid}/stat") as f:
+        fields = f.read().rsplit(")", 1)[1].split()
+    ticks = os.sysconf("SC_CLK_TCK")
+    return (int(fields[11]) + int(fields[12])) / ticks  # utime, stime
+
+
+def cpu(seconds: float, rate: float, orientation: bool):
+    dev = PtySphere(rate, seconds + 1.0, orientation)
+    proc = subprocess.Popen([sys.executable, "-m", "sphere.mouse", "--port", dev.path, "--backend", "log",
+                             "--no-stream", "--quiet", "--config", os.devnull],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        if not dev.started.wait(15):
+            raise RuntimeError("sphere-mouse did not ask for HELLO")
+        time.sleep(1.0)  # imports, discovery and warm-up are not the steady state
+        c0, w0 = proc_cpu_s(proc.pid), time.perf_counter()
+        f0 = dev.frames
+        dev.done.wait(seconds + 10)
+        c1, w1 = proc_cpu_s(proc.pid), time.perf_counter()
+        f1 = dev.frames
+    finally:
+        proc.terminate()
+        proc.wait(10)
+        dev.close()
+    return {"cpu_pct": 100.0 * (c1 - c0) / (w1 - w0), "wall_s": w1 - w0, "fps": (f1 - f0) / (w1 - w0)}
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m sphere.daemon.bench", description=__doc__.split("\n\n")[0])
+    ap.add_argument("--seconds", type=float, default=10.0, help="length of each run (default 10)")
+    ap.add_argument("--rate", type=float, default=200.0, help="RAW_SAMPLE frames per second (default 200)")
+    ap.add_argument("--orientation", action="store_true", help="also send ORIENTATION at half the rate")
+    args = ap.parse_args(argv)
+    print(f"sphere-mouse benchmark: {args.rate:g} RAW_SAMPLE frames/s" + (" + ORIENTATION" if args.orientation else "")
+          + f", {args.seconds:g} s per run, pty, {os.cpu_count()} CPUs, Python {sys.version.split()[0]}, "
+          f"load average before {os.getloadavg()[0]:.2f}")
+    lat = latency(args.seconds, args.rate, args.orientation)
+    t, a = lat["total"], lat["after_read"]
+    print(f"latency, last byte written → backend call ({lat['calls']} pointer moves of {lat['frames']} frames):")
+    print(f"  p50 {percentile(t, 50):7.0f} µs   p99 {percentile(t, 99):7.0f} µs   max {max(t) if t else float('nan'):7.0f} µs")
+    print(f"  of which after the read returned: p50 {percentile(a, 50):.0f} µs, p99 {percentile(a, 99):.0f} µs")
+    c = cpu(args.seconds, args.rate, args.orientation)
+    print(f"CPU of the sphere-mouse process (backend log, stdout to /dev/null) at {c['fps']:.0f} frames/s over "
+          f"{c['wall_s']:.1f} s: {c['cpu_pct']:.2f} % of one core")
+    print(f"load average after: {os.getloadavg()[0]:.2f} (other work on the machine shows in the latency tail)")
+    target_ok = percentile(t, 99) < 2000 and c["cpu_pct"] < 5.0
+    print("targets (p99 < 2 ms, CPU < 5 % of one core): " + ("met" if target_ok else "NOT met"))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
