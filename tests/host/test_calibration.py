@@ -102,3 +102,54 @@ def test_from_capture_finds_still_poses_and_all_three_parts():
     assert c.accel is not None and c.accel.poses == 6
     assert np.allclose(c.accel.offset_lsb, offset, atol=1.0)
     assert c.mag is not None and np.allclose(c.mag.hard_iron_lsb, hard, atol=5.0)
+
+
+def _synthetic_session(rng, rate=100.0):
+    offset, sens = np.array([5.0, -8.0, 10.0]), np.array([255.0, 258.0, 250.0])
+    gbias = np.array([20.0, -15.0, 7.0])
+    field, hard = np.array([200.0, 0.0, -450.0]), np.array([40.0, -60.0, 15.0])
+    acc, gyr, mag = [], [], []
+    for d in np.vstack([np.eye(3), -np.eye(3)]):
+        n, m = 300, 200
+        acc.append(d * sens + offset + rng.normal(0, 1.5, (n, 3)))
+        gyr.append(gbias + rng.normal(0, 2.0, (n, 3)))
+        mag.append(np.tile(field, (n, 1)) + hard + rng.normal(0, 1.0, (n, 3)))
+        acc.append(rng.normal(0, 150, (m, 3)))
+        gyr.append(rng.normal(0, 3000, (m, 3)))
+        mag.append(_rotations(m, rng) @ field + hard)
+    return np.vstack(acc), np.vstack(gyr), np.vstack(mag), dict(offset=offset, gbias=gbias, hard=hard)
+
+
+def test_calibrate_command_from_a_capture_file(tmp_path, capsys):
+    import json
+
+    from sphere.cli import main
+    from sphere.protocol import RawSample, encode_frame
+
+    rng = np.random.default_rng(5)
+    acc, gyr, mag, truth = _synthetic_session(rng)
+    path = tmp_path / "cal.bin"
+    with open(path, "wb") as f:
+        for i, (a, g, m) in enumerate(zip(acc, gyr, mag)):
+            p = RawSample(t_us=i * 10_000, flags=0b1111, accel=tuple(int(v) for v in np.clip(np.rint(a), -4096, 4095)),
+                          gyro=tuple(int(v) for v in np.rint(g)), mag=tuple(int(v) for v in np.rint(m)))
+            f.write(encode_frame(p, i & 0xFF))
+    out = tmp_path / "cal.json"
+    png = tmp_path / "mag.png"
+    assert main(["calibrate", "--capture", str(path), "--json", str(out), "--plot", str(png)]) == 0
+    text = capsys.readouterr().out
+    assert "field norm before" in text and "SET_CALIBRATION block" in text
+    doc = json.loads(out.read_text())
+    block = doc["block"]
+    assert np.allclose(block["gyro_bias"], truth["gbias"], atol=1)
+    assert np.allclose(block["accel_offset"], truth["offset"], atol=1.5)
+    assert np.allclose(block["mag_offset"], truth["hard"], atol=5)
+    assert all(0.9 * 16384 < v < 1.1 * 16384 for v in block["accel_scale"])
+    assert png.stat().st_size > 1000
+
+
+def test_calibrate_command_refuses_a_missing_capture(tmp_path, capsys):
+    from sphere.cli import main
+
+    assert main(["calibrate", "--capture", str(tmp_path / "nope.bin")]) == 2
+    assert "no such capture" in capsys.readouterr().err
