@@ -30,6 +30,8 @@
 #include "sim_elf.h"
 #include "sim_io.h"
 #include "sim_cycle_timers.h"
+#include "sim_interrupts.h"
+#include <stdint.h>
 #include "avr_ioport.h"
 #include "avr_uart.h"
 #include "parts/uart_pty.h"
@@ -76,6 +78,34 @@ typedef struct {
 static timing_t tm_update, tm_loop;
 static int have_loop_pin;
 
+/* The sample clock's interrupt: the vector that runs at the sample rate (found after 0.5 s). */
+#define N_VECTORS 26
+static uint32_t vec_count[N_VECTORS];
+static avr_cycle_count_t vec_last[N_VECTORS];
+static int tick_vector = -1, tick_searched;
+static vec_t loop_tick; /* tick ISR entry .. end of the MARG update */
+
+static void vector_hook(struct avr_irq_t *irq, uint32_t value, void *param)
+{
+	(void)irq;
+	if (!value)
+		return;
+	int v = (int)(intptr_t)param;
+	vec_count[v]++;
+	vec_last[v] = tm_update.board->avr->cycle;
+}
+
+static void find_tick_vector(avr_t *avr)
+{
+	double t = (double)avr->cycle / avr->frequency, rate = (double)avr->frequency / tm_update.period_cycles;
+	tick_searched = 1;
+	for (int v = 1; v < N_VECTORS; v++)
+		if (vec_count[v] && fabs(vec_count[v] / t - rate) < 0.05 * rate) {
+			tick_vector = v;
+			return;
+		}
+}
+
 static void pin_hook(struct avr_irq_t *irq, uint32_t value, void *param)
 {
 	(void)irq;
@@ -100,6 +130,12 @@ static void pin_hook(struct avr_irq_t *irq, uint32_t value, void *param)
 		}
 		vec_push(&t->update, (uint32_t)d);
 		t->updates++;
+		if (!t->is_loop_pin) {
+			if (!tick_searched && avr->cycle > avr->frequency / 2)
+				find_tick_vector(avr);
+			if (tick_vector > 0 && avr->cycle - vec_last[tick_vector] < t->period_cycles)
+				vec_push(&loop_tick, (uint32_t)(avr->cycle - vec_last[tick_vector]));
+		}
 		if (!t->is_loop_pin && !have_loop_pin) {
 			board_t *b = t->board;
 			if (!b->start_armed && avr->cycle > b->first_start_cycle &&
@@ -433,6 +469,12 @@ int main(int argc, char **argv)
 		avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_IOPORT_GETIRQ(lpin_port), lpin_bit), pin_hook, &tm_loop);
 	}
 
+	for (int v = 1; v < N_VECTORS; v++) {
+		avr_irq_t *irq = avr_get_interrupt_irq(avr, (uint8_t)v);
+		if (irq)
+			avr_irq_register_notify(irq + AVR_INT_IRQ_RUNNING, vector_hook, (void *)(intptr_t)v);
+	}
+
 	void *twi = find_io(avr, "twi");
 	board.twi = twi;
 	board.real_timing = real_i2c;
@@ -492,13 +534,13 @@ int main(int argc, char **argv)
 	double sim_s = (double)avr->cycle / avr->frequency;
 	if (uart_out.capture)
 		fclose(uart_out.capture);
-	if (use_pty)
-		uart_pty_stop(&pty);
+	/* no uart_pty_stop(): it signals its thread with SIGINT, which our handler catches, and then waits
+	 * for it forever; leaving main ends the thread with the process */
 
 	if (state == cpu_Crashed)
 		fprintf(stderr, "sphere-board: the AVR crashed at %.6f s (pc 0x%04x)\n", sim_s, avr->pc);
 
-	vec_t *lv = &tm_loop.update;
+	vec_t *lv = have_loop_pin ? &tm_loop.update : (loop_tick.n ? &loop_tick : &tm_loop.update);
 	size_t loop_n = lv->n;
 	uint32_t loop_med = 0, upd_med = 0;
 	FILE *sf = NULL;
@@ -525,6 +567,7 @@ int main(int argc, char **argv)
 		fprintf(sf, "  \"cpu_load_max\": %.4f,\n", load_max);
 		fprintf(sf, "  \"cpu_load_basis\": \"%s\",\n",
 			have_loop_pin ? "median loop-pin pulse / sample period"
+			: lv == &loop_tick ? "median (sample clock interrupt entry .. end of the MARG update) / sample period"
 			: loop_n ? "median (first I2C START of the period .. end of the MARG update) / sample period"
 			: "median MARG update / sample period (no loop measured)");
 		if (real_i2c)
@@ -532,6 +575,7 @@ int main(int argc, char **argv)
 		else
 		fprintf(sf, "  \"i2c_timing_note\": \"simavr 1.6 advances the TWI one step per microsecond whatever TWBR says, so I2C time in the loop figures is not real 400 kHz time; the MARG update cycles are exact\",\n");
 		fprintf(sf, "  \"sample_rate_hz\": %.3f,\n", rate_hz);
+		fprintf(sf, "  \"sample_clock_vector\": %d,\n", tick_vector);
 		fprintf(sf, "  \"period_cycles\": %llu,\n", (unsigned long long)period);
 		fprintf(sf, "  \"overruns\": %u,\n", tm_update.overruns);
 		fprintf(sf, "  \"updates\": %u,\n", tm_update.updates);

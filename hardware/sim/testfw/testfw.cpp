@@ -1,7 +1,7 @@
 // testfw.cpp - the virtual board's own test sketch (not the sphere's firmware).
 // Part of the MARG sphere's virtual board (hardware/sim); GPL-3.0-or-later like the board.
 //
-// Reads the three chips' IDs and data at 200 Hz over Wire and sends protocol/spec.md frames:
+// Reads the three chips' IDs and data at 200 Hz (Timer1 compare interrupt) over Wire and sends protocol/spec.md frames:
 // HELLO at start, RAW_SAMPLE every period, EVENT on ADXL345 INT1 (D2), STATUS once a second.
 // STATUS rx_errors counts every byte received on the UART (to test the board's --send).
 // D13 (PB5) is high during a dummy "update" of a fixed length, so the board's timing is testable.
@@ -42,7 +42,8 @@ static bool rd(uint8_t a, uint8_t r, uint8_t *b, uint8_t n) {
   for (uint8_t i = 0; i < n; i++) b[i] = Wire.read();
   return true;
 }
-static volatile bool int1;
+static volatile bool int1, tick;
+ISR(TIMER1_COMPA_vect) { tick = true; }  // the 200 Hz sample clock
 static void on_int1() { int1 = true; }
 static uint8_t found, devid, whoami, hid[3];
 static uint16_t errs[3], rx_bytes;
@@ -69,13 +70,14 @@ void setup() {
   uint8_t h[19] = {1, 0, 0, 1, found, devid, whoami, hid[0], hid[1], hid[2], 200, 0, 75, 5, 200, 0, 0, 0, 0};
   send(0x01, h, 19);
   attachInterrupt(digitalPinToInterrupt(2), on_int1, RISING);
+  TCCR1A = 0; TCCR1B = _BV(WGM12) | _BV(CS11); OCR1A = 9999; TIMSK1 = _BV(OCIE1A);  // 16 MHz / 8 / 10000
 }
 
-static uint32_t next_us, last_status;
+static uint32_t last_status;
 static uint8_t ok;
 void loop() {
-  while ((int32_t)(micros() - next_us) < 0) {}
-  next_us += 5000;
+  while (!tick) {}
+  tick = false;
   uint32_t t = micros();
   uint8_t a[6] = {0}, g[6] = {0}, m[6] = {0}, f = 0;
   if (rd(0x53, 0x32, a, 6)) f |= 1; else errs[0]++;
