@@ -151,8 +151,14 @@ class SphereMouse:
             dt = self.motion.orientation(p, t)
             if self.motion.uses_host_filter:
                 return
-            if self.mode == "tilt" and not self.paused and not self.actions.frozen(t):
-                self._tilt_step(t, dt)
+            if not self.paused and not self.actions.frozen(t):
+                if self.mode == "tilt":
+                    self._tilt_step(t, dt)
+                elif self.mode == "pointer" and not self.motion.raw_seen:
+                    # orientation-only stream: the rate comes from successive orientations
+                    dx, dy = self.mapper.update(self.motion.gyro_dps, dt, self.motion.up)
+                    if dx or dy:
+                        self._move(t, dx, dy)
             if self.stream is not None:
                 self.stream.publish_orientation(self.motion.quat, t)
         elif typ == Event.TYPE:

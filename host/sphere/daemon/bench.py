@@ -7,6 +7,7 @@
    another thread with a backend that notes ``time.perf_counter_ns()`` when it is called. Reported:
    from the moment the frame's last byte was written into the pty to the backend call (p50, p99,
    max), and the part of it after the source's read returned.
+   For comparison, the floor: the same pty path read by a bare ``select`` + ``os.read`` loop.
 2. **CPU**, out of process: the real ``sphere-mouse --port PTY --backend log`` as a subprocess fed at
    the same rate; its user + system CPU time from /proc over the run, as % of one core.
 """
@@ -122,6 +123,45 @@ def latency(seconds: float, rate: float, orientation: bool):
     return {"frames": dev.frames, "calls": len(total), "wall_s": wall, "total": total, "after_read": after_read}
 
 
+def baseline(seconds: float, rate: float):
+    """The floor: the same pty, writer and rate, with a bare select + os.read loop instead of the daemon."""
+    master, slave = os.openpty()
+    tty.setraw(slave)
+    frame = ScriptedSphere().sample((0.0, 0.0, 50.0))[0][1]
+    written: list[int] = []
+    got: list[int] = []
+    stop = threading.Event()
+
+    def reader():
+        have = 0
+        while not stop.is_set():
+            r, _, _ = select.select([slave], [], [], 0.05)
+            if r:
+                have += len(os.read(slave, 4096))
+                now = time.perf_counter_ns()
+                while have >= len(frame):
+                    have -= len(frame)
+                    got.append(now)
+
+    t = threading.Thread(target=reader, daemon=True)
+    t.start()
+    period = 1.0 / rate
+    t_next = time.perf_counter() + 0.1
+    for _ in range(int(seconds * rate)):
+        wait = t_next - time.perf_counter()
+        if wait > 0:
+            time.sleep(wait)
+        t_next += period
+        os.write(master, frame)
+        written.append(time.perf_counter_ns())
+    time.sleep(0.1)
+    stop.set()
+    t.join(2)
+    os.close(master)
+    os.close(slave)
+    return sorted((g - w) / 1000.0 for w, g in zip(written, got))
+
+
 def proc_cpu_s(pid: int) -> float:
     with open(f"/proc/{pid}/stat") as f:
         fields = f.read().rsplit(")", 1)[1].split()
@@ -164,6 +204,9 @@ def main(argv=None) -> int:
     print(f"latency, last byte written → backend call ({lat['calls']} pointer moves of {lat['frames']} frames):")
     print(f"  p50 {percentile(t, 50):7.0f} µs   p99 {percentile(t, 99):7.0f} µs   max {max(t) if t else float('nan'):7.0f} µs")
     print(f"  of which after the read returned: p50 {percentile(a, 50):.0f} µs, p99 {percentile(a, 99):.0f} µs")
+    b = baseline(args.seconds, args.rate)
+    print(f"  floor on this machine now (same pty and writer, a bare os.read loop): p50 {percentile(b, 50):.0f} µs, "
+          f"p99 {percentile(b, 99):.0f} µs")
     c = cpu(args.seconds, args.rate, args.orientation)
     print(f"CPU of the sphere-mouse process (backend log, stdout to /dev/null) at {c['fps']:.0f} frames/s over "
           f"{c['wall_s']:.1f} s: {c['cpu_pct']:.2f} % of one core")

@@ -83,6 +83,25 @@ def up_from_quat(q):
     return (2.0 * (x * z - w * y), 2.0 * (y * z + w * x), 1.0 - 2.0 * (x * x + y * y))
 
 
+def body_rate_dps(q0, q1, dt_s: float):
+    """Angular rate (°/s, sensor axes) that turns orientation q0 into q1 in dt_s: from q0* ⊗ q1."""
+    w0, x0, y0, z0 = q0
+    w1, x1, y1, z1 = q1
+    # d = conj(q0) ⊗ q1
+    w = w0 * w1 + x0 * x1 + y0 * y1 + z0 * z1
+    x = w0 * x1 - x0 * w1 - y0 * z1 + z0 * y1
+    y = w0 * y1 + x0 * z1 - y0 * w1 - z0 * x1
+    z = w0 * z1 - x0 * y1 + y0 * x1 - z0 * w1
+    if w < 0:
+        w, x, y, z = -w, -x, -y, -z
+    s = math.sqrt(x * x + y * y + z * z)
+    if s < 1e-12 or dt_s <= 0:
+        return (0.0, 0.0, 0.0)
+    angle = 2.0 * math.atan2(s, w)
+    k = math.degrees(angle) / (s * dt_s)
+    return (x * k, y * k, z * k)
+
+
 def _host_filter(beta: float):
     """The best host filter available: sphere.fusion's SphereFilter, else its Madgwick; None if neither."""
     try:
@@ -194,6 +213,10 @@ class MotionTracker:
         q = packet.quat_float
         n = math.sqrt(sum(v * v for v in q))
         if n > 0:
-            self.quat = tuple(v / n for v in q)
+            q = tuple(v / n for v in q)
+            if not self.raw_seen:
+                # an orientation-only stream (a slow Bluetooth link): the rate from successive orientations
+                self.gyro_dps = body_rate_dps(self.quat, q, dt) if self.quat is not None else (0.0, 0.0, 0.0)
+            self.quat = q
             self.up = up_from_quat(self.quat)
         return dt
