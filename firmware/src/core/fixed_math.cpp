@@ -30,6 +30,14 @@ static const uint16_t INV_SQRT_SEED[192] SPHERE_TABLE = {
     17192, 17155, 17119, 17082, 17046, 17010, 16974, 16939, 16904, 16869, 16834, 16799,
     16765, 16731, 16697, 16663, 16629, 16596, 16563, 16530, 16497, 16465, 16432, 16400};
 
+__attribute__((noinline)) int32_t mac2(int16_t a0, int16_t b0, int16_t a1, int16_t b1) {
+    return mul16(a0, b0) + mul16(a1, b1);
+}
+
+__attribute__((noinline)) int32_t mac3(int16_t a0, int16_t b0, int16_t a1, int16_t b1, int16_t a2, int16_t b2) {
+    return mul16(a0, b0) + mul16(a1, b1) + mul16(a2, b2);
+}
+
 uint16_t invSqrtQ14(uint16_t x) {
     // seed within 0.4 %, then one Newton step y ← y(3 − X·y²)/2: error about 2e-5
     uint16_t y = SPHERE_READ_U16(&INV_SQRT_SEED[(uint8_t)((x >> 8) - 64)]);
@@ -38,6 +46,21 @@ uint16_t invSqrtQ14(uint16_t x) {
     uint32_t r = umul16(y, (uint16_t)(49152u - t)) + 16384u;
     r = (uint32_t)hi16u(r << 1);
     return r > 32768u ? 32768u : (uint16_t)r;
+}
+
+uint16_t sqrtQ28(uint32_t n) {
+    if (n == 0) return 0;
+    if (n >= (1ul << 30)) n = (1ul << 30) - 1;
+    uint8_t k = 0;  // x = n·4^k in [2^28, 2^30)
+    while (n < (1ul << 28)) {
+        n <<= 2;
+        ++k;
+    }
+    uint16_t xq = hi16u(n << 2);  // X = x/2^30 in Q16
+    // √n = 2^15·X·(1/√X) / 2^k
+    uint32_t r = umul16(xq, invSqrtQ14(xq));
+    r = (uint32_t)hi16u(r << 1);  // >> 15
+    return (uint16_t)(r >> k);
 }
 
 bool normaliseQ14(const int16_t* v, uint8_t n, int16_t* out) {

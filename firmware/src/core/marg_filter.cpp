@@ -50,10 +50,11 @@ uint8_t MargFilter::update(const int16_t g[3], const int16_t a[3], const int16_t
     int16_t q0 = q14of(q_[0]), q1 = q14of(q_[1]), q2 = q14of(q_[2]), q3 = q14of(q_[3]);
 
     // 1. gyro: ½ q ⊗ [0, ω]·dt, in Q30. Sums in Q14·LSB, |sum| ≤ ‖q‖·‖ω‖ < 2^14·1.0001·56756 < 2^30
-    int32_t d0 = -mul16(q1, g[0]) - mul16(q2, g[1]) - mul16(q3, g[2]);
-    int32_t d1 = mul16(q0, g[0]) + mul16(q2, g[2]) - mul16(q3, g[1]);
-    int32_t d2 = mul16(q0, g[1]) - mul16(q1, g[2]) + mul16(q3, g[0]);
-    int32_t d3 = mul16(q0, g[2]) + mul16(q1, g[1]) - mul16(q2, g[0]);
+    // (q components are within ±16386, so negating them cannot overflow; the gyro may be −32768)
+    int32_t d0 = mac3((int16_t)-q1, g[0], (int16_t)-q2, g[1], (int16_t)-q3, g[2]);
+    int32_t d1 = mac3(q0, g[0], q2, g[2], (int16_t)-q3, g[1]);
+    int32_t d2 = mac3(q0, g[1], (int16_t)-q1, g[2], q3, g[0]);
+    int32_t d3 = mac3(q0, g[2], q1, g[1], (int16_t)-q2, g[0]);
     int32_t n0 = q_[0] + scaleQ16(d0, gyro_k_);
     int32_t n1 = q_[1] + scaleQ16(d1, gyro_k_);
     int32_t n2 = q_[2] + scaleQ16(d2, gyro_k_);
@@ -72,10 +73,8 @@ uint8_t MargFilter::update(const int16_t g[3], const int16_t a[3], const int16_t
     }
     {
         // rotation matrix sensor→earth, Q14 (entries within ±1)
-        int32_t q1q1 = mul16(q1, q1), q2q2 = mul16(q2, q2), q3q3 = mul16(q3, q3);
-        int32_t q0q1 = mul16(q0, q1), q0q2 = mul16(q0, q2), q0q3 = mul16(q0, q3);
-        int32_t q1q2 = mul16(q1, q2), q1q3 = mul16(q1, q3), q2q3 = mul16(q2, q3);
-        int16_t r20 = r13(q1q3 - q0q2), r21 = r13(q0q1 + q2q3), r22 = (int16_t)(16384 - r13(q1q1 + q2q2));
+        int16_t r20 = r13(mac2(q1, q3, (int16_t)-q0, q2)), r21 = r13(mac2(q0, q1, q2, q3)),
+                r22 = (int16_t)(16384 - r13(mac2(q1, q1, q2, q2)));
 
         // gravity objective (eq. 74), Q13
         int16_t fg0 = (int16_t)((r20 - ax) >> 1), fg1 = (int16_t)((r21 - ay) >> 1),
@@ -83,40 +82,37 @@ uint8_t MargFilter::update(const int16_t g[3], const int16_t a[3], const int16_t
         // half the Jacobian (a common factor does not change ∇f/‖∇f‖), Q13 entries
         int16_t c0 = q0 >> 1, c1 = q1 >> 1, c2 = q2 >> 1, c3 = q3 >> 1;
         // J_gᵀ f_g / 2, Q26
-        int32_t s0 = -mul16(c2, fg0) + mul16(c1, fg1);
-        int32_t s1 = mul16(c3, fg0) + mul16(c0, fg1) - mul16(q1, fg2);
-        int32_t s2 = -mul16(c0, fg0) + mul16(c3, fg1) - mul16(q2, fg2);
-        int32_t s3 = mul16(c1, fg0) + mul16(c2, fg1);
+        int32_t s0 = mac2((int16_t)-c2, fg0, c1, fg1);
+        int32_t s1 = mac3(c3, fg0, c0, fg1, (int16_t)-q1, fg2);
+        int32_t s2 = mac3((int16_t)-c0, fg0, c3, fg1, (int16_t)-q2, fg2);
+        int32_t s3 = mac2(c1, fg0, c2, fg1);
 
         int16_t mn[3];
         if (mag_valid && normaliseQ14(m, 3, mn)) {
             flags |= ORI_MAG_USED;
             int16_t mx = mn[0], my = mn[1], mz = mn[2];
-            int16_t r00 = (int16_t)(16384 - r13(q2q2 + q3q3)), r01 = r13(q1q2 - q0q3), r02 = r13(q1q3 + q0q2);
-            int16_t r10 = r13(q1q2 + q0q3), r11 = (int16_t)(16384 - r13(q1q1 + q3q3)), r12 = r13(q2q3 - q0q1);
+            int16_t r00 = (int16_t)(16384 - r13(mac2(q2, q2, q3, q3))), r01 = r13(mac2(q1, q2, (int16_t)-q0, q3)),
+                    r02 = r13(mac2(q1, q3, q0, q2));
+            int16_t r10 = r13(mac2(q1, q2, q0, q3)), r11 = (int16_t)(16384 - r13(mac2(q1, q1, q3, q3))),
+                    r12 = r13(mac2(q2, q3, (int16_t)-q0, q1));
             // h = q ⊗ m ⊗ q*, Q14
-            int16_t hv[2] = {r14(mul16(r00, mx) + mul16(r01, my) + mul16(r02, mz)),
-                             r14(mul16(r10, mx) + mul16(r11, my) + mul16(r12, mz))};
-            int16_t hz = r14(mul16(r20, mx) + mul16(r21, my) + mul16(r22, mz));
-            // b = [√(hx² + hy²), 0, hz]: the length of (hx, hy) is (hx, hy)·unit(hx, hy)
-            int16_t bx = 0, bz = hz, u[2];
-            if (normaliseQ14(hv, 2, u)) {
-                bx = r14(mul16(hv[0], u[0]) + mul16(hv[1], u[1]));
-            }
+            int16_t hx = r14(mac3(r00, mx, r01, my, r02, mz)), hy = r14(mac3(r10, mx, r11, my, r12, mz));
+            int16_t hz = r14(mac3(r20, mx, r21, my, r22, mz));
+            // b = [√(hx² + hy²), 0, hz]
+            int16_t bx = (int16_t)sqrtQ28((uint32_t)mac2(hx, hx, hy, hy)), bz = hz;
             // magnetic objective (eq. 76): Rᵀ b − m, Q13
-            int16_t fb0 = (int16_t)((r14(mul16(bx, r00) + mul16(bz, r20)) - mx) >> 1);
-            int16_t fb1 = (int16_t)((r14(mul16(bx, r01) + mul16(bz, r21)) - my) >> 1);
-            int16_t fb2 = (int16_t)((r14(mul16(bx, r02) + mul16(bz, r22)) - mz) >> 1);
+            int16_t fb0 = (int16_t)((r14(mac2(bx, r00, bz, r20)) - mx) >> 1);
+            int16_t fb1 = (int16_t)((r14(mac2(bx, r01, bz, r21)) - my) >> 1);
+            int16_t fb2 = (int16_t)((r14(mac2(bx, r02, bz, r22)) - mz) >> 1);
             // half of J_b (eq. 77), Q13: X_i = bx·q_i, Z_i = bz·q_i
             int16_t X0 = r15(mul16(bx, q0)), X1 = r15(mul16(bx, q1)), X2 = r15(mul16(bx, q2)),
                     X3 = r15(mul16(bx, q3));
             int16_t Z0 = r15(mul16(bz, q0)), Z1 = r15(mul16(bz, q1)), Z2 = r15(mul16(bz, q2)),
                     Z3 = r15(mul16(bz, q3));
-            s0 += -mul16(Z2, fb0) + mul16((int16_t)(Z1 - X3), fb1) + mul16(X2, fb2);
-            s1 += mul16(Z3, fb0) + mul16((int16_t)(X2 + Z0), fb1) + mul16((int16_t)(X3 - 2 * Z1), fb2);
-            s2 += mul16((int16_t)(-2 * X2 - Z0), fb0) + mul16((int16_t)(X1 + Z3), fb1) +
-                  mul16((int16_t)(X0 - 2 * Z2), fb2);
-            s3 += mul16((int16_t)(Z1 - 2 * X3), fb0) + mul16((int16_t)(Z2 - X0), fb1) + mul16(X1, fb2);
+            s0 += mac3((int16_t)-Z2, fb0, (int16_t)(Z1 - X3), fb1, X2, fb2);
+            s1 += mac3(Z3, fb0, (int16_t)(X2 + Z0), fb1, (int16_t)(X3 - 2 * Z1), fb2);
+            s2 += mac3((int16_t)(-2 * X2 - Z0), fb0, (int16_t)(X1 + Z3), fb1, (int16_t)(X0 - 2 * Z2), fb2);
+            s3 += mac3((int16_t)(Z1 - 2 * X3), fb0, (int16_t)(Z2 - X0), fb1, X1, fb2);
         }
         int32_t sv[4] = {s0, s1, s2, s3};
         int16_t sn[4];
@@ -132,7 +128,7 @@ integrate:
     // renormalise: ‖q‖² = 1 + e is close to 1, so q ← q·(1 − e/2 + 3e²/8)
     {
         int16_t h0 = q14of(n0), h1 = q14of(n1), h2 = q14of(n2), h3 = q14of(n3);
-        int32_t e28 = mul16(h0, h0) + mul16(h1, h1) + mul16(h2, h2) + mul16(h3, h3) - (1l << 28);
+        int32_t e28 = mac2(h0, h0, h1, h1) + mac2(h2, h2, h3, h3) - (1l << 28);
         // Q16; |e| stays below 0.03 (see MARG_FILTER.md), clamped to ±0.25 for safety
         if (e28 > (1l << 26)) e28 = 1l << 26;
         if (e28 < -(1l << 26)) e28 = -(1l << 26);

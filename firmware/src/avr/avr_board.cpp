@@ -1,0 +1,123 @@
+#include "avr_board.h"
+
+#include <Arduino.h>
+#include <avr/eeprom.h>
+#include <avr/interrupt.h>
+#include <avr/wdt.h>
+#include <util/atomic.h>
+
+namespace {
+volatile uint8_t g_ticks = 0;
+volatile bool g_int_seen = false;
+volatile uint32_t g_int_t_us = 0;
+const uint16_t EEPROM_CALIBRATION_ADDR = 0;
+
+void onAdxlInt() {
+    if (!g_int_seen) {
+        g_int_t_us = ::micros();
+        g_int_seen = true;
+    }
+}
+}  // namespace
+
+ISR(TIMER1_COMPA_vect) {
+    if (g_ticks < 255) ++g_ticks;
+}
+
+void AvrBoard::begin() {
+    pinMode(TIMING_PIN, OUTPUT);
+    digitalWrite(TIMING_PIN, LOW);
+    pinMode(ADXL_INT_PIN, INPUT);
+    attachInterrupt(digitalPinToInterrupt(ADXL_INT_PIN), onAdxlInt, RISING);
+    // Timer1, CTC on OCR1A, clk/8: 16 MHz / 8 / 10000 = 200 Hz
+    ATOMIC_BLOCK(ATOMIC_RESTORESTATE) {
+        TCCR1A = 0;
+        TCCR1B = _BV(WGM12) | _BV(CS11);
+        TCNT1 = 0;
+        OCR1A = (uint16_t)(F_CPU / 8 / 200 - 1);
+        TIFR1 = _BV(OCF1A);
+        TIMSK1 = _BV(OCIE1A);
+        g_ticks = 0;
+    }
+}
+
+uint8_t AvrBoard::takeTicks() {
+    uint8_t n;
+    ATOMIC_BLOCK(ATOMIC_RESTORESTATE) {
+        n = g_ticks;
+        g_ticks = 0;
+    }
+    return n;
+}
+
+uint32_t AvrBoard::micros() { return ::micros(); }
+
+bool AvrBoard::send(const uint8_t* frame, uint8_t len) {
+    if (Serial.availableForWrite() < (int)len) return false;
+    Serial.write(frame, len);
+    return true;
+}
+
+void AvrBoard::eepromRead(uint8_t* out, uint8_t len) {
+    eeprom_read_block(out, (const void*)EEPROM_CALIBRATION_ADDR, len);
+}
+
+bool AvrBoard::eepromWrite(const uint8_t* data, uint8_t len) {
+    eeprom_update_block(data, (void*)EEPROM_CALIBRATION_ADDR, len);  // writes only the bytes that differ
+    eeprom_busy_wait();
+    return true;  // SphereDevice reads the block back to verify
+}
+
+void AvrBoard::margPin(bool high) {
+    if (identifying_) return;  // the LED belongs to IDENTIFY meanwhile
+    if (high) PORTB |= _BV(PB5);
+    else PORTB &= (uint8_t)~_BV(PB5);
+}
+
+bool AvrBoard::adxlInterrupt(uint32_t& t_us) {
+    bool seen;
+    ATOMIC_BLOCK(ATOMIC_RESTORESTATE) {
+        seen = g_int_seen;
+        t_us = g_int_t_us;
+        g_int_seen = false;
+    }
+    if (!seen && digitalRead(ADXL_INT_PIN) == HIGH) {  // latched before the edge could be seen
+        t_us = ::micros();
+        seen = true;
+    }
+    return seen;
+}
+
+void AvrBoard::identify(uint8_t seconds) {
+    identifying_ = true;
+    identify_until_ms_ = millis() + 1000UL * seconds;
+}
+
+void AvrBoard::blink(uint8_t times, uint16_t ms) {
+    for (uint8_t i = 0; i < times; ++i) {
+        PORTB |= _BV(PB5);
+        delay(ms);
+        PORTB &= (uint8_t)~_BV(PB5);
+        delay(ms);
+    }
+}
+
+void AvrBoard::service() {
+    if (identifying_) {
+        uint32_t now = millis();
+        if ((int32_t)(now - identify_until_ms_) >= 0) {
+            identifying_ = false;
+            PORTB &= (uint8_t)~_BV(PB5);
+        } else if ((now / 100) & 1) {
+            PORTB |= _BV(PB5);  // 5 Hz
+        } else {
+            PORTB &= (uint8_t)~_BV(PB5);
+        }
+    }
+    if (reboot_pending_) {
+        Serial.flush();  // the REPLY is on the wire
+        wdt_enable(WDTO_15MS);
+        for (;;) {
+        }
+    }
+}
