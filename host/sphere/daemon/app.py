@@ -13,6 +13,20 @@ DEFAULT_SCREEN_WIDTH_PX = 1920
 BUTTONS = {"left_click": "left", "right_click": "right", "middle_click": "middle"}
 
 
+def _desktop_size():
+    """The X screen's size when an X display is reachable (uinput itself cannot know it); else None."""
+    import os
+
+    if not os.environ.get("DISPLAY"):
+        return None
+    try:
+        from sphere.daemon.backends.pynput_backend import main_screen_size
+
+        return main_screen_size()
+    except Exception:
+        return None
+
+
 class SphereMouse:
     """Owns the state of one running daemon. ``handle(DecodedPacket)`` is the whole per-packet work;
     ``run()`` drives it from the source until the source ends or :meth:`stop` is called."""
@@ -27,6 +41,8 @@ class SphereMouse:
         width = cfg.output.screen_width_px
         if not width:
             size = backend.screen_size()
+            if size is None and backend.name == "uinput":
+                size = _desktop_size()
             width = size[0] if size else DEFAULT_SCREEN_WIDTH_PX
         self.screen_width_px = width
         self.mapper = PointerMapper(PointerSettings.from_config(cfg.pointer), width)
@@ -137,6 +153,8 @@ class SphereMouse:
             if self.actions._pending is not None:
                 for a in self.actions.due(t):
                     self.do(a)
+            if self.stream is not None and self.motion.uses_host_filter:
+                self.stream.publish_orientation(self.motion.quat, t)
             if self.paused or self.actions.frozen(t) or p.flags & 0x10:
                 return
             if self.mode == "pointer":
@@ -145,12 +163,12 @@ class SphereMouse:
                     self._move(t, dx, dy)
             elif self.mode == "tilt" and self.motion.uses_host_filter:
                 self._tilt_step(t, dt)
-            if self.stream is not None and self.motion.uses_host_filter:
-                self.stream.publish_orientation(self.motion.quat, t)
         elif typ == Orientation.TYPE:
             dt = self.motion.orientation(p, t)
             if self.motion.uses_host_filter:
                 return
+            if self.stream is not None:
+                self.stream.publish_orientation(self.motion.quat, t)
             if not self.paused and not self.actions.frozen(t):
                 if self.mode == "tilt":
                     self._tilt_step(t, dt)
@@ -159,8 +177,6 @@ class SphereMouse:
                     dx, dy = self.mapper.update(self.motion.gyro_dps, dt, self.motion.up)
                     if dx or dy:
                         self._move(t, dx, dy)
-            if self.stream is not None:
-                self.stream.publish_orientation(self.motion.quat, t)
         elif typ == Event.TYPE:
             for a in self.actions.on_event(p.event_name, t):
                 self.do(a)

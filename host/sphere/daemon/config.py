@@ -115,7 +115,7 @@ SCHEMA: dict[str, dict[str, Option]] = {
                           choices=("auto", "uinput", "x11", "pynput", "log")),
         "display": Option("", str, "X display for the x11 backend (empty = `$DISPLAY`)"),
         "screen_width_px": Option(0, int, "screen width used to turn degrees into pixels; 0 = ask the backend "
-                                  "(x11, pynput) or 1920 (uinput, log)", _non_negative),
+                                  "(x11, pynput; uinput asks the X display if there is one), else 1920", _non_negative),
     },
     "mode": {
         "start": Option("pointer", str, "mode at start", choices=MODES),
