@@ -71,6 +71,14 @@ static void run(const char* name, bool acc, bool mag, uint16_t overhead) {
     put(" (n=");
     putNum(s.n);
     put(")\n");
+    // the state after the run, for comparison with the same code compiled natively (bench/marg_check.cpp)
+    put("  state after run:");
+    for (uint8_t i = 0; i < 4; ++i) {
+        int32_t q = filter.quaternionQ30()[i];
+        put(q < 0 ? " -" : " ");
+        putNum(q < 0 ? (uint32_t)(-q) : (uint32_t)q);
+    }
+    put("\n");
 }
 
 int main() {
@@ -102,6 +110,14 @@ int main() {
         putNum(t1 - t0 - overhead);
         put(" cycles, 4 x int32 ");
         putNum(t2 - t1 - overhead);
+        put(" cycles\n");
+        volatile uint16_t xin = 30000;
+        uint16_t t3 = TCNT1;
+        volatile uint16_t r = sphere::invSqrtQ14(xin);
+        uint16_t t4 = TCNT1;
+        (void)r;
+        put("invSqrtQ14: ");
+        putNum(t4 - t3 - overhead);
         put(" cycles\n");
     }
     put("bench: done\n");

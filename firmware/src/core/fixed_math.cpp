@@ -63,58 +63,84 @@ uint16_t sqrtQ28(uint32_t n) {
     return (uint16_t)(r >> k);
 }
 
+static inline uint16_t absU16(int16_t x) { return x < 0 ? (uint16_t)-x : (uint16_t)x; }
+
 bool normaliseQ14(const int16_t* v, uint8_t n, int16_t* out) {
-    uint16_t m = 0;
-    for (uint8_t i = 0; i < n; ++i) {
-        uint16_t a = v[i] < 0 ? (uint16_t)(-v[i]) : (uint16_t)v[i];
-        if (a > m) m = a;
-    }
+    // straight-line for up to four components (a missing fourth is 0): no arrays, no shift loops
+    // per component
+    int16_t w0 = v[0], w1 = v[1], w2 = n > 2 ? v[2] : 0, w3 = n > 3 ? v[3] : 0;
+    uint16_t m = absU16(w0);
+    uint16_t t = absU16(w1);
+    if (t > m) m = t;
+    t = absU16(w2);
+    if (t > m) m = t;
+    t = absU16(w3);
+    if (t > m) m = t;
     if (m == 0) return false;
-    // block floating point: bring the largest component into [2^13, 2^14]
-    int16_t w[4];
-    uint8_t up = 0, down = 0;
-    while (m < (1u << 13)) { m <<= 1; ++up; }
-    while (m > (1u << 14)) { m >>= 1; ++down; }
-    for (uint8_t i = 0; i < n; ++i) w[i] = (int16_t)(down ? (v[i] >> down) : (int16_t)((uint16_t)v[i] << up));
-    uint32_t N = 0;  // in [2^26, 2^30]
-    for (uint8_t i = 0; i < n; ++i) N += (uint32_t)mul16(w[i], w[i]);
+    // block floating point: the largest component into [2^13, 2^14]
+    while (m < (1u << 13)) {
+        m <<= 1;
+        w0 = (int16_t)((uint16_t)w0 << 1);
+        w1 = (int16_t)((uint16_t)w1 << 1);
+        w2 = (int16_t)((uint16_t)w2 << 1);
+        w3 = (int16_t)((uint16_t)w3 << 1);
+    }
+    while (m > (1u << 14)) {
+        m >>= 1;
+        w0 >>= 1;
+        w1 >>= 1;
+        w2 >>= 1;
+        w3 >>= 1;
+    }
+    uint32_t N = (uint32_t)(mul16(w0, w0) + mul16(w1, w1)) + (uint32_t)(mul16(w2, w2) + mul16(w3, w3));
     // x = N·4^k in [2^28, 2^30); X = x/2^30 in [0.25, 1); 1/√N = (1/√X)·2^k/2^15
     bool k = N < (1ul << 28);
     if (k) N <<= 2;
-    uint16_t xq = N >= (1ul << 30) ? 0xFFFFu : (uint16_t)((N << 2) >> 16);
+    uint16_t xq = N >= (1ul << 30) ? 0xFFFFu : hi16u(N << 2);
     uint16_t yu = invSqrtQ14(xq);
     int16_t y = (int16_t)(yu > 32767u ? 32767u : yu);  // Q14 (≤ 2.0), as a signed operand
-    for (uint8_t i = 0; i < n; ++i) {
-        int32_t p = mul16(w[i], y);  // |p| < 2^29
-        out[i] = k ? rshift14(p) : rshift15(p);
+    if (k) {
+        out[0] = rshift14(mul16(w0, y));
+        out[1] = rshift14(mul16(w1, y));
+        if (n > 2) out[2] = rshift14(mul16(w2, y));
+        if (n > 3) out[3] = rshift14(mul16(w3, y));
+    } else {
+        out[0] = rshift15(mul16(w0, y));
+        out[1] = rshift15(mul16(w1, y));
+        if (n > 2) out[2] = rshift15(mul16(w2, y));
+        if (n > 3) out[3] = rshift15(mul16(w3, y));
     }
     return true;
 }
 
 bool normaliseQ14(const int32_t* v, uint8_t n, int16_t* out) {
-    // reduce to 16 bits on a shared exponent: whole bytes first, then at most seven single bits
+    // reduce to 16 bits on a shared exponent, then as int16
     uint32_t m = 0;
     for (uint8_t i = 0; i < n; ++i) {
         uint32_t a = v[i] < 0 ? (uint32_t)(-v[i]) : (uint32_t)v[i];
         if (a > m) m = a;
     }
-    uint8_t bytes = 0, bits = 0;
-    while (m >= (1ul << 22)) { m >>= 8; ++bytes; }
-    while (m >= (1ul << 14)) { m >>= 1; ++bits; }
     int16_t w[4];
-    for (uint8_t i = 0; i < n; ++i) {
-        int32_t t = v[i];
-        for (uint8_t b = 0; b < bytes; ++b) t >>= 8;
-        int16_t u = bits ? (int16_t)(t >> 8) : (int16_t)t;  // when bits > 0, |t| < 2^22: keep 16 bits
-        if (bits) {
-            // t >> bits, done as (t >> 8) << (8 − bits) on 16-bit values plus the dropped byte's bits
-            uint8_t lo = (uint8_t)t;
-            for (uint8_t b = bits; b < 8; ++b) {
-                u = (int16_t)((uint16_t)u << 1) | (lo >> 7);
-                lo <<= 1;
-            }
-        }
-        w[i] = u;
+    if (m < (1ul << 15)) {
+        for (uint8_t i = 0; i < n; ++i) w[i] = (int16_t)v[i];
+        return normaliseQ14(w, n, out);
+    }
+    uint8_t sh = 0;  // smallest shift that brings m below 2^15
+    if (m >= (1ul << 23)) {
+        m >>= 8;
+        sh = 8;
+    }
+    while (m >= (1ul << 15)) {
+        m >>= 1;
+        ++sh;
+    }
+    if (sh == 1) {
+        for (uint8_t i = 0; i < n; ++i) w[i] = (int16_t)(v[i] >> 1);
+    } else {
+        // v >> sh = floor(v·p / 2^16) with p = 2^(16 − sh) ≤ 2^14: two 16-bit multiplies, no shift loop
+        int16_t p = (int16_t)(1u << (16 - sh));
+        for (uint8_t i = 0; i < n; ++i)
+            w[i] = (int16_t)(mul16(hi16(v[i]), p) + (int32_t)hi16u(umul16((uint16_t)v[i], (uint16_t)p)));
     }
     return normaliseQ14(w, n, out);
 }
