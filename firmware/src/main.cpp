@@ -6,8 +6,8 @@
 #include <Arduino.h>
 #include <avr/wdt.h>
 
-#include "avr/avr_board.h"
-#include "avr/avr_twi.h"
+#include "board/avr_board.h"
+#include "board/avr_twi.h"
 #include "core/sphere_device.h"
 
 static AvrTwi twi;

@@ -1,7 +1,7 @@
 // Drivers against register-map fakes, and SphereDevice end to end: streams, commands, faults, taps.
 #include <cmath>
 
-#include <doctest/doctest.h>
+#include "doctest_include.h"
 
 #include "bytes.h"
 #include "fakes.h"

@@ -8,7 +8,7 @@
 #include <string>
 #include <vector>
 
-#include <doctest/doctest.h>
+#include "doctest_include.h"
 
 #include "fixed_math.h"
 #include "madgwick_ref.h"

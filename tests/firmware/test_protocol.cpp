@@ -2,7 +2,7 @@
 #include <cstring>
 #include <functional>
 
-#include <doctest/doctest.h>
+#include "doctest_include.h"
 
 #include "bytes.h"
 #include "command_parser.h"
