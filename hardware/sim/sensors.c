@@ -26,6 +26,7 @@
 #include "avr_twi.h"
 #include "avr_ioport.h"
 #include "sim_time.h"
+#include "sim_io.h"
 #include "sensors.h"
 
 /* ---------------------------------------------------------------- trace */
@@ -463,19 +464,24 @@ static void twi_send(board_t *b, uint8_t msg, uint8_t addr, uint8_t data)
 	avr_raise_irq(b->irq + TWI_IRQ_INPUT, avr_twi_irq_msg(msg, addr, data));
 }
 
-/* Real bus timing: simavr finishes every TWI step 1 us after it starts. One cycle after a byte step
- * starts, move the TWI's pending step timer to 9 SCL periods after the start, SCL = F_CPU / (16 + 2 TWBR 4^TWPS). */
-static avr_cycle_count_t twi_stretch(avr_t *avr, avr_cycle_count_t when, void *param)
+/* --i2c-real-timing: one cycle after the AVR's TWI started a step (it registers its completion timer right
+ * after raising the message we hook), move the completion to 9 SCL periods after the step started,
+ * SCL = F_CPU / (16 + 2 TWBR 4^TWPS), instead of simavr's 1 us. */
+static avr_cycle_count_t twi_fixup(avr_t *avr, avr_cycle_count_t when, void *param)
 {
 	board_t *b = param;
-	uint8_t twbr = avr->data[0xB8], twps = avr->data[0xB9] & 3;
-	avr_cycle_count_t scl = 16 + 2ULL * twbr * (1ULL << (2 * twps));
-	avr_cycle_count_t want = b->msg_cycle + 9 * scl;
-	for (avr_cycle_timer_slot_p s = avr->cycle_timers.timer; s; s = s->next) {
-		if (s->param == b->twi) {
-			if (s->when < want)
-				avr_cycle_timer_register(avr, want - avr->cycle, s->timer, b->twi);
-			break;
+	avr_twi_t *twi = b->twi;
+	(void)twi;
+	if (b->real_timing) {
+		uint8_t twbr = avr->data[0xB8], twps = avr->data[0xB9] & 3;
+		avr_cycle_count_t scl = 16 + 2ULL * twbr * (1ULL << (2 * twps));
+		avr_cycle_count_t want = b->msg_cycle + 9 * scl;
+		for (avr_cycle_timer_slot_p s = avr->cycle_timers.timer; s; s = s->next) {
+			if (s->param == b->twi) {
+				if (s->when < want)
+					avr_cycle_timer_register(avr, want - avr->cycle, s->timer, b->twi);
+				break;
+			}
 		}
 	}
 	return 0;
@@ -488,9 +494,11 @@ static void twi_hook(struct avr_irq_t *irq, uint32_t value, void *param)
 	avr_twi_msg_irq_t v;
 	v.u.v = value;
 	uint8_t msg = v.u.twi.msg;
-	if (b->real_timing && b->twi && (msg & (TWI_COND_START | TWI_COND_WRITE | TWI_COND_READ))) {
+	if (b->twi && (msg & (TWI_COND_START | TWI_COND_WRITE | TWI_COND_READ))) {
 		b->msg_cycle = b->avr->cycle;
-		avr_cycle_timer_register(b->avr, 1, twi_stretch, b);
+		b->sla_w_pending = (msg & TWI_COND_START) && !(v.u.twi.addr & 1) && b->fix_status;
+		if (b->real_timing)
+			avr_cycle_timer_register(b->avr, 1, twi_fixup, b);
 	}
 
 	if (msg & TWI_COND_STOP) {
@@ -568,6 +576,36 @@ static void twi_hook(struct avr_irq_t *irq, uint32_t value, void *param)
 	}
 }
 
+/* simavr 1.6 completes an acknowledged SLA+W with status 0x28 (data ACK) instead of 0x18, and a refused
+ * one with 0x30 instead of 0x20; a driver that checks the datasheet's codes (as a polling driver does)
+ * then gives up. The status is set through this IRQ right after TWSR is written: put the real code there. */
+static void twi_status_hook(struct avr_irq_t *irq, uint32_t value, void *param)
+{
+	(void)irq;
+	board_t *b = param;
+	if (b->fix_status && b->sla_w_pending && (value == 0x28 || value == 0x30)) {
+		uint8_t fixed = value == 0x28 ? 0x18 : 0x20;
+		b->avr->data[0xB9] = (uint8_t)((b->avr->data[0xB9] & 0x07) | fixed); /* TWSR */
+		if (b->verbose > 2)
+			fprintf(b->log, "[%.6f] twi status 0x%02x after SLA+W reported as 0x%02x\n", board_time_s(b), value, fixed);
+		value = fixed;
+	}
+	b->sla_w_pending = 0;
+	if (b->verbose > 2)
+		fprintf(b->log, "[%.6f] twi status 0x%02x (TWCR 0x%02x)\n", board_time_s(b), value, b->avr->data[0xBC]);
+}
+
+/* simavr 1.6 stores the TWINT bit the program writes to TWCR as it is, so writing 1 to clear TWINT
+ * leaves it set, and a polling driver sees the previous step's completion (and status) at once: the
+ * "one step stale" status. The real TWI clears TWINT on that write. This runs after simavr's own TWCR
+ * handler (which has already taken the write of 1 as "cleared" and started the step): clear the bit. */
+static void twcr_write_hook(struct avr_t *avr, avr_io_addr_t addr, uint8_t v, void *param)
+{
+	board_t *b = param;
+	if (b->fix_status && (v & 0x80))
+		avr->data[addr] &= (uint8_t)~0x80;
+}
+
 static const char *irq_names[2] = {"8<sphere.twi.in", "32>sphere.twi.out"};
 
 void board_init(board_t *b, avr_t *avr, trace_t *trace, int verbose)
@@ -620,6 +658,9 @@ void board_init(board_t *b, avr_t *avr, trace_t *trace, int verbose)
 	avr_irq_register_notify(b->irq + TWI_IRQ_OUTPUT, twi_hook, b);
 	avr_connect_irq(b->irq + TWI_IRQ_INPUT, avr_io_getirq(avr, AVR_IOCTL_TWI_GETIRQ(0), TWI_IRQ_INPUT));
 	avr_connect_irq(avr_io_getirq(avr, AVR_IOCTL_TWI_GETIRQ(0), TWI_IRQ_OUTPUT), b->irq + TWI_IRQ_OUTPUT);
+
+	avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_TWI_GETIRQ(0), TWI_IRQ_STATUS), twi_status_hook, b);
+	avr_register_io_write(avr, 0xBC, twcr_write_hook, b); /* TWCR */
 
 	b->int1_pin = avr_io_getirq(avr, AVR_IOCTL_IOPORT_GETIRQ('D'), 2);
 	b->int1_level = -1;

@@ -98,6 +98,8 @@ typedef struct board_t {
 	void *twi;               /* simavr's TWI module (the parameter of its step timer) */
 	int real_timing;         /* stretch each TWI byte step to 9 SCL periods at the TWBR rate */
 	avr_cycle_count_t msg_cycle;
+	int fix_status;          /* report 0x18/0x20 after SLA+W, as the real TWI does (simavr 1.6: 0x28/0x30) */
+	int sla_w_pending;
 	uint32_t stalled_ops;
 	uint32_t events_single_tap, events_double_tap, events_free_fall;
 	int verbose;

@@ -95,12 +95,22 @@ static void vector_hook(struct avr_irq_t *irq, uint32_t value, void *param)
 	vec_last[v] = tm_update.board->avr->cycle;
 }
 
+/* Called at update ends: snapshot the vectors' counts once 0.5 s have passed, decide 0.5 s later. */
+static uint32_t vec_snap[N_VECTORS];
+static avr_cycle_count_t snap_cycle;
 static void find_tick_vector(avr_t *avr)
 {
-	double t = (double)avr->cycle / avr->frequency, rate = (double)avr->frequency / tm_update.period_cycles;
+	if (!snap_cycle) {
+		snap_cycle = avr->cycle;
+		memcpy(vec_snap, vec_count, sizeof vec_snap);
+		return;
+	}
+	if (avr->cycle - snap_cycle < avr->frequency / 2)
+		return;
+	double t = (double)(avr->cycle - snap_cycle) / avr->frequency, rate = (double)avr->frequency / tm_update.period_cycles;
 	tick_searched = 1;
 	for (int v = 1; v < N_VECTORS; v++)
-		if (vec_count[v] && fabs(vec_count[v] / t - rate) < 0.05 * rate) {
+		if (fabs((vec_count[v] - vec_snap[v]) / t - rate) < 0.03 * rate) {
 			tick_vector = v;
 			return;
 		}
@@ -114,13 +124,6 @@ static void pin_hook(struct avr_irq_t *irq, uint32_t value, void *param)
 	if (value && !t->high) {
 		t->high = 1;
 		t->rise = avr->cycle;
-		if (!t->is_loop_pin) {
-			if (t->have_last_rise && avr->cycle - t->last_rise > t->period_cycles * 3 / 2 &&
-			    avr->cycle - t->last_rise < t->period_cycles * 100)
-				t->overruns += (uint32_t)((avr->cycle - t->last_rise + t->period_cycles / 2) / t->period_cycles) - 1;
-			t->last_rise = avr->cycle;
-			t->have_last_rise = 1;
-		}
 	} else if (!value && t->high) {
 		t->high = 0;
 		avr_cycle_count_t d = avr->cycle - t->rise;
@@ -130,6 +133,15 @@ static void pin_hook(struct avr_irq_t *irq, uint32_t value, void *param)
 		}
 		vec_push(&t->update, (uint32_t)d);
 		t->updates++;
+		/* a sample period with no update: consecutive update starts more than 1.5 periods apart
+		 * (gaps longer than 100 periods are start-up or a stopped stream, not overruns) */
+		if (!t->is_loop_pin) {
+			avr_cycle_count_t gap = t->rise - t->last_rise;
+			if (t->have_last_rise && gap > t->period_cycles * 3 / 2 && gap < t->period_cycles * 100)
+				t->overruns += (uint32_t)((gap + t->period_cycles / 2) / t->period_cycles) - 1;
+			t->last_rise = t->rise;
+			t->have_last_rise = 1;
+		}
 		if (!t->is_loop_pin) {
 			if (!tick_searched && avr->cycle > avr->frequency / 2)
 				find_tick_vector(avr);
@@ -324,6 +336,7 @@ static void usage(FILE *f)
 		"  --timing-pin PIN     the pin high during the MARG update (default B5 = D13)\n"
 		"  --loop-pin PIN       a pin high during a whole sample period's work (optional)\n"
 		"  --i2c-real-timing    stretch each I2C byte to 9 SCL periods at the TWBR rate (simavr: 1 us)\n"
+		"  --simavr-twi-status  keep simavr 1.6's status 0x28/0x30 after SLA+W (default: the real 0x18/0x20)\n"
 		"  -v                   log the bus (twice: every byte)\n");
 }
 
@@ -331,7 +344,7 @@ int main(int argc, char **argv)
 {
 	const char *trace_path = NULL, *capture_path = NULL, *stats_path = NULL, *send_path = NULL;
 	double seconds = 10.0, rate_hz = 200.0;
-	int use_pty = 0, realtime = 0, verbose = 0, real_i2c = 0;
+	int use_pty = 0, realtime = 0, verbose = 0, real_i2c = 0, simavr_status = 0;
 	char tpin_port = 'B', lpin_port = 0;
 	int tpin_bit = 5, lpin_bit = 0;
 	fault_t faults[MAX_FAULTS];
@@ -344,7 +357,7 @@ int main(int argc, char **argv)
 		{"rate", required_argument, 0, 'R'}, {"nack", required_argument, 0, 'N'},
 		{"stall", required_argument, 0, 'S'}, {"send", required_argument, 0, 'i'},
 		{"timing-pin", required_argument, 0, 'T'}, {"loop-pin", required_argument, 0, 'L'},
-		{"i2c-real-timing", no_argument, 0, 'I'}, {"help", no_argument, 0, 'h'}, {0, 0, 0, 0}};
+		{"i2c-real-timing", no_argument, 0, 'I'}, {"simavr-twi-status", no_argument, 0, 'Z'}, {"help", no_argument, 0, 'h'}, {0, 0, 0, 0}};
 	int o;
 	while ((o = getopt_long(argc, argv, "t:s:c:prj:vh", opts, NULL)) != -1) {
 		switch (o) {
@@ -358,6 +371,7 @@ int main(int argc, char **argv)
 		case 'i': send_path = optarg; break;
 		case 'v': verbose++; break;
 		case 'I': real_i2c = 1; break;
+		case 'Z': simavr_status = 1; break;
 		case 'T':
 			if (parse_pin(optarg, &tpin_port, &tpin_bit)) { fprintf(stderr, "bad pin %s (e.g. B5)\n", optarg); return 2; }
 			break;
@@ -418,7 +432,7 @@ int main(int argc, char **argv)
 	}
 	avr_init(avr);
 	avr->frequency = 16000000;
-	avr->log = verbose > 2 ? LOG_TRACE : LOG_ERROR;
+	avr->log = verbose > 3 ? LOG_TRACE : LOG_ERROR;
 	avr_load_firmware(avr, &fw);
 	avr->frequency = 16000000; /* a Nano's crystal, whatever the ELF says */
 	avr->sleep = no_sleep;     /* sleep is simulated time, never wall time */
@@ -478,6 +492,7 @@ int main(int argc, char **argv)
 	void *twi = find_io(avr, "twi");
 	board.twi = twi;
 	board.real_timing = real_i2c;
+	board.fix_status = !simavr_status;
 	if (!twi && n_faults)
 		fprintf(stderr, "sphere-board: warning: no TWI module found, bus stalls cannot be simulated\n");
 
@@ -573,7 +588,7 @@ int main(int argc, char **argv)
 		if (real_i2c)
 			fprintf(sf, "  \"i2c_timing_note\": \"--i2c-real-timing: each TWI byte step stretched to 9 SCL periods at the firmware's TWBR rate (the START and STOP conditions are not), so the loop figures approximate the real bus; the MARG update cycles are exact\",\n");
 		else
-		fprintf(sf, "  \"i2c_timing_note\": \"simavr 1.6 advances the TWI one step per microsecond whatever TWBR says, so I2C time in the loop figures is not real 400 kHz time; the MARG update cycles are exact\",\n");
+		fprintf(sf, "  \"i2c_timing_note\": \"simavr 1.6 clocks the TWI at one SCL period per microsecond (9 us a byte) whatever TWBR says, so I2C time in the loop figures is not real 400 kHz time (22.5 us a byte); the MARG update cycles are exact\",\n");
 		fprintf(sf, "  \"sample_rate_hz\": %.3f,\n", rate_hz);
 		fprintf(sf, "  \"sample_clock_vector\": %d,\n", tick_vector);
 		fprintf(sf, "  \"period_cycles\": %llu,\n", (unsigned long long)period);

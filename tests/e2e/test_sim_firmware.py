@@ -63,16 +63,25 @@ def test_status_once_a_second_all_sensors_ok():
     assert st[-1].loop_overruns == 0
 
 
+FIRMWARE_TAP_THRESHOLD_G = 3.0  # THRESH_TAP 48 × 62.5 mg, the firmware's default (firmware/src/core/adxl345.cpp)
+
+
 def test_events_on_the_tapping_trials_taps():
+    """Every tap of trial 24 that reaches the firmware's threshold in the chip's 200 Hz data gives a tap
+    event, and the sphere lying still before the taps gives none. (The tap at 50.05 s of the trial peaks
+    at 7.9 g in BROAD's 285.7 Hz samples but at 2.8 g once resampled to the chip's 200 Hz: below 3 g.)"""
     s = firmware_scenario("tapping")
-    taps = tap_times_sim_s(s.trial)
-    assert len(taps) == 3, taps
+    motion = s.trial
+    taps = tap_times_sim_s(motion, FIRMWARE_TAP_THRESHOLD_G)
+    assert len(taps) >= 2, taps
     ev = [e for e in s.summary.events if e.event_name in ("single_tap", "double_tap")]
     for t in taps:
         near = [e for e in ev if -0.05 <= e.t_us / 1e6 - t <= 0.5]
         assert near, f"no tap event within 0.5 s after the tap at {t:.3f} s (events at {[e.t_us / 1e6 for e in ev]})"
-    # nothing while the sphere lies still before the first tap
-    assert not [e for e in ev if e.t_us / 1e6 < taps[0] - 0.1]
+    first_spike = tap_times_sim_s(motion, 2.0)[0]
+    assert not [e for e in ev if e.t_us / 1e6 < first_spike - 0.05], "tap events while the sphere lay still"
+    for e in ev:
+        assert e.act_tap_status & 0x07, "a tap event names no axis"
 
 
 def test_free_fall_on_a_synthetic_toss():
