@@ -2,7 +2,7 @@
 
     python -m sphere.daemon.bench [--seconds 10] [--rate 200]
 
-1. **Latency**, in process: a writer thread plays a sphere on a pty at ``--rate`` RAW_SAMPLE frames/s
+1. **Latency**, in process: a writer process plays a sphere on a pty at ``--rate`` RAW_SAMPLE frames/s
    (a steady turn, so every sample moves the pointer); the daemon (SerialSource → SphereMouse) runs in
    another thread with a backend that notes ``time.perf_counter_ns()`` when it is called. Reported:
    from the moment the frame's last byte was written into the pty to the backend call (p50, p99,
@@ -28,25 +28,38 @@ from sphere.protocol import FrameDecoder
 
 
 class PtySphere:
-    """A sphere behind a pty: answers GET_HELLO with HELLO, then writes one RAW_SAMPLE per period."""
+    """A sphere behind a pty, in its own process (so it never holds the daemon's GIL): answers GET_HELLO
+    with HELLO, then writes one RAW_SAMPLE per period and notes when each one's last byte was written.
+    ``time.perf_counter_ns`` is CLOCK_MONOTONIC on Linux, the same clock in both processes."""
 
     def __init__(self, rate_hz: float, seconds: float, orientation: bool = False):
+        import multiprocessing as mp
+
+        ctx = mp.get_context("fork")
         self.master, slave = os.openpty()
         tty.setraw(slave)
         self.path = os.ttyname(slave)
         os.close(slave)
         self.rate_hz = rate_hz
         self.seconds = seconds
-        self.sphere = ScriptedSphere(imu_rate_hz=int(rate_hz), orientation_every=2 if orientation else 10**9,
-                                     status_every_s=1.0)
-        self.written_ns: dict[int, int] = {}  # device t_us of the sample → perf_counter_ns after its last byte
-        self.frames = 0
-        self.started = threading.Event()
-        self.done = threading.Event()
-        self.thread = threading.Thread(target=self._run, daemon=True)
-        self.thread.start()
+        self.orientation = orientation
+        self.started = ctx.Event()
+        self.done = ctx.Event()
+        self._frames = ctx.Value("l", 0)
+        self._results = ctx.Queue()
+        self.written_ns: dict[int, int] = {}
+        self.proc = ctx.Process(target=self._run, daemon=True)
+        self.proc.start()
+        os.close(self.master)  # the writer process has its own copy
+
+    @property
+    def frames(self) -> int:
+        return self._frames.value
 
     def _run(self):
+        sphere = ScriptedSphere(imu_rate_hz=int(self.rate_hz), orientation_every=2 if self.orientation else 10**9,
+                                status_every_s=1.0)
+        written = {}
         dec = FrameDecoder("host")
         while True:
             try:
@@ -55,29 +68,34 @@ class PtySphere:
                     break
             except OSError:
                 time.sleep(0.01)
-        os.write(self.master, self.sphere.frame(hello_packet(int(self.rate_hz), 0)))
+        os.write(self.master, sphere.frame(hello_packet(int(self.rate_hz), 0)))
         self.started.set()
         period = 1.0 / self.rate_hz
-        n = int(self.seconds * self.rate_hz)
         t_next = time.perf_counter() + 0.2
-        for i in range(n):
-            rate = (0.0, 8.0, 50.0)  # a steady turn: every sample moves the pointer
-            frames = self.sphere.sample(rate)
+        for _ in range(int(self.seconds * self.rate_hz)):
+            frames = sphere.sample((0.0, 8.0, 50.0))  # a steady turn: every sample moves the pointer
             wait = t_next - time.perf_counter()
             if wait > 0:
                 time.sleep(wait)
             t_next += period
-            for t_us, f in frames:
+            for _, f in frames:
                 os.write(self.master, f)
-                self.frames += 1
-            self.written_ns[frames[0][0]] = time.perf_counter_ns()
+            written[frames[0][0]] = time.perf_counter_ns()
+            self._frames.value += len(frames)
+        self._results.put(written)
         self.done.set()
+        time.sleep(0.5)  # keep the pty open until the reader has drained it
+
+    def wait(self, timeout: float) -> bool:
+        if not self.done.wait(timeout):
+            return False
+        self.written_ns = self._results.get(timeout=5)
+        return True
 
     def close(self):
-        try:
-            os.close(self.master)
-        except OSError:
-            pass
+        if self.proc.is_alive():
+            self.proc.terminate()
+        self.proc.join(5)
 
 
 def percentile(sorted_values, p):
@@ -104,7 +122,7 @@ def latency(seconds: float, rate: float, orientation: bool):
     t.start()
     dev.started.wait(10)
     wall0 = time.perf_counter()
-    dev.done.wait(seconds + 10)
+    dev.wait(seconds + 10)
     time.sleep(0.2)
     wall = time.perf_counter() - wall0
     daemon.stop()
@@ -180,7 +198,7 @@ def cpu(seconds: float, rate: float, orientation: bool):
         time.sleep(1.0)  # imports, discovery and warm-up are not the steady state
         c0, w0 = proc_cpu_s(proc.pid), time.perf_counter()
         f0 = dev.frames
-        dev.done.wait(seconds + 10)
+        dev.wait(seconds + 10)
         c1, w1 = proc_cpu_s(proc.pid), time.perf_counter()
         f1 = dev.frames
     finally:

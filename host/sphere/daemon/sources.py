@@ -434,22 +434,22 @@ class ScriptedSource(_Decoding):
         from sphere.daemon.synthetic import ScriptedSphere
 
         sphere = ScriptedSphere()
-        frames = [sphere.hello()]
+        t0, hello = sphere.hello()
         start = time.perf_counter()
-        t0 = frames[0][0]
         self.generation = 1
+        self.arrival_ns = time.perf_counter_ns()
+        yield self.decode(hello)
         while not self._stop:
-            frames += sphere.steps(self.script)
-            for t_us, frame in frames:
+            for sample in sphere.iter_steps(self.script):
                 if self._stop:
                     return
+                t_us = sample[0][0]
                 if self.speed > 0:
                     wait = start + (t_us - t0) * 1e-6 / self.speed - time.perf_counter()
                     if wait > 0:
                         time.sleep(wait)
                 self.arrival_ns = time.perf_counter_ns()
-                yield self.decode(frame)
-            frames = []
+                yield self.decode(b"".join(f for _, f in sample))
             if not self.loop:
                 return
 

@@ -115,40 +115,45 @@ class ScriptedSphere:
         return [(self.t_us, self.frame(ev))]
 
     def steps(self, script):
-        out = []
+        """All frames of a script at once: [(t_us, frame_bytes)]."""
+        return [frame for sample in self.iter_steps(script) for frame in sample]
+
+    def iter_steps(self, script):
+        """The frames of a script one sample period at a time (lists of (t_us, frame_bytes)), computed lazily."""
         for step in script:
-            kind = step[0]
-            if kind == "still":
-                for _ in range(int(round(step[1] * self.rate))):
-                    out += self.sample()
-            elif kind == "turn":
-                _, axis, dps, secs = step
-                n = math.sqrt(sum(a * a for a in axis))
-                rate = tuple(a / n * dps for a in axis)
-                for _ in range(int(round(secs * self.rate))):
-                    out += self.sample(rate)
-            elif kind == "tilt":
-                _, axis, deg, secs = step
-                out += self.steps([("turn", axis, deg / secs, secs)])
-            elif kind == "tap":
-                name = step[1]
-                # the knock: a short jolt while the firmware flags tap_active, then the event
-                # (the first sample of the knock comes before the chip has seen the tap)
-                for i, rate in enumerate(((0, 0, 250.0), (0, 150.0, -250.0), (0, -150.0, 0))):
-                    out += self.sample(rate, tap_active=i > 0)
-                out += self.sample()
-                out += self.event(name)
-            elif kind == "free_fall":
-                n = int(round(step[1] * self.rate))
-                for i in range(n):
-                    out += self.sample((300.0, 0.0, 0.0), falling=True)
-                out += self.event("free_fall")
-                # the spin undone while catching, so the sphere ends as it started
-                for i in range(n):
-                    out += self.sample((-300.0, 0.0, 0.0))
-            else:
-                raise ValueError(f"unknown script step {step!r}")
-        return out
+            yield from self._step_lists(step)
+
+    def _step_lists(self, step):
+        kind = step[0]
+        if kind == "still":
+            for _ in range(int(round(step[1] * self.rate))):
+                yield self.sample()
+        elif kind == "turn":
+            _, axis, dps, secs = step
+            n = math.sqrt(sum(a * a for a in axis))
+            rate = tuple(a / n * dps for a in axis)
+            for _ in range(int(round(secs * self.rate))):
+                yield self.sample(rate)
+        elif kind == "tilt":
+            _, axis, deg, secs = step
+            yield from self._step_lists(("turn", axis, deg / secs, secs))
+        elif kind == "tap":
+            name = step[1]
+            # the knock: a short jolt while the firmware flags tap_active, then the event
+            # (the first sample of the knock comes before the chip has seen the tap)
+            for i, rate in enumerate(((0, 0, 250.0), (0, 150.0, -250.0), (0, -150.0, 0))):
+                yield self.sample(rate, tap_active=i > 0)
+            yield self.sample() + self.event(name)
+        elif kind == "free_fall":
+            n = int(round(step[1] * self.rate))
+            for _ in range(n):
+                yield self.sample((300.0, 0.0, 0.0), falling=True)
+            yield self.event("free_fall")
+            # the spin undone while catching, so the sphere ends as it started
+            for _ in range(n):
+                yield self.sample((-300.0, 0.0, 0.0))
+        else:
+            raise ValueError(f"unknown script step {step!r}")
 
 
 def script_frames(script, with_hello: bool = True, **kwargs):
