@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+import shutil
 import sys
 import tempfile
 from concurrent.futures import ThreadPoolExecutor
@@ -185,6 +186,10 @@ def run(args) -> int:
     multi = len(sources) > 1
     with tempfile.TemporaryDirectory(prefix="sphere-sim-") as tmpd:
         tmp = Path(tmpd)
+        # run a snapshot of the image: a rebuild of firmware/build meanwhile must not change or remove it
+        snapshot = tmp / Path(elf).name
+        shutil.copyfile(elf, snapshot)
+        elf = snapshot
         try:
             if multi:
                 with ThreadPoolExecutor(max(1, args.jobs)) as ex:
