@@ -18,8 +18,7 @@ void setup() {
     MCUSR = 0;  // a watchdog reset leaves WDRF set; clear it so the watchdog does not fire again
     wdt_disable();
     Serial.begin(115200);
-    pinMode(AvrBoard::TIMING_PIN, OUTPUT);
-    board.blink(2, 60);  // power-up: two short blinks
+    board.blink(2);      // power-up: two short blinks
     twi.begin();
     device.begin();      // probes the sensors, loads the calibration, sends 0x00 and HELLO
     board.begin();       // sample clock starts now

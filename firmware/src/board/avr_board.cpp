@@ -5,6 +5,7 @@
 #include <avr/interrupt.h>
 #include <avr/wdt.h>
 #include <util/atomic.h>
+#include <util/delay.h>
 
 namespace {
 volatile uint8_t g_ticks = 0;
@@ -12,23 +13,28 @@ volatile bool g_int_seen = false;
 volatile uint32_t g_int_t_us = 0;
 const uint16_t EEPROM_CALIBRATION_ADDR = 0;
 
-void onAdxlInt() {
+}  // namespace
+
+// ADXL345 INT1 on D2 (INT0), rising edge: note when it was seen; the loop reads INT_SOURCE
+ISR(INT0_vect) {
     if (!g_int_seen) {
         g_int_t_us = ::micros();
         g_int_seen = true;
     }
 }
-}  // namespace
 
 ISR(TIMER1_COMPA_vect) {
     if (g_ticks < 255) ++g_ticks;
 }
 
 void AvrBoard::begin() {
-    pinMode(TIMING_PIN, OUTPUT);
-    digitalWrite(TIMING_PIN, LOW);
-    pinMode(ADXL_INT_PIN, INPUT);
-    attachInterrupt(digitalPinToInterrupt(ADXL_INT_PIN), onAdxlInt, RISING);
+    DDRB |= _BV(PB5);  // D13 output, low
+    PORTB &= (uint8_t)~_BV(PB5);
+    DDRD &= (uint8_t)~_BV(PD2);  // D2 input, no pull-up (the ADXL345 drives INT1 push-pull)
+    PORTD &= (uint8_t)~_BV(PD2);
+    EICRA = (uint8_t)((EICRA & ~(_BV(ISC01) | _BV(ISC00))) | _BV(ISC01) | _BV(ISC00));  // rising edge
+    EIFR = _BV(INTF0);
+    EIMSK |= _BV(INT0);
     // Timer1, CTC on OCR1A, clk/8: 16 MHz / 8 / 10000 = 200 Hz
     ATOMIC_BLOCK(ATOMIC_RESTORESTATE) {
         TCCR1A = 0;
@@ -81,7 +87,7 @@ bool AvrBoard::adxlInterrupt(uint32_t& t_us) {
         t_us = g_int_t_us;
         g_int_seen = false;
     }
-    if (!seen && digitalRead(ADXL_INT_PIN) == HIGH) {  // latched before the edge could be seen
+    if (!seen && (PIND & _BV(PD2))) {  // latched before the edge could be seen
         t_us = ::micros();
         seen = true;
     }
@@ -93,12 +99,13 @@ void AvrBoard::identify(uint8_t seconds) {
     identify_until_ms_ = millis() + 1000UL * seconds;
 }
 
-void AvrBoard::blink(uint8_t times, uint16_t ms) {
+void AvrBoard::blink(uint8_t times) {
+    DDRB |= _BV(PB5);
     for (uint8_t i = 0; i < times; ++i) {
         PORTB |= _BV(PB5);
-        delay(ms);
+        _delay_ms(60);
         PORTB &= (uint8_t)~_BV(PB5);
-        delay(ms);
+        _delay_ms(60);
     }
 }
 

@@ -15,7 +15,7 @@ public:
     void begin();                 // pins, INT0, Timer1 at 200 Hz
     static uint8_t takeTicks();   // periods elapsed since the last call (normally 1)
     void service();               // LED blinking for IDENTIFY, reboot once the reply is out
-    void blink(uint8_t times, uint16_t ms);  // start-up blinks (before the sample clock runs)
+    void blink(uint8_t times);    // 60 ms blinks at power-up (before the sample clock runs)
 
     uint32_t micros() override;
     bool send(const uint8_t* frame, uint8_t len) override;

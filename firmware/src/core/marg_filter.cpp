@@ -43,102 +43,94 @@ static inline int32_t scaleQ16(int32_t v, int16_t k) {
     return mul16(hi, k) + (int32_t)(uint16_t)(((uint32_t)lo * (uint16_t)k) >> 16);
 }
 
+// ½·J_bᵀ f_b (eq. 76, 77) added to s (Q26), from q (Q14), the bottom row of R(q) (Q14) and the unit
+// magnetometer m̂ (Q14). Kept out of update() so that neither needs all its temporaries at once.
+static __attribute__((noinline)) void addMagGradient(const int16_t* q, const int16_t* r2, const int16_t* mn,
+                                                     int32_t* s) {
+    int16_t q0 = q[0], q1 = q[1], q2 = q[2], q3 = q[3];
+    int16_t mx = mn[0], my = mn[1], mz = mn[2];
+    int16_t r20 = r2[0], r21 = r2[1], r22 = r2[2];
+    int16_t r00 = (int16_t)(16384 - r13(mac2(q2, q2, q3, q3))), r01 = r13(mac2(q1, q2, (int16_t)-q0, q3)),
+            r02 = r13(mac2(q1, q3, q0, q2));
+    int16_t r10 = r13(mac2(q1, q2, q0, q3)), r11 = (int16_t)(16384 - r13(mac2(q1, q1, q3, q3))),
+            r12 = r13(mac2(q2, q3, (int16_t)-q0, q1));
+    // h = q ⊗ m ⊗ q*, Q14
+    int16_t hx = r14(mac3(r00, mx, r01, my, r02, mz)), hy = r14(mac3(r10, mx, r11, my, r12, mz));
+    int16_t hz = r14(mac3(r20, mx, r21, my, r22, mz));
+    // b = [√(hx² + hy²), 0, hz]
+    int16_t bx = (int16_t)sqrtQ28((uint32_t)mac2(hx, hx, hy, hy)), bz = hz;
+    // magnetic objective (eq. 76): Rᵀ b − m, Q13
+    int16_t fb0 = (int16_t)((r14(mac2(bx, r00, bz, r20)) - mx) >> 1);
+    int16_t fb1 = (int16_t)((r14(mac2(bx, r01, bz, r21)) - my) >> 1);
+    int16_t fb2 = (int16_t)((r14(mac2(bx, r02, bz, r22)) - mz) >> 1);
+    // half of J_b (eq. 77), Q13: X_i = bx·q_i, Z_i = bz·q_i
+    int16_t X0 = r15(mul16(bx, q0)), X1 = r15(mul16(bx, q1)), X2 = r15(mul16(bx, q2)), X3 = r15(mul16(bx, q3));
+    int16_t Z0 = r15(mul16(bz, q0)), Z1 = r15(mul16(bz, q1)), Z2 = r15(mul16(bz, q2)), Z3 = r15(mul16(bz, q3));
+    s[0] += mac3((int16_t)-Z2, fb0, (int16_t)(Z1 - X3), fb1, X2, fb2);
+    s[1] += mac3(Z3, fb0, (int16_t)(X2 + Z0), fb1, (int16_t)(X3 - 2 * Z1), fb2);
+    s[2] += mac3((int16_t)(-2 * X2 - Z0), fb0, (int16_t)(X1 + Z3), fb1, (int16_t)(X0 - 2 * Z2), fb2);
+    s[3] += mac3((int16_t)(Z1 - 2 * X3), fb0, (int16_t)(Z2 - X0), fb1, X1, fb2);
+}
+
+// q ← n/‖n‖ for ‖n‖² = 1 + e close to 1: q = n·(1 − e/2 + 3e²/8), with e from the Q14 parts of n.
+static __attribute__((noinline)) void renormalise(const int32_t* n, int32_t* q) {
+    int16_t h0 = q14of(n[0]), h1 = q14of(n[1]), h2 = q14of(n[2]), h3 = q14of(n[3]);
+    int32_t e28 = mac2(h0, h0, h1, h1) + mac2(h2, h2, h3, h3) - (1l << 28);
+    // Q16; |e| stays below 0.03 (see MARG_FILTER.md), clamped to ±0.25 for safety
+    if (e28 > (1l << 26)) e28 = 1l << 26;
+    if (e28 < -(1l << 26)) e28 = -(1l << 26);
+    int16_t e16 = hi16((int32_t)((uint32_t)(e28 + 2048) << 4));
+    int16_t d16 = (int16_t)(-(e16 >> 1) + ((3 * hi16(mul16(e16, e16) + 32768l)) >> 3));
+    q[0] = n[0] + mul16(h0, d16);
+    q[1] = n[1] + mul16(h1, d16);
+    q[2] = n[2] + mul16(h2, d16);
+    q[3] = n[3] + mul16(h3, d16);
+}
+
 uint8_t MargFilter::update(const int16_t g[3], const int16_t a[3], const int16_t m[3], bool acc_valid,
                            bool mag_valid) {
     uint8_t flags = 0;
     // state in Q14 for the products (rounded)
-    int16_t q0 = q14of(q_[0]), q1 = q14of(q_[1]), q2 = q14of(q_[2]), q3 = q14of(q_[3]);
+    int16_t q[4] = {q14of(q_[0]), q14of(q_[1]), q14of(q_[2]), q14of(q_[3])};
+    int16_t q0 = q[0], q1 = q[1], q2 = q[2], q3 = q[3];
 
     // 1. gyro: ½ q ⊗ [0, ω]·dt, in Q30. Sums in Q14·LSB, |sum| ≤ ‖q‖·‖ω‖ < 2^14·1.0001·56756 < 2^30
     // (q components are within ±16386, so negating them cannot overflow; the gyro may be −32768)
-    int32_t d0 = mac3((int16_t)-q1, g[0], (int16_t)-q2, g[1], (int16_t)-q3, g[2]);
-    int32_t d1 = mac3(q0, g[0], q2, g[2], (int16_t)-q3, g[1]);
-    int32_t d2 = mac3(q0, g[1], (int16_t)-q1, g[2], q3, g[0]);
-    int32_t d3 = mac3(q0, g[2], q1, g[1], (int16_t)-q2, g[0]);
-    int32_t n0 = q_[0] + scaleQ16(d0, gyro_k_);
-    int32_t n1 = q_[1] + scaleQ16(d1, gyro_k_);
-    int32_t n2 = q_[2] + scaleQ16(d2, gyro_k_);
-    int32_t n3 = q_[3] + scaleQ16(d3, gyro_k_);
+    int32_t n[4];
+    n[0] = q_[0] + scaleQ16(mac3((int16_t)-q1, g[0], (int16_t)-q2, g[1], (int16_t)-q3, g[2]), gyro_k_);
+    n[1] = q_[1] + scaleQ16(mac3(q0, g[0], q2, g[2], (int16_t)-q3, g[1]), gyro_k_);
+    n[2] = q_[2] + scaleQ16(mac3(q0, g[1], (int16_t)-q1, g[2], q3, g[0]), gyro_k_);
+    n[3] = q_[3] + scaleQ16(mac3(q0, g[2], q1, g[1], (int16_t)-q2, g[0]), gyro_k_);
 
-    int16_t ax, ay, az;
-    {
-        int16_t an[3];
-        if (!acc_valid || !normaliseQ14(a, 3, an)) {
-            flags |= ORI_ACCEL_REJECTED;
-            goto integrate;
-        }
-        ax = an[0];
-        ay = an[1];
-        az = an[2];
-    }
-    {
-        // rotation matrix sensor→earth, Q14 (entries within ±1)
-        int16_t r20 = r13(mac2(q1, q3, (int16_t)-q0, q2)), r21 = r13(mac2(q0, q1, q2, q3)),
-                r22 = (int16_t)(16384 - r13(mac2(q1, q1, q2, q2)));
-
+    int16_t an[3];
+    if (!acc_valid || !normaliseQ14(a, 3, an)) {
+        flags |= ORI_ACCEL_REJECTED;
+    } else {
+        // bottom row of the rotation matrix sensor→earth, Q14 (entries within ±1)
+        int16_t r2[3] = {r13(mac2(q1, q3, (int16_t)-q0, q2)), r13(mac2(q0, q1, q2, q3)),
+                         (int16_t)(16384 - r13(mac2(q1, q1, q2, q2)))};
         // gravity objective (eq. 74), Q13
-        int16_t fg0 = (int16_t)((r20 - ax) >> 1), fg1 = (int16_t)((r21 - ay) >> 1),
-                fg2 = (int16_t)((r22 - az) >> 1);
-        // half the Jacobian (a common factor does not change ∇f/‖∇f‖), Q13 entries
+        int16_t fg0 = (int16_t)((r2[0] - an[0]) >> 1), fg1 = (int16_t)((r2[1] - an[1]) >> 1),
+                fg2 = (int16_t)((r2[2] - an[2]) >> 1);
+        // half the Jacobian (a common factor does not change ∇f/‖∇f‖), Q13 entries; J_gᵀ f_g / 2, Q26
         int16_t c0 = q0 >> 1, c1 = q1 >> 1, c2 = q2 >> 1, c3 = q3 >> 1;
-        // J_gᵀ f_g / 2, Q26
-        int32_t s0 = mac2((int16_t)-c2, fg0, c1, fg1);
-        int32_t s1 = mac3(c3, fg0, c0, fg1, (int16_t)-q1, fg2);
-        int32_t s2 = mac3((int16_t)-c0, fg0, c3, fg1, (int16_t)-q2, fg2);
-        int32_t s3 = mac2(c1, fg0, c2, fg1);
-
+        int32_t s[4] = {mac2((int16_t)-c2, fg0, c1, fg1), mac3(c3, fg0, c0, fg1, (int16_t)-q1, fg2),
+                        mac3((int16_t)-c0, fg0, c3, fg1, (int16_t)-q2, fg2), mac2(c1, fg0, c2, fg1)};
         int16_t mn[3];
         if (mag_valid && normaliseQ14(m, 3, mn)) {
             flags |= ORI_MAG_USED;
-            int16_t mx = mn[0], my = mn[1], mz = mn[2];
-            int16_t r00 = (int16_t)(16384 - r13(mac2(q2, q2, q3, q3))), r01 = r13(mac2(q1, q2, (int16_t)-q0, q3)),
-                    r02 = r13(mac2(q1, q3, q0, q2));
-            int16_t r10 = r13(mac2(q1, q2, q0, q3)), r11 = (int16_t)(16384 - r13(mac2(q1, q1, q3, q3))),
-                    r12 = r13(mac2(q2, q3, (int16_t)-q0, q1));
-            // h = q ⊗ m ⊗ q*, Q14
-            int16_t hx = r14(mac3(r00, mx, r01, my, r02, mz)), hy = r14(mac3(r10, mx, r11, my, r12, mz));
-            int16_t hz = r14(mac3(r20, mx, r21, my, r22, mz));
-            // b = [√(hx² + hy²), 0, hz]
-            int16_t bx = (int16_t)sqrtQ28((uint32_t)mac2(hx, hx, hy, hy)), bz = hz;
-            // magnetic objective (eq. 76): Rᵀ b − m, Q13
-            int16_t fb0 = (int16_t)((r14(mac2(bx, r00, bz, r20)) - mx) >> 1);
-            int16_t fb1 = (int16_t)((r14(mac2(bx, r01, bz, r21)) - my) >> 1);
-            int16_t fb2 = (int16_t)((r14(mac2(bx, r02, bz, r22)) - mz) >> 1);
-            // half of J_b (eq. 77), Q13: X_i = bx·q_i, Z_i = bz·q_i
-            int16_t X0 = r15(mul16(bx, q0)), X1 = r15(mul16(bx, q1)), X2 = r15(mul16(bx, q2)),
-                    X3 = r15(mul16(bx, q3));
-            int16_t Z0 = r15(mul16(bz, q0)), Z1 = r15(mul16(bz, q1)), Z2 = r15(mul16(bz, q2)),
-                    Z3 = r15(mul16(bz, q3));
-            s0 += mac3((int16_t)-Z2, fb0, (int16_t)(Z1 - X3), fb1, X2, fb2);
-            s1 += mac3(Z3, fb0, (int16_t)(X2 + Z0), fb1, (int16_t)(X3 - 2 * Z1), fb2);
-            s2 += mac3((int16_t)(-2 * X2 - Z0), fb0, (int16_t)(X1 + Z3), fb1, (int16_t)(X0 - 2 * Z2), fb2);
-            s3 += mac3((int16_t)(Z1 - 2 * X3), fb0, (int16_t)(Z2 - X0), fb1, X1, fb2);
+            addMagGradient(q, r2, mn, s);
         }
-        int32_t sv[4] = {s0, s1, s2, s3};
         int16_t sn[4];
-        if (normaliseQ14(sv, 4, sn)) {
+        if (normaliseQ14(s, 4, sn)) {
             // q̇ −= β ∇f/‖∇f‖ ; step = ŝ(Q14)·β·dt(2^23) → Q30
-            n0 -= ((sn[0] * beta_dt_ + 128) >> 8) << 1;
-            n1 -= ((sn[1] * beta_dt_ + 128) >> 8) << 1;
-            n2 -= ((sn[2] * beta_dt_ + 128) >> 8) << 1;
-            n3 -= ((sn[3] * beta_dt_ + 128) >> 8) << 1;
+            // (ŝ·B) >> 7 with B = bh·2^8 + bl, as two 16-bit products (no 32 × 32 multiply)
+            int16_t bh = (int16_t)(beta_dt_ >> 8), bl = (int16_t)(beta_dt_ & 0xFF);
+            for (uint8_t i = 0; i < 4; ++i)
+                n[i] -= (mul16(sn[i], bh) + ((mul16(sn[i], bl) + 128) >> 8)) << 1;
         }
     }
-integrate:
-    // renormalise: ‖q‖² = 1 + e is close to 1, so q ← q·(1 − e/2 + 3e²/8)
-    {
-        int16_t h0 = q14of(n0), h1 = q14of(n1), h2 = q14of(n2), h3 = q14of(n3);
-        int32_t e28 = mac2(h0, h0, h1, h1) + mac2(h2, h2, h3, h3) - (1l << 28);
-        // Q16; |e| stays below 0.03 (see MARG_FILTER.md), clamped to ±0.25 for safety
-        if (e28 > (1l << 26)) e28 = 1l << 26;
-        if (e28 < -(1l << 26)) e28 = -(1l << 26);
-        int16_t e16 = hi16((int32_t)((uint32_t)(e28 + 2048) << 4));
-        int16_t d16 = (int16_t)(-(e16 >> 1) + ((3 * hi16(mul16(e16, e16) + 32768l)) >> 3));
-        q_[0] = n0 + mul16(h0, d16);
-        q_[1] = n1 + mul16(h1, d16);
-        q_[2] = n2 + mul16(h2, d16);
-        q_[3] = n3 + mul16(h3, d16);
-    }
+    renormalise(n, q_);
     return flags;
 }
 

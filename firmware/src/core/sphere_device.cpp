@@ -249,8 +249,7 @@ void SphereDevice::sendStatus() {
     status_.rx_errors = (uint16_t)(decoder_.oversize + decoder_.framing_errors + decoder_.crc_errors);
     status_.calibration_state = cal_state_;
     status_.calibration_step = cal_step_;
-    uint32_t load = (uint32_t)max_work_us_ * 1000u / MargFilter::DEFAULT_DT_US;
-    status_.cpu_load = (uint16_t)(load > 65535u ? 65535u : load);
+    status_.cpu_load = max_work_us_ / (MargFilter::DEFAULT_DT_US / 1000u);  // µs per 5 ms → per mille
     max_work_us_ = 0;
     status_.battery_mv = hal_.batteryMv();
     uint8_t body[STATUS_LEN];
