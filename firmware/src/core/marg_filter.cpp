@@ -43,33 +43,30 @@ static inline int32_t scaleQ16(int32_t v, int16_t k) {
     return mul16(hi, k) + (int32_t)(uint16_t)(((uint32_t)lo * (uint16_t)k) >> 16);
 }
 
-// ½·J_bᵀ f_b (eq. 76, 77) added to s (Q26), from q (Q14), the bottom row of R(q) (Q14) and the unit
-// magnetometer m̂ (Q14). Kept out of update() so that neither needs all its temporaries at once.
-static __attribute__((noinline)) void addMagGradient(const int16_t* q, const int16_t* r2, const int16_t* mn,
-                                                     int32_t* s) {
+// The magnetic part (eq. 76, 77). J_b is linear in b: J_b = bz·J_g + bx·K(q), so
+// ½J_gᵀ f_g + ½J_bᵀ f_b = ½J_gᵀ (f_g + bz·f_b) + ½Kᵀ (bx·f_b). This adds bz·f_b to u (which holds f_g)
+// and writes v = bx·f_b, all Q13. q, r2 (bottom row of R(q)) and m̂ are Q14.
+static __attribute__((noinline)) void magTerms(const int16_t* q, const int16_t* r2, const int16_t* mn, int16_t* u,
+                                               int16_t* v) {
     int16_t q0 = q[0], q1 = q[1], q2 = q[2], q3 = q[3];
     int16_t mx = mn[0], my = mn[1], mz = mn[2];
-    int16_t r20 = r2[0], r21 = r2[1], r22 = r2[2];
+    // rows 0 and 1 of the rotation matrix sensor→earth, Q14
     int16_t r00 = (int16_t)(16384 - r13(mac2(q2, q2, q3, q3))), r01 = r13(mac2(q1, q2, (int16_t)-q0, q3)),
             r02 = r13(mac2(q1, q3, q0, q2));
     int16_t r10 = r13(mac2(q1, q2, q0, q3)), r11 = (int16_t)(16384 - r13(mac2(q1, q1, q3, q3))),
             r12 = r13(mac2(q2, q3, (int16_t)-q0, q1));
-    // h = q ⊗ m ⊗ q*, Q14
+    // h = q ⊗ m ⊗ q* and b = [√(hx² + hy²), 0, hz], Q14
     int16_t hx = r14(mac3(r00, mx, r01, my, r02, mz)), hy = r14(mac3(r10, mx, r11, my, r12, mz));
-    int16_t hz = r14(mac3(r20, mx, r21, my, r22, mz));
-    // b = [√(hx² + hy²), 0, hz]
-    int16_t bx = (int16_t)sqrtQ28((uint32_t)mac2(hx, hx, hy, hy)), bz = hz;
-    // magnetic objective (eq. 76): Rᵀ b − m, Q13
-    int16_t fb0 = (int16_t)((r14(mac2(bx, r00, bz, r20)) - mx) >> 1);
-    int16_t fb1 = (int16_t)((r14(mac2(bx, r01, bz, r21)) - my) >> 1);
-    int16_t fb2 = (int16_t)((r14(mac2(bx, r02, bz, r22)) - mz) >> 1);
-    // half of J_b (eq. 77), Q13: X_i = bx·q_i, Z_i = bz·q_i
-    int16_t X0 = r15(mul16(bx, q0)), X1 = r15(mul16(bx, q1)), X2 = r15(mul16(bx, q2)), X3 = r15(mul16(bx, q3));
-    int16_t Z0 = r15(mul16(bz, q0)), Z1 = r15(mul16(bz, q1)), Z2 = r15(mul16(bz, q2)), Z3 = r15(mul16(bz, q3));
-    s[0] += mac3((int16_t)-Z2, fb0, (int16_t)(Z1 - X3), fb1, X2, fb2);
-    s[1] += mac3(Z3, fb0, (int16_t)(X2 + Z0), fb1, (int16_t)(X3 - 2 * Z1), fb2);
-    s[2] += mac3((int16_t)(-2 * X2 - Z0), fb0, (int16_t)(X1 + Z3), fb1, (int16_t)(X0 - 2 * Z2), fb2);
-    s[3] += mac3((int16_t)(Z1 - 2 * X3), fb0, (int16_t)(Z2 - X0), fb1, X1, fb2);
+    int16_t bz = r14(mac3(r2[0], mx, r2[1], my, r2[2], mz));
+    int16_t bx = (int16_t)sqrtQ28((uint32_t)mac2(hx, hx, hy, hy));
+    // magnetic objective f_b = Rᵀ b − m̂ (eq. 76), Q14 → Q13
+    int16_t fb[3] = {(int16_t)((r14(mac2(bx, r00, bz, r2[0])) - mx) >> 1),
+                     (int16_t)((r14(mac2(bx, r01, bz, r2[1])) - my) >> 1),
+                     (int16_t)((r14(mac2(bx, r02, bz, r2[2])) - mz) >> 1)};
+    for (uint8_t i = 0; i < 3; ++i) {
+        u[i] = (int16_t)(u[i] + r14(mul16(bz, fb[i])));
+        v[i] = r14(mul16(bx, fb[i]));
+    }
 }
 
 // q ← n/‖n‖ for ‖n‖² = 1 + e close to 1: q = n·(1 − e/2 + 3e²/8), with e from the Q14 parts of n.
@@ -112,14 +109,25 @@ uint8_t MargFilter::update(const int16_t g[3], const int16_t a[3], const int16_t
         // gravity objective (eq. 74), Q13
         int16_t fg0 = (int16_t)((r2[0] - an[0]) >> 1), fg1 = (int16_t)((r2[1] - an[1]) >> 1),
                 fg2 = (int16_t)((r2[2] - an[2]) >> 1);
-        // half the Jacobian (a common factor does not change ∇f/‖∇f‖), Q13 entries; J_gᵀ f_g / 2, Q26
-        int16_t c0 = q0 >> 1, c1 = q1 >> 1, c2 = q2 >> 1, c3 = q3 >> 1;
-        int32_t s[4] = {mac2((int16_t)-c2, fg0, c1, fg1), mac3(c3, fg0, c0, fg1, (int16_t)-q1, fg2),
-                        mac3((int16_t)-c0, fg0, c3, fg1, (int16_t)-q2, fg2), mac2(c1, fg0, c2, fg1)};
+        int16_t u[3] = {fg0, fg1, fg2}, v[3];
         int16_t mn[3];
-        if (mag_valid && normaliseQ14(m, 3, mn)) {
+        bool marg = mag_valid && normaliseQ14(m, 3, mn);
+        if (marg) {
             flags |= ORI_MAG_USED;
-            addMagGradient(q, r2, mn, s);
+            magTerms(q, r2, mn, u, v);
+        }
+        // ∇f/2 = ½J_gᵀ u (+ ½Kᵀ v), Q26. Half the Jacobians (a common factor does not change
+        // ∇f/‖∇f‖): ½J_g = [[−q2, q3, −q0, q1], [q1, q0, q3, q2], [0, −2q1, −2q2, 0]] (eq. 75) and
+        // ½K = [[0, 0, −2q2, −2q3], [−q3, q2, q1, −q0], [q2, q3, q0, q1]]; entries Q13 (c_i = q_i,
+        // and the Q14 value of q_i read as Q13 is 2q_i).
+        int16_t c0 = q0 >> 1, c1 = q1 >> 1, c2 = q2 >> 1, c3 = q3 >> 1;
+        int32_t s[4] = {mac2((int16_t)-c2, u[0], c1, u[1]), mac3(c3, u[0], c0, u[1], (int16_t)-q1, u[2]),
+                        mac3((int16_t)-c0, u[0], c3, u[1], (int16_t)-q2, u[2]), mac2(c1, u[0], c2, u[1])};
+        if (marg) {
+            s[0] += mac2((int16_t)-c3, v[1], c2, v[2]);
+            s[1] += mac2(c2, v[1], c3, v[2]);
+            s[2] += mac3((int16_t)-q2, v[0], c1, v[1], c0, v[2]);
+            s[3] += mac3((int16_t)-q3, v[0], (int16_t)-c0, v[1], c1, v[2]);
         }
         int16_t sn[4];
         if (normaliseQ14(s, 4, sn)) {
