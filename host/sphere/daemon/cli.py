@@ -100,7 +100,7 @@ def open_source(cfg, log):
     if kind == "simulate":
         if sources.simulator_available():
             try:
-                return sources.SimulatorSource(s.sim_trace, log=log, **serial_kwargs)
+                return sources.SimulatorSource(s.sim_trace, log=log, seconds=s.sim_seconds, **serial_kwargs)
             except sources.SourceError as e:
                 log(f"the virtual board cannot run here ({e}); using the built-in scripted sphere")
         else:

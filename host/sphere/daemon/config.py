@@ -106,8 +106,10 @@ SCHEMA: dict[str, dict[str, Option]] = {
                                 "contains `hid_product`)", _range(0, 0xFFFF)),
         "hid_product_id": Option(0, int, "USB product ID of a HID receiver (0 = any)", _range(0, 0xFFFF)),
         "hid_product": Option("sphere", str, "substring of the HID product string looked for when no IDs are set"),
+        "sim_seconds": Option(600.0, _num, "how long the virtual board runs with `--simulate` (the daemon ends with "
+                              "it)", _range(1.0, 86400.0)),
         "sim_trace": Option("", str, "motion the virtual board plays with `--simulate`: a BROAD trial (.mat, name or "
-                            "number) or `synthetic:NAME` (see `sphere sim --help`); empty = `synthetic:rotation`"),
+                            "number) or `synthetic:NAME` (see `sphere sim --help`); empty = `synthetic:rotation:15`"),
     },
     "output": {
         "backend": Option("auto", str, "`uinput` (Linux, X11 and Wayland), `x11` (XTest), `pynput` (macOS, Windows), "

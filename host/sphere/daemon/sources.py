@@ -174,6 +174,10 @@ class SerialSource(_Decoding):
         if not self.reset_on_open:
             ser.dtr = False  # applied at open; the kernel may still pulse DTR (see host/docs/sphere-mouse.md)
         ser.open()
+        try:
+            ser.reset_input_buffer()  # bytes from before the (DTR) reset belong to an older session
+        except Exception:
+            pass
         return ser
 
     def send(self, packet) -> None:
@@ -257,14 +261,14 @@ class SerialSource(_Decoding):
         return None
 
     def _lose(self, why: str) -> None:
-        self.losses += 1
-        self.log(f"lost the sphere on {self.port_name}: {why}; looking for it again")
+        ser, self.serial = self.serial, None
         try:
-            self.serial.close()
+            ser.close()
         except Exception:
             pass
-        self.serial = None
         self.state = "looking for the sphere (link lost)"
+        self.log(f"lost the sphere on {self.port_name}: {why}; looking for it again")
+        self.losses += 1
 
     def __iter__(self) -> Iterator[list[DecodedPacket]]:
         self._iterating = True
@@ -467,20 +471,20 @@ def simulator_available() -> bool:
 
 
 PTY_RE = re.compile(r"(/dev/pts/\d+)")
-DEFAULT_SIM_TRACE = "synthetic:rotation"
+DEFAULT_SIM_TRACE = "synthetic:rotation:15"
 
 
-def simulator_command(trace: str = "", seconds: float = 24 * 3600) -> list[str]:
+def simulator_command(trace: str = "", seconds: float = 600.0) -> list[str]:
     """How --simulate starts the virtual board: ``sphere sim --trace TRACE --pty --seconds S``."""
     return [sys.executable, "-m", "sphere.cli", "sim", "--trace", trace or DEFAULT_SIM_TRACE, "--pty",
             "--seconds", f"{seconds:g}"]
 
 
-def start_simulator(trace: str = "", log=None, timeout_s: float = 120.0):
+def start_simulator(trace: str = "", log=None, timeout_s: float = 120.0, seconds: float = 600.0):
     """Start the virtual board; returns (process, pty path). The board prints ``... UART on /dev/pts/N``;
     the rest of its output is read and dropped so that it never blocks on a full pipe. The first start
     may build the firmware and the board (make), hence the long timeout."""
-    cmd = simulator_command(trace)
+    cmd = simulator_command(trace, seconds)
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     deadline = time.monotonic() + timeout_s
     tail: list[str] = []
@@ -503,8 +507,8 @@ def start_simulator(trace: str = "", log=None, timeout_s: float = 120.0):
 class SimulatorSource(SerialSource):
     """The virtual board's UART through the pty that `sphere sim --pty` exposes."""
 
-    def __init__(self, trace: str = "", log=None, **serial_kwargs):
-        self.proc, path = start_simulator(trace, log)
+    def __init__(self, trace: str = "", log=None, seconds: float = 600.0, **serial_kwargs):
+        self.proc, path = start_simulator(trace, log, seconds=seconds)
         serial_kwargs.setdefault("reset_on_open", False)
         super().__init__(port=path, log=log, **serial_kwargs)
         self.state = f"simulated sphere on {path}"
