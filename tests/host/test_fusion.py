@@ -130,14 +130,18 @@ def _err(f, t, q0=True):
     return broad.orientation_error(q, t)
 
 
-def test_kf_beats_madgwick_on_a_fast_rotation_slice():
+def test_kf_beats_madgwick_on_a_disturbed_slice():
+    """With the settings `sphere eval` uses (tuned once on all trials), the KF's robust measurement update
+    beats Madgwick while a magnet rides on the sensor (trial 32). Over all twelve trials it does not:
+    see host/docs/fusion.md."""
     from sphere.fusion import registry
 
-    t = _trial("07", 30.0, 60.0)
+    t = _trial("32", 0.0, 90.0)
+    bias = registry.startup_gyro_bias(t.gyr_rad_s, t.dt_s)
     e0 = (t.acc_m_s2[0], t.mag_uT[0])
-    mad = _err(registry.make("madgwick", t.dt_s, *e0), t)
-    kf = _err(registry.make("dissertation-kf", t.dt_s, *e0), t)
-    assert kf.total < mad.total, (kf, mad)
+    mad = _err(registry.make("madgwick", t.dt_s, *e0, gyro_bias_rad_s=bias), t)
+    kf = _err(registry.make("dissertation-kf", t.dt_s, *e0, gyro_bias_rad_s=bias), t)
+    assert kf.total < 0.9 * mad.total, (kf, mad)
 
 
 def test_sphere_filter_accuracy_on_a_real_slice():

@@ -31,7 +31,7 @@ import numpy as np
 from sphere.fusion.common import ecompass
 
 EARTH_FRAME = "NWU"
-#: σ_g tuned once on all shipped BROAD trials (mean total RMSE; see host/docs/fusion.md)
+#: σ_g default of the class; `sphere eval` uses the value tuned on BROAD (sphere.fusion.registry)
 DEFAULT_GYRO_NOISE_RAD_S = 0.02
 
 

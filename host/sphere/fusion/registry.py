@@ -19,10 +19,10 @@ from sphere.fusion.sphere_filter import SphereFilter
 #: β tuned once on all shipped BROAD trials (mean total RMSE, grid 0.01…0.3); see host/docs/fusion.md
 TUNED_MADGWICK_BETA = 0.015
 #: σ_g tuned the same way for the dissertation KF (R = 10⁻² I fixed by the dissertation)
-TUNED_KF_GYRO_NOISE = 0.02
+TUNED_KF_GYRO_NOISE = 0.3
 
 TUNED_KF_ROBUST = "huber"
-TUNED_KF_THRESHOLD = 0.5
+TUNED_KF_THRESHOLD = 0.03
 #: seconds of still data at the start used as the start-up gyro calibration for madgwick and the KF
 STARTUP_BIAS_S = 1.0
 
