@@ -57,6 +57,9 @@ def add_arguments(p) -> None:
     p.add_argument("--accuracy", action="store_true",
                    help="compare the firmware's quaternions with BROAD's optical reference and the host Madgwick")
     p.add_argument("--beta", type=float, default=DEFAULT_BETA, help="β of the host Madgwick (default the firmware's)")
+    p.add_argument("--host-independent", action="store_true",
+                   help="the host Madgwick decides alone (no tap/norm rejections, no start-up gain) instead of "
+                        "following the firmware's flags")
     p.add_argument("--jobs", type=int, default=2, help="boards run at once with several traces (default 2)")
     p.add_argument("--no-build", action="store_true", help="do not run make; fail with the command instead")
     p.add_argument("--json", action="store_true", help="print the figures as JSON")
@@ -126,7 +129,8 @@ def _one(args, source: str, elf, tmp: Path, index: int, multi: bool):
         if trial is None:
             print(f"sphere sim: --accuracy needs a BROAD trial, not {source}", file=sys.stderr)
         elif summary is not None:
-            acc = accuracy(summary, trial, args.hold, args.beta, bias_s=min(args.hold, 2.0))
+            acc = accuracy(summary, trial, args.hold, args.beta, bias_s=min(args.hold, 2.0),
+                           follow_firmware=not args.host_independent)
     if stats_out and Path(stats_out).exists():
         Path(stats_out).write_text(json.dumps(stats, indent=2) + "\n")
     return source, run, stats, acc
@@ -213,6 +217,8 @@ def run(args) -> int:
             rows.append(acc)
     if rows:
         print()
-        print(f"Orientation error, dataset metric (RMSE over movement samples; β = {args.beta:g} for the host Madgwick):")
+        how = ("deciding alone" if args.host_independent else
+               "following the firmware's tap/norm rejections and start-up gain, sample by sample")
+        print(f"Orientation error, dataset metric (RMSE over movement samples; host Madgwick β = {args.beta:g}, {how}):")
         print(accuracy_table(rows))
     return rc

@@ -88,29 +88,62 @@ def _held(t_src_s: np.ndarray, values: np.ndarray, t_query_s: np.ndarray) -> np.
     return out
 
 
-def host_madgwick(raw: list, imu_rate_hz: float, beta: float, bias_s: float = 0.0):
+STARTUP_BETA = 1.0  # the firmware's STARTUP_BETA_MILLI (firmware/src/core/marg_filter.h), while `converging`
+
+
+def host_madgwick(raw: list, imu_rate_hz: float, beta: float, bias_s: float = 0.0, orientation: list | None = None,
+                  startup_beta: float = STARTUP_BETA):
     """The host's double-precision Madgwick on the RAW_SAMPLE values the firmware read.
 
     Returns (t_s, q_nwu) or None when sphere.fusion.madgwick is not there. ``bias_s`` > 0: subtract
     the mean gyro of the first ``bias_s`` seconds (as the firmware's power-up bias estimate does).
+    With ``orientation`` (the firmware's ORIENTATION packets) the host takes the firmware's decisions
+    sample by sample, so that only the arithmetic differs: the accelerometer is left out where the
+    firmware flagged a tap (RAW_SAMPLE ``tap_active``) or ``accel_rejected``, the magnetometer where it
+    was missing or ``mag_rejected`` (gravity-only), and β is ``startup_beta`` while ``converging``.
+    The flags of a raw sample without its own ORIENTATION packet are those of the newest before it.
     """
     try:
-        from sphere.fusion.madgwick import Madgwick
+        from sphere.fusion.madgwick import madgwick_step
         from sphere.fusion.common import ecompass
     except ImportError:
         return None
     un = TimeUnwrapper()
-    t = np.array([un(p.t_us) for p in raw]) * 1e-6
+    t_us = np.array([un(p.t_us) for p in raw])
+    t = t_us * 1e-6
     gyr = np.radians(np.array([p.gyro_dps for p in raw], dtype=float))
     acc = np.array([p.accel_g for p in raw], dtype=float)
     mag = np.array([p.mag_uT for p in raw], dtype=float)
+    rflags = np.array([p.flags for p in raw], dtype=int)
     if bias_s > 0:
         first = t < t[0] + bias_s
         gyr = gyr - gyr[first].mean(axis=0)
-    q0 = ecompass(*acc[0], *mag[0], frame="NWU")
-    f = Madgwick(beta=beta, q0=q0)
-    q = f.update_batch(gyr, acc, mag, 1.0 / imu_rate_hz)
-    return t, q
+    acc_valid = (rflags & 0x01).astype(bool) & ~(rflags & 0x10).astype(bool)
+    mag_valid = (rflags & 0x04).astype(bool)
+    betas = np.full(len(raw), float(beta))
+    if orientation:
+        uo = TimeUnwrapper()
+        t_o = np.array([uo(o.t_us) for o in orientation])
+        of = np.array([o.flags for o in orientation], dtype=int)
+        idx = np.searchsorted(t_o, t_us, side="right") - 1
+        has = idx >= 0
+        f = np.where(has, of[np.clip(idx, 0, None)], 0)
+        acc_valid &= ~((f & 0x02).astype(bool) & has)
+        mag_valid &= ~(((f & 0x04).astype(bool) | ~(f & 0x01).astype(bool)) & has)
+        betas = np.where(has & (f & 0x08).astype(bool), startup_beta, betas)
+    q = ecompass(*acc[0], *mag[0], frame="NWU")
+    dt = 1.0 / imu_rate_hz
+    out = np.empty((len(raw), 4))
+    g, a, m = gyr.tolist(), acc.tolist(), mag.tolist()
+    av, mv, bl = acc_valid.tolist(), mag_valid.tolist(), betas.tolist()
+    for i in range(len(raw)):
+        gi, ai, mi = g[i], a[i], m[i]
+        if mv[i]:
+            q = madgwick_step(q, gi[0], gi[1], gi[2], ai[0], ai[1], ai[2], mi[0], mi[1], mi[2], dt, bl[i], av[i], True)
+        else:
+            q = madgwick_step(q, gi[0], gi[1], gi[2], ai[0], ai[1], ai[2], None, None, None, dt, bl[i], av[i], False)
+        out[i] = q
+    return t, out
 
 
 @dataclass
@@ -123,7 +156,8 @@ class AccuracyRow:
     note: str = ""
 
 
-def accuracy(summary: CaptureSummary, trial, offset_s: float, beta: float, bias_s: float = 0.0) -> AccuracyRow:
+def accuracy(summary: CaptureSummary, trial, offset_s: float, beta: float, bias_s: float = 0.0,
+             follow_firmware: bool = True) -> AccuracyRow:
     """The dataset's metric for the firmware's quaternions and the host Madgwick's on one trial slice.
 
     ``trial`` is the slice of the BROAD trial that was played; its sample i was played at simulated
@@ -150,7 +184,8 @@ def accuracy(summary: CaptureSummary, trial, offset_s: float, beta: float, bias_
     host = None
     q_h_enu = None
     imu_rate = summary.hello.imu_rate_hz if summary.hello else 200
-    hm = host_madgwick(summary.raw, imu_rate, beta, bias_s) if summary.raw else None
+    hm = host_madgwick(summary.raw, imu_rate, beta, bias_s,
+                       orientation=summary.orientation if follow_firmware else None) if summary.raw else None
     if hm is None:
         notes.append("host Madgwick unavailable (sphere.fusion.madgwick missing or no RAW_SAMPLE packets)")
     else:
