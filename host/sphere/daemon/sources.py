@@ -14,6 +14,7 @@ from __future__ import annotations
 import glob
 import os
 import re
+import select
 import subprocess
 import sys
 import threading
@@ -260,6 +261,20 @@ class SerialSource(_Decoding):
             return out
         return None
 
+    def _read(self, ser) -> bytes:
+        """Whatever has arrived, waiting at most read_timeout_s. On POSIX one select + one read of all that
+        is there (pyserial's read costs several system calls per call); elsewhere pyserial's read."""
+        fd = getattr(ser, "fd", None)
+        if fd is None or os.name != "posix":
+            return ser.read(ser.in_waiting or 1)
+        r, _, _ = select.select([fd], [], [], self.read_timeout_s)
+        if not r:
+            return b""
+        data = os.read(fd, 4096)
+        if not data:  # readable but nothing: the device went away (as pyserial reports it)
+            raise OSError("device reports readiness to read but returned no data (unplugged?)")
+        return data
+
     def _lose(self, why: str) -> None:
         ser, self.serial = self.serial, None
         try:
@@ -301,8 +316,7 @@ class SerialSource(_Decoding):
                 yield packets
                 continue
             try:
-                ser = self.serial
-                data = ser.read(ser.in_waiting or 1)
+                data = self._read(self.serial)
             except (serial.SerialException, OSError) as e:
                 self._lose(f"read failed ({e})")
                 yield []
