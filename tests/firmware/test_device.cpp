@@ -200,9 +200,9 @@ TEST_CASE("power-up: a 0x00, HELLO, gyro bias estimated while still, then the de
     CHECK(count(f, PKT_ORIENTATION) == 100);
     CHECK(count(f, PKT_STATUS) == 1);
     for (size_t i = 0; i < f.size(); ++i) CHECK(f[i][1] == (uint8_t)(i + 1));  // no gaps
-    CHECK(r.dev.calibration().gyro_bias[0] == 5);
-    CHECK(r.dev.calibration().gyro_bias[1] == -7);
-    CHECK(r.dev.calibration().gyro_bias[2] == 1);
+    CHECK((int)r.dev.calibration().gyro_bias[0] == 5);
+    CHECK((int)r.dev.calibration().gyro_bias[1] == -7);
+    CHECK((int)r.dev.calibration().gyro_bias[2] == 1);
     CHECK(r.dev.calibrationState() == (CAL_EEPROM_INVALID | CAL_GYRO_BIAS_VALID | CAL_GYRO_BIAS_ESTIMATED));
     CHECK(r.hal.pin_pulses == 200);
     CHECK(r.hal.pin_high == 0);
@@ -315,13 +315,13 @@ TEST_CASE("calibration commands: set, get, save, load, reset; a broken EEPROM is
     r.send(frameOf(CMD_LOAD_CALIBRATION, 5, {}));
     f = r.hal.frames();
     for (auto& p : f) CHECK(p[4] == RESULT_OK);
-    CHECK(r.dev.calibration().accel_scale[0] == 16006);
+    CHECK((int)r.dev.calibration().accel_scale[0] == 16006);
     CHECK((r.dev.calibrationState() & CAL_FROM_EEPROM));
     // a new power-up finds it in EEPROM
     Rig r2;
     std::memcpy(r2.hal.eeprom, r.hal.eeprom, 64);
     r2.dev.begin();
-    CHECK(r2.dev.calibration().accel_scale[0] == 16006);
+    CHECK((int)r2.dev.calibration().accel_scale[0] == 16006);
     CHECK((r2.dev.calibrationState() & CAL_FROM_EEPROM));
     CHECK_FALSE((r2.dev.calibrationState() & CAL_EEPROM_INVALID));
     // damaged EEPROM: load refused, calibration in use unchanged
@@ -354,8 +354,8 @@ TEST_CASE("calibration steps: busy, stop, gyro bias over 2 s") {
     CHECK(f[2][4] == RESULT_OK);
     CHECK(f[3][4] == RESULT_OK);
     r.run(401);
-    CHECK(r.dev.calibration().gyro_bias[0] == 20);
-    CHECK(r.dev.calibration().gyro_bias[2] == 22);
+    CHECK((int)r.dev.calibration().gyro_bias[0] == 20);
+    CHECK((int)r.dev.calibration().gyro_bias[2] == 22);
     r.send(frameOf(CMD_GET_STATUS, 5, {}));
     f = r.hal.frames();
     REQUIRE(f.back()[0] == PKT_STATUS);

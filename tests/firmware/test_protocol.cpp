@@ -313,7 +313,7 @@ TEST_CASE("every golden vector decodes, re-encodes and is judged as listed") {
                     writeCalibrationBlock(cmd.calibration, blk);
                     CHECK(std::vector<uint8_t>(blk, blk + CALIBRATION_BLOCK_LEN) ==
                           std::vector<uint8_t>(body, body + body_len));
-                    CHECK(cmd.calibration.mag_soft_iron[1] == -120);
+                    CHECK((int)cmd.calibration.mag_soft_iron[1] == -120);
                 }
             }
             // the REPLY frame itself decodes back to what was sent

@@ -2,6 +2,7 @@
 
 #include "bytes.h"
 #include "crc16.h"
+#include "fixed_math.h"
 
 namespace sphere {
 
@@ -31,21 +32,14 @@ bool Calibration::magIsDefault() const {
     return true;
 }
 
-static const int16_t* field(const Calibration& c, uint8_t i) {
-    // the 21 values in block order
-    if (i < 3) return &c.gyro_bias[i];
-    if (i < 6) return &c.accel_offset[i - 3];
-    if (i < 9) return &c.accel_scale[i - 6];
-    if (i < 12) return &c.mag_offset[i - 9];
-    return &c.mag_soft_iron[i - 12];
-}
-
 void writeCalibrationBlock(const Calibration& c, uint8_t* out) {
-    for (uint8_t i = 0; i < 21; ++i) putI16(out + 2 * i, *field(c, i));
+    const uint8_t* p = (const uint8_t*)&c;
+    for (uint8_t i = 0; i < CALIBRATION_BLOCK_LEN; ++i) out[i] = p[i];
 }
 
 void readCalibrationBlock(const uint8_t* in, Calibration& c) {
-    for (uint8_t i = 0; i < 21; ++i) *const_cast<int16_t*>(field(c, i)) = getI16(in + 2 * i);
+    uint8_t* p = (uint8_t*)&c;
+    for (uint8_t i = 0; i < CALIBRATION_BLOCK_LEN; ++i) p[i] = in[i];
 }
 
 void writeCalibrationImage(const Calibration& c, uint8_t* image) {
@@ -71,21 +65,24 @@ void applyGyro(const Calibration& c, const int16_t raw[3], int16_t out[3]) {
     for (uint8_t i = 0; i < 3; ++i) out[i] = saturate16((int32_t)raw[i] - c.gyro_bias[i]);
 }
 
+// raw − offset, limited to ±8191 so that the Q14 products below cannot overflow (the chips' own
+// ranges are ±4096 and ±2048)
+static int16_t centred(int16_t raw, int16_t offset) {
+    int32_t d = (int32_t)raw - offset;
+    return (int16_t)(d > 8191 ? 8191 : d < -8191 ? -8191 : d);
+}
+
 void applyAccel(const Calibration& c, const int16_t raw[3], int16_t out[3]) {
-    for (uint8_t i = 0; i < 3; ++i) {
-        int32_t d = (int32_t)raw[i] - c.accel_offset[i];
-        out[i] = saturate16((d * c.accel_scale[i] + 8192) >> 14);
-    }
+    for (uint8_t i = 0; i < 3; ++i)
+        out[i] = saturate16((mac2(centred(raw[i], c.accel_offset[i]), c.accel_scale[i], 0, 0) + 8192) >> 14);
 }
 
 void applyMag(const Calibration& c, const int16_t raw[3], int16_t out[3]) {
-    int32_t d[3];
-    for (uint8_t i = 0; i < 3; ++i) d[i] = (int32_t)raw[i] - c.mag_offset[i];
-    for (uint8_t r = 0; r < 3; ++r) {
-        int32_t s = 0;
-        for (uint8_t k = 0; k < 3; ++k) s += d[k] * c.mag_soft_iron[3 * r + k];
-        out[r] = saturate16((s + 8192) >> 14);
-    }
+    int16_t d[3];
+    for (uint8_t i = 0; i < 3; ++i) d[i] = centred(raw[i], c.mag_offset[i]);
+    const int16_t* m = c.mag_soft_iron;
+    for (uint8_t r = 0; r < 3; ++r, m += 3)
+        out[r] = saturate16((mac3(d[0], m[0], d[1], m[1], d[2], m[2]) + 8192) >> 14);
 }
 
 }  // namespace sphere

@@ -10,7 +10,7 @@ const uint8_t CALIBRATION_EEPROM_VERSION = 1;
 const uint8_t CALIBRATION_EEPROM_LEN = 1 + CALIBRATION_BLOCK_LEN + 2;  // version, block, crc (LE)
 const int16_t Q14_ONE = 16384;
 
-struct Calibration {
+struct __attribute__((packed)) Calibration {
     int16_t gyro_bias[3];      // gyroscope LSB
     int16_t accel_offset[3];   // accelerometer LSB
     int16_t accel_scale[3];    // Q14
@@ -22,6 +22,9 @@ struct Calibration {
     bool magIsDefault() const;
     bool gyroIsDefault() const;
 };
+
+// The struct is the block: 21 little-endian int16 in the order of §5.2 (little-endian targets only).
+static_assert(sizeof(Calibration) == CALIBRATION_BLOCK_LEN, "calibration block is 42 bytes");
 
 void writeCalibrationBlock(const Calibration& c, uint8_t* out);  // 42 bytes, little-endian
 void readCalibrationBlock(const uint8_t* in, Calibration& c);

@@ -54,7 +54,7 @@ const uint8_t STREAM_RAW = 1, STREAM_ORIENTATION = 2, STREAM_STATUS = 4;
 const uint8_t CAL_GYRO_BIAS_VALID = 1, CAL_ACCEL_CALIBRATED = 2, CAL_MAG_CALIBRATED = 4, CAL_FROM_EEPROM = 8,
               CAL_EEPROM_INVALID = 16, CAL_GYRO_BIAS_ESTIMATED = 32;
 
-struct Hello {
+struct __attribute__((packed)) Hello {
     uint8_t protocol_version;
     uint8_t firmware_version[3];
     uint8_t sensors_found;
@@ -69,7 +69,7 @@ struct Hello {
     uint8_t calibration_state;
 };
 
-struct RawSample {
+struct __attribute__((packed)) RawSample {
     uint32_t t_us;
     uint8_t flags;
     int16_t accel[3];
@@ -77,13 +77,13 @@ struct RawSample {
     int16_t mag[3];
 };
 
-struct Orientation {
+struct __attribute__((packed)) Orientation {
     uint32_t t_us;
     uint8_t flags;
     int16_t quat[4];  // Q14, w x y z, sensor → earth (NWU)
 };
 
-struct Event {
+struct __attribute__((packed)) Event {
     uint32_t t_us;
     uint8_t event;
     uint8_t int_source;
@@ -91,7 +91,7 @@ struct Event {
     int8_t tap_sign;
 };
 
-struct Status {
+struct __attribute__((packed)) Status {
     uint32_t t_us;
     uint8_t sensors_ok;
     uint16_t i2c_errors[3];
@@ -104,6 +104,17 @@ struct Status {
     uint16_t cpu_load;
     uint16_t battery_mv;
 };
+
+// The packet structs are packed and little-endian on both the ATmega328P and the native test hosts,
+// so their bytes are the bodies of §4 as they stand (checked below and by the golden vectors).
+static_assert(sizeof(Hello) == HELLO_LEN, "HELLO body is 19 bytes");
+static_assert(sizeof(RawSample) == RAW_SAMPLE_LEN, "RAW_SAMPLE body is 23 bytes");
+static_assert(sizeof(Orientation) == ORIENTATION_LEN, "ORIENTATION body is 13 bytes");
+static_assert(sizeof(Event) == EVENT_LEN, "EVENT body is 8 bytes");
+static_assert(sizeof(Status) == STATUS_LEN, "STATUS body is 25 bytes");
+#if defined(__BYTE_ORDER__) && __BYTE_ORDER__ != __ORDER_LITTLE_ENDIAN__
+#error "packet bodies are copied from packed structs: a little-endian target is required"
+#endif
 
 // Each writes the body into `out` and returns its length.
 uint8_t writeHello(const Hello& p, uint8_t* out);
