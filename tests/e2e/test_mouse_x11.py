@@ -183,3 +183,31 @@ def test_pynput_backend_under_xvfb(xvfb, tmp_path):
     x, y = pointer(xvfb)
     assert abs(x - (700 - 160)) <= 2 and y == 500  # 5° left at 1280 px / 40°
     assert [c[0] for c in clicks.presses] == [1] and abs(clicks.presses[0][1] - 540) <= 2
+
+
+def run_simulated(display, trace, seconds):
+    env = dict(os.environ, DISPLAY=display)
+    r = subprocess.run(
+        [sys.executable, "-m", "sphere.mouse", "--simulate", "--trace", trace, "--set", f"source.sim_seconds={seconds}",
+         "--backend", "x11", "--no-stream", "--config", os.devnull],
+        env=env, capture_output=True, text=True, timeout=300,
+    )
+    if "virtual board cannot run here" in r.stderr or "not installed here" in r.stderr:
+        pytest.skip("the virtual board (sphere sim: simavr + firmware build) cannot run here: "
+                    + r.stderr.splitlines()[0][:300])
+    assert r.returncode == 0, r.stderr
+    assert "simulated sphere stopped" in r.stderr, r.stderr
+    return r
+
+
+@pytest.mark.slow
+def test_virtual_board_taps_click_and_toss_switches_mode(xvfb):
+    """The whole chain: the real firmware on the simulated board → its UART pty → sphere-mouse → X."""
+    clicks = ClickRecorder(xvfb)
+    xdotool(xvfb, "mousemove", "400", "300")
+    run_simulated(xvfb, "synthetic:taps", 4)  # knocks at 1.0, 2.0 and 2.15 s
+    time.sleep(0.3)
+    assert len(clicks.presses) >= 2 and all(c[0] == 1 for c in clicks.presses), clicks.presses
+    assert all(abs(c[1] - 400) <= 3 and abs(c[2] - 300) <= 3 for c in clicks.presses), clicks.presses
+    r = run_simulated(xvfb, "synthetic:toss", 4)  # thrown at 2 s, caught 0.4 s later
+    assert "mode tilt" in r.stderr, r.stderr
