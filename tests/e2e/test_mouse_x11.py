@@ -201,7 +201,7 @@ def run_simulated(display, trace, seconds):
 
 
 @pytest.mark.slow
-def test_virtual_board_taps_click_and_toss_switches_mode(xvfb):
+def test_virtual_board_taps_toss_and_turn(xvfb):
     """The whole chain: the real firmware on the simulated board → its UART pty → sphere-mouse → X."""
     clicks = ClickRecorder(xvfb)
     xdotool(xvfb, "mousemove", "400", "300")
@@ -211,3 +211,8 @@ def test_virtual_board_taps_click_and_toss_switches_mode(xvfb):
     assert all(abs(c[1] - 400) <= 3 and abs(c[2] - 300) <= 3 for c in clicks.presses), clicks.presses
     r = run_simulated(xvfb, "synthetic:toss", 4)  # thrown at 2 s, caught 0.4 s later
     assert "mode tilt" in r.stderr, r.stderr
+    # still 1 s, then 10 °/s about the vertical for 2 s: 20° to the left = half the screen width
+    xdotool(xvfb, "mousemove", "1000", "500")
+    run_simulated(xvfb, "synthetic:rotation:10", 3)
+    x, y = pointer(xvfb)
+    assert abs(x - (1000 - 640)) <= 6 and abs(y - 500) <= 3, (x, y)
