@@ -71,17 +71,15 @@ static __attribute__((noinline)) void magTerms(const int16_t* q, const int16_t* 
 
 // q ← n/‖n‖ for ‖n‖² = 1 + e close to 1: q = n·(1 − e/2 + 3e²/8), with e from the Q14 parts of n.
 static __attribute__((noinline)) void renormalise(const int32_t* n, int32_t* q) {
-    int16_t h0 = q14of(n[0]), h1 = q14of(n[1]), h2 = q14of(n[2]), h3 = q14of(n[3]);
-    int32_t e28 = mac2(h0, h0, h1, h1) + mac2(h2, h2, h3, h3) - (1l << 28);
+    int16_t h[4];
+    for (uint8_t i = 0; i < 4; ++i) h[i] = q14of(n[i]);
+    int32_t e28 = mac2(h[0], h[0], h[1], h[1]) + mac2(h[2], h[2], h[3], h[3]) - (1l << 28);
     // Q16; |e| stays below 0.03 (see MARG_FILTER.md), clamped to ±0.25 for safety
     if (e28 > (1l << 26)) e28 = 1l << 26;
     if (e28 < -(1l << 26)) e28 = -(1l << 26);
     int16_t e16 = hi16((int32_t)((uint32_t)(e28 + 2048) << 4));
     int16_t d16 = (int16_t)(-(e16 >> 1) + ((3 * hi16(mul16(e16, e16) + 32768l)) >> 3));
-    q[0] = n[0] + mul16(h0, d16);
-    q[1] = n[1] + mul16(h1, d16);
-    q[2] = n[2] + mul16(h2, d16);
-    q[3] = n[3] + mul16(h3, d16);
+    for (uint8_t i = 0; i < 4; ++i) q[i] = n[i] + mul16(h[i], d16);
 }
 
 uint8_t MargFilter::update(const int16_t g[3], const int16_t a[3], const int16_t m[3], bool acc_valid,
