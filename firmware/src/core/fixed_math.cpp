@@ -99,11 +99,16 @@ bool normaliseQ14(const int16_t* v, uint8_t n, int16_t* out) {
     uint16_t xq = N >= (1ul << 30) ? 0xFFFFu : hi16u(N << 2);
     uint16_t yu = invSqrtQ14(xq);
     int16_t y = (int16_t)(yu > 32767u ? 32767u : yu);  // Q14 (≤ 2.0), as a signed operand
-    const int16_t w[4] = {w0, w1, w2, w3};
-    for (uint8_t i = 0; i < n; ++i) {
-        int32_t p = mul16(w[i], y);  // |p| < 2^29
-        if (!k) p >>= 1;
-        out[i] = rshift14(p);
+    if (k) {
+        out[0] = rshift14(mul16(w0, y));
+        out[1] = rshift14(mul16(w1, y));
+        if (n > 2) out[2] = rshift14(mul16(w2, y));
+        if (n > 3) out[3] = rshift14(mul16(w3, y));
+    } else {
+        out[0] = rshift15(mul16(w0, y));
+        out[1] = rshift15(mul16(w1, y));
+        if (n > 2) out[2] = rshift15(mul16(w2, y));
+        if (n > 3) out[3] = rshift15(mul16(w3, y));
     }
     return true;
 }
