@@ -23,7 +23,8 @@ bool Hmc5883l::poll(int16_t out[3], bool& fresh) {
     fresh = false;
     uint8_t status;
     if (!bus_.readRegister(ADDRESS, STATUS, status)) return false;
-    if (!(status & STATUS_RDY)) return true;
+    if (!(status & STATUS_RDY) && ++idle_polls_ < POLLS_WITHOUT_RDY) return true;
+    idle_polls_ = 0;
     uint8_t raw[6];
     if (!bus_.readRegisters(ADDRESS, DATA_X_MSB, raw, 6)) return false;
     decode(raw, out);

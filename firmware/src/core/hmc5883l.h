@@ -18,14 +18,18 @@ public:
     static const uint8_t STATUS_RDY = 0x01;
     static const int16_t OVERFLOW = -4096;
 
-    explicit Hmc5883l(I2cBus& bus) : bus_(bus) { id_[0] = id_[1] = id_[2] = 0; }
+    // Polls without RDY before the data are read anyway (4 × 5 ms > one 13.3 ms output period): a chip
+    // or a model whose STATUS never shows RDY still delivers its samples.
+    static const uint8_t POLLS_WITHOUT_RDY = 4;
+
+    explicit Hmc5883l(I2cBus& bus) : bus_(bus), idle_polls_(0) { id_[0] = id_[1] = id_[2] = 0; }
 
     // Reads ID A–C ("H43") and configures the chip when they match.
     bool begin();
     const uint8_t* id() const { return id_; }
     static bool idValid(const uint8_t id[3]) { return id[0] == 'H' && id[1] == '4' && id[2] == '3'; }
-    // Reads STATUS; when a new sample is ready, reads it into `out` (x, y, z) and sets `fresh`.
-    // `out` is left as it was when nothing new is ready. False on a bus failure.
+    // Reads STATUS; when a new sample is ready (RDY, or POLLS_WITHOUT_RDY polls without it), reads it
+    // into `out` (x, y, z) and sets `fresh`. `out` is left as it was otherwise. False on a bus failure.
     bool poll(int16_t out[3], bool& fresh);
 
     static void decode(const uint8_t raw[6], int16_t out[3]);  // X, Z, Y big-endian → x, y, z
@@ -33,6 +37,7 @@ public:
 private:
     I2cBus& bus_;
     uint8_t id_[3];
+    uint8_t idle_polls_;
 };
 
 }  // namespace sphere
