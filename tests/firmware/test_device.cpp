@@ -448,9 +448,26 @@ TEST_CASE("a tap: the accelerometer is ignored during the spike and the EVENT ca
     r.bus.adxl.regs[0x30] = 0xA4;
     r.bus.adxl.regs[0x2B] = 0x04;
     r.hal.interrupt = true;
+    r.hal.interrupt_t = r.hal.now;
     r.run(1);
     f = r.hal.frames();
     CHECK(count(f, PKT_EVENT) == 2);
+    // the chip keeps raising FREE_FALL while the fall lasts: still one event per fall
+    for (int i = 0; i < 30; ++i) {
+        r.bus.adxl.regs[0x30] = 0x84;
+        r.hal.interrupt = true;
+        r.hal.interrupt_t = r.hal.now;
+        r.run(1);
+    }
+    CHECK(count(r.hal.frames(), PKT_EVENT) == 0);
+    r.run(60);  // 300 ms without it: the next one is a new fall
+    r.bus.adxl.regs[0x30] = 0x84;
+    r.hal.interrupt = true;
+    r.hal.interrupt_t = r.hal.now;
+    r.run(1);
+    f = r.hal.frames();
+    REQUIRE(count(f, PKT_EVENT) == 1);
+    CHECK((*first(f, PKT_EVENT))[2 + 4] == EVENT_FREE_FALL);
 }
 
 TEST_CASE("damaged command frames are counted in rx_errors and not answered") {

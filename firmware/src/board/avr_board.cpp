@@ -75,9 +75,19 @@ bool AvrBoard::eepromWrite(const uint8_t* data, uint8_t len) {
 }
 
 void AvrBoard::margPin(bool high) {
-    if (identifying_) return;  // the LED belongs to IDENTIFY meanwhile
-    if (high) PORTB |= _BV(PB5);
-    else PORTB &= (uint8_t)~_BV(PB5);
+    // While the update runs, the UART's transmit interrupt is held back, so the update is not stretched
+    // by it and the pulse measures the update (Timer0's 1 kHz tick for micros() may still fall inside:
+    // about 80 cycles). The UART meanwhile finishes the byte in its shift register; receive and the
+    // ADXL345's INT0 stay enabled.
+    static uint8_t held;
+    if (high) {
+        held = (uint8_t)(UCSR0B & _BV(UDRIE0));
+        UCSR0B &= (uint8_t)~_BV(UDRIE0);
+        if (!identifying_) PORTB |= _BV(PB5);
+    } else {
+        if (!identifying_) PORTB &= (uint8_t)~_BV(PB5);
+        UCSR0B |= held;
+    }
 }
 
 bool AvrBoard::adxlInterrupt(uint32_t& t_us) {

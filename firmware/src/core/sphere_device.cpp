@@ -26,6 +26,8 @@ SphereDevice::SphereDevice(I2cBus& bus, DeviceHal& hal)
     bias_at_startup_ = false;
     bias_tries_ = 0;
     max_work_us_ = 0;
+    falling_ = false;
+    last_fall_us_ = 0;
 }
 
 void SphereDevice::probe(uint8_t sensor) {
@@ -130,8 +132,17 @@ void SphereDevice::handleEvents() {
         return;
     }
     if (src & (Adxl345::INT_SINGLE_TAP | Adxl345::INT_DOUBLE_TAP)) guard_.onTapInterrupt();
+    // The chip raises FREE_FALL again after every INT_SOURCE read while the fall lasts: one EVENT per
+    // fall, a new one only after FREE_FALL_GAP_US without it.
+    uint8_t report = src;
+    if (src & Adxl345::INT_FREE_FALL) {
+        if (falling_ && t_ev - last_fall_us_ < FREE_FALL_GAP_US) report &= (uint8_t)~Adxl345::INT_FREE_FALL;
+        falling_ = true;
+        last_fall_us_ = t_ev;
+    }
     Event ev[2];
-    uint8_t n = tapEvents(t_ev, src, act, guard_, ev);
+    uint8_t n = tapEvents(t_ev, report, act, guard_, ev);
+    for (uint8_t i = 0; i < n; ++i) ev[i].int_source = src;  // the register as read
     uint8_t body[EVENT_LEN];
     for (uint8_t i = 0; i < n; ++i) sendPacket(PKT_EVENT, body, writeEvent(ev[i], body));
 }

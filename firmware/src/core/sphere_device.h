@@ -46,6 +46,7 @@ public:
     static const uint16_t STARTUP_BIAS_TRIES = 10;       // give up after 10 windows with motion
     static const uint16_t STEP_BIAS_SAMPLES = 400;       // 2 s for CALIBRATION_STEP gyro_bias
     static const uint8_t RETRY_TICKS = 200;              // look for a missing sensor once a second
+    static const uint32_t FREE_FALL_GAP_US = 250000;     // FREE_FALL quiet this long ends a fall
 
     SphereDevice(I2cBus& bus, DeviceHal& hal);
 
@@ -114,6 +115,8 @@ private:
     bool bias_at_startup_;
     uint8_t bias_tries_;
     uint16_t max_work_us_;
+    bool falling_;
+    uint32_t last_fall_us_;
 };
 
 }  // namespace sphere
