@@ -236,6 +236,12 @@ class SerialSource(_Decoding):
 
     def _connect(self) -> list[DecodedPacket] | None:
         paths = [self.port] if self.port != "auto" else expand_candidates(self.candidates)
+        if not paths:
+            self.state = f"looking for the sphere (no port matches {' '.join(self.candidates)})"
+        elif self.port != "auto" and not os.path.exists(self.port):
+            self.state = f"waiting for {self.port} to appear"
+        else:
+            self.state = f"looking for the sphere (no HELLO from {', '.join(paths)})"
         for path in paths:
             got = self._try_port(path)
             if got is None:
@@ -308,8 +314,6 @@ class SerialSource(_Decoding):
                 last_try = now
                 packets = self._connect()
                 if packets is None:
-                    if self.state.startswith("looking") is False:
-                        self.state = "looking for the sphere"
                     yield []
                     continue
                 last_byte = time.monotonic()
