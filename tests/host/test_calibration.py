@@ -153,3 +153,97 @@ def test_calibrate_command_refuses_a_missing_capture(tmp_path, capsys):
 
     assert main(["calibrate", "--capture", str(tmp_path / "nope.bin")]) == 2
     assert "no such capture" in capsys.readouterr().err
+
+
+class _FakeSphere:
+    """A serial port double: streams RAW_SAMPLE frames for the pose named in ``phase`` and answers
+    SET_CALIBRATION / SAVE_CALIBRATION with REPLY ok."""
+
+    def __init__(self, rng):
+        from sphere.protocol import FrameDecoder
+
+        self.rng = rng
+        self.phase = "still"
+        self.t_us = 0
+        self.seq = 0
+        self.out = bytearray()
+        self.host = FrameDecoder("host")
+        self.received = []
+        self.offset, self.sens = np.array([5.0, -8.0, 10.0]), np.array([255.0, 258.0, 250.0])
+        self.gbias = np.array([20.0, -15.0, 7.0])
+        self.field, self.hard = np.array([200.0, 0.0, -450.0]), np.array([40.0, -60.0, 15.0])
+        self.faces = {0: [1, 0, 0], 1: [-1, 0, 0], 2: [0, 1, 0], 3: [0, -1, 0], 4: [0, 0, 1], 5: [0, 0, -1]}
+        self.in_waiting = 0
+
+    def _sample(self):
+        from sphere.protocol import RawSample, encode_frame
+
+        rng = self.rng
+        if self.phase == "turning":
+            R = _rotations(1, rng)[0]
+            acc = R.T @ np.array([0, 0, 1.0]) * self.sens + self.offset
+            gyr = rng.normal(0, 500, 3)
+            mag = R @ self.field + self.hard
+        else:
+            face = 4 if self.phase == "still" else next(i for i, n in enumerate(FACE_NAMES) if n == self.phase)
+            acc = np.array(self.faces[face]) * self.sens + self.offset + rng.normal(0, 1.0, 3)
+            gyr = self.gbias + rng.normal(0, 2.0, 3)
+            mag = self.field + self.hard
+        self.t_us += 5000
+        self.seq = (self.seq + 1) & 0xFF
+        p = RawSample(t_us=self.t_us, flags=0b1111, accel=tuple(int(v) for v in np.rint(acc)),
+                      gyro=tuple(int(v) for v in np.rint(gyr)), mag=tuple(int(v) for v in np.rint(mag)))
+        return encode_frame(p, self.seq)
+
+    def read(self, n=1):
+        import time as _t
+
+        _t.sleep(0.002)
+        return b"".join(self._sample() for _ in range(4)) + self._pop()
+
+    def _pop(self):
+        data, self.out = bytes(self.out), bytearray()
+        return data
+
+    def write(self, data):
+        from sphere.protocol import Reply, encode_frame
+
+        for p in self.host.feed(data):
+            self.received.append(p)
+            self.out += encode_frame(Reply(cmd_seq=p.seq, cmd_type=p.TYPE, result=0), 0)
+
+    def close(self):
+        pass
+
+
+FACE_NAMES = None
+
+
+def test_calibrate_port_session_sends_and_saves(monkeypatch, capsys):
+    """The guided --port flow against a fake sphere: every step, then SET_CALIBRATION and SAVE_CALIBRATION."""
+    global FACE_NAMES
+    from sphere import serial_link
+    from sphere.cli import main
+    from sphere.commands import calibrate
+
+    FACE_NAMES = calibrate.FACES
+    port = _FakeSphere(np.random.default_rng(6))
+    monkeypatch.setattr(serial_link, "open_port", lambda *a, **k: port)
+    monkeypatch.setattr(calibrate, "STILL_S", 0.4)
+    monkeypatch.setattr(calibrate, "FACE_S", 0.3)
+    monkeypatch.setattr(calibrate, "TURN_S", 1.5)
+    original = calibrate._record
+
+    def record(link, seconds, label):
+        port.phase = label
+        return original(link, seconds, label)
+
+    monkeypatch.setattr(calibrate, "_record", record)
+    assert main(["calibrate", "--port", "FAKE", "--yes"]) == 0
+    names = [p.NAME for p in port.received]
+    assert names[-2:] == ["SET_CALIBRATION", "SAVE_CALIBRATION"]
+    block = port.received[-2]
+    assert np.allclose(block.gyro_bias, port.gbias, atol=1)
+    assert np.allclose(block.accel_offset, port.offset, atol=2)
+    assert np.allclose(block.mag_offset, port.hard, atol=8)
+    assert "saved to EEPROM" in capsys.readouterr().err

@@ -6,7 +6,8 @@ This module is the *definition* the firmware's fixed-point filter follows (host/
 Earth frame: **NWU** (x = horizontal magnetic north, y = west, z = up). ``quat`` is sensor-to-earth,
 ``[w, x, y, z]``: a vector measured in the sensor frame is ``q ⊗ v ⊗ q*`` in the earth frame.
 
-One update with gyroscope ω (rad/s), accelerometer a, magnetometer m and step dt (s), all on the
+One update with gyroscope ω (rad/s, calibrated: ``gyro_bias_rad_s`` is subtracted first, zero by
+default), accelerometer a, magnetometer m (any units; both are normalised) and step dt (s), all on the
 previous estimate q = [q0, q1, q2, q3] (Madgwick 2010; seed digest §4, eq. 66–82):
 
 1. Rate from the gyroscope: q̇_ω = ½ q ⊗ [0, ωx, ωy, ωz].

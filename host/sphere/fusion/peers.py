@@ -218,8 +218,6 @@ class AhrsMadgwickPeer(_AhrsPeer):
     _shown = ("gain", "frequency")
 
     def update(self, gyr_rad_s, acc_m_s2, mag_uT, dt_s):
-        from ahrs.common.orientation import ecompass  # noqa: F401  (import check only)
-
         g, a = np.asarray(gyr_rad_s, float), np.asarray(acc_m_s2, float)
         if self._q is None:
             self._q = _first_q(a, mag_uT, self.earth_frame)
