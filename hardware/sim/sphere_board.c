@@ -272,6 +272,7 @@ static avr_io_t *find_io(avr_t *avr, const char *kind)
 
 /* A stalled bus: a slave holds the clock, so the TWI never finishes its step and TWINT never rises.
  * simavr finishes each TWI step from a cycle timer whose parameter is the TWI module: cancel it. */
+static uint32_t stalled_steps;
 static void hold_twi(avr_t *avr, void *twi)
 {
 	avr_cycle_timer_t fn[8];
@@ -281,6 +282,7 @@ static void hold_twi(avr_t *avr, void *twi)
 			fn[n++] = s->timer;
 	for (int i = 0; i < n; i++)
 		avr_cycle_timer_cancel(avr, fn[i], twi);
+	stalled_steps += (uint32_t)n; /* each a bus step that never completes */
 }
 
 /* ---------------------------------------------------------------- main */
@@ -576,7 +578,7 @@ int main(int argc, char **argv)
 	if (loop_n) loop_med = lv->v[loop_n / 2];
 	double load = loop_n ? (double)loop_med / period : (tm_update.update.n ? (double)upd_med / period : 0);
 	double load_max = loop_n ? (double)lv->v[loop_n - 1] / period : 0;
-	uint32_t i2c_errors = board.i2c_errors;
+	uint32_t i2c_errors = board.i2c_errors + stalled_steps;
 	if (sf) {
 		fprintf(sf, "  \"cpu_load\": %.4f,\n", load);
 		fprintf(sf, "  \"cpu_load_max\": %.4f,\n", load_max);
@@ -601,6 +603,7 @@ int main(int argc, char **argv)
 		fprintf(sf, "  \"i2c_errors\": %u,\n", i2c_errors);
 		fprintf(sf, "  \"i2c_starts\": %u,\n", board.starts);
 		fprintf(sf, "  \"i2c_address_nacks\": %u,\n", board.addr_nacks);
+		fprintf(sf, "  \"i2c_stalled_steps\": %u,\n", stalled_steps);
 		fprintf(sf, "  \"chip_nacks\": {\"adxl345\": %u, \"itg3200\": %u, \"hmc5883l\": %u},\n",
 			board.chip[0].nacked, board.chip[1].nacked, board.chip[2].nacked);
 		fprintf(sf, "  \"adxl345_events\": {\"single_tap\": %u, \"double_tap\": %u, \"free_fall\": %u},\n",

@@ -120,6 +120,11 @@ def test_bus_stall_does_not_stop_the_stream():
     assert any(t > 3.5 for t in times), "nothing streamed after the stall"
     late = [x for x in s.summary.status if x.t_us / 1e6 > 4.0]
     assert late and late[-1].sensors_ok == 0b111
+    assert late[-1].i2c_recoveries > 0, "the stall needed no bus recovery?"
+    assert s.stats["i2c_stalled_steps"] > 0
+    gaps = [b - a for a, b in zip(times, times[1:])]
+    assert max(gaps) < 0.05, f"the stream stopped for {max(gaps):.3f} s"
+    assert s.summary.hellos == 1 and s.stats["resets"] == 0, "the watchdog had to reset the device"
 
 
 def test_marg_update_is_timed_from_the_timing_pin():
