@@ -43,10 +43,10 @@ def test_replay_speed_paces_by_device_time(tmp_path):
     t0 = time.perf_counter()
     SphereMouse(cfg, ReplaySource(cap, speed=4.0), RecordingBackend(), log=lambda m: None).run()
     fast = time.perf_counter() - t0
-    assert 0.4 <= fast < 1.0  # 2 s at ×4 = 0.5 s
+    assert 0.45 <= fast < 2.0  # 2 s at ×4 = 0.5 s (generous above: a busy machine is slow, never early)
     t0 = time.perf_counter()
     SphereMouse(cfg, ReplaySource(cap, speed=0), RecordingBackend(), log=lambda m: None).run()
-    assert time.perf_counter() - t0 < 0.4
+    assert time.perf_counter() - t0 < fast
 
 
 def test_missing_capture_and_wrong_protocol(tmp_path):

@@ -90,7 +90,7 @@ def start_daemon(source, backend=None):
     return daemon, backend, t
 
 
-def wait_for(cond, timeout=10.0):
+def wait_for(cond, timeout=20.0):
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
         if cond():
