@@ -18,8 +18,9 @@ DESCRIPTION = (
     "synthetic source (synthetic:still, synthetic:rotation[:DPS], synthetic:toss, synthetic:taps) or a "
     "prepared trace (.bin). The UART goes into a capture file (--capture, readable by `sphere decode`) "
     "and/or a pseudo-terminal (--pty, for `sphere capture` or sphere-mouse). Prints the run's figures; "
-    "--stats writes them as JSON. Simulated I2C timing is one microsecond per TWI step (simavr 1.6), not "
-    "real 400 kHz time; the MARG update's cycle counts (from the timing pin D13) are exact."
+    "--stats writes them as JSON. simavr 1.6 clocks the I2C bus at one SCL period per microsecond (9 us a byte, "
+    "not 400 kHz's 22.5 us) unless --i2c-real-timing; the MARG update's cycle counts (from the timing pin D13) "
+    "are exact."
 )
 
 DEFAULT_BETA = 0.041  # the firmware's DEFAULT_BETA_MILLI (firmware/src/core/marg_filter.h)
