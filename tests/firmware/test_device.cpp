@@ -501,3 +501,25 @@ TEST_CASE("a full transmit buffer drops frames, counts them and leaves a sequenc
     REQUIRE(f.size() == 3);
     CHECK((uint8_t)(f[2][1] - f[1][1]) == 4);
 }
+
+TEST_CASE("gyro bias: a steady turn about the vertical is not mistaken for stillness") {
+    GyroBiasEstimator e;
+    int16_t g[3] = {0, 0, 144}, a[3] = {0, 0, 256};  // 10 °/s about z: gyro and accel constant
+    e.start(200);
+    int8_t r = 0;
+    for (int i = 0; i < 200 && r == 0; ++i) {
+        double h = 10.0 * i / 200 * M_PI / 180;  // the field turns with the heading
+        int16_t m[3] = {(int16_t)std::lround(300 * std::cos(h)), (int16_t)std::lround(-300 * std::sin(h)), -400};
+        r = e.update(g, a, m);
+    }
+    CHECK(r == -1);
+    e.start(200);  // the same still: accepted, the mean is the bias
+    int16_t m[3] = {300, 0, -400}, g2[3] = {3, -2, 7};
+    for (int i = 0; i < 200 && r <= 0; ++i) r = e.update(g2, a, m);
+    CHECK(r == 1);
+    CHECK(e.bias()[2] == 7);
+    e.start(10);  // without a magnetometer only gyro and accel count
+    r = 0;
+    for (int i = 0; i < 10 && r == 0; ++i) r = e.update(g, a, nullptr);
+    CHECK(r == 1);
+}

@@ -173,7 +173,9 @@ void SphereDevice::tick() {
     if (tap_active_) raw_flags_ |= RAW_TAP_ACTIVE;
 
     if (bias_est_.running()) {
-        int8_t r = (raw_flags_ & RAW_GYRO_OK) ? bias_est_.update(raw_gyro_, raw_accel_) : -1;
+        int8_t r = (raw_flags_ & RAW_GYRO_OK)
+                       ? bias_est_.update(raw_gyro_, raw_accel_, (raw_flags_ & RAW_MAG_OK) ? raw_mag_ : 0)
+                       : -1;
         if (r > 0) {
             for (uint8_t i = 0; i < 3; ++i) cal_.gyro_bias[i] = bias_est_.bias()[i];
             cal_state_ |= CAL_GYRO_BIAS_VALID | CAL_GYRO_BIAS_ESTIMATED;
