@@ -380,6 +380,7 @@ class HidSource(_Decoding):
         self.device = None
         self.state = "looking for a HID receiver"
         self._stop = False
+        self._iterating = False
 
     def _find(self):
         for info in self.hid.enumerate(self.vendor_id, self.product_id):
@@ -388,6 +389,22 @@ class HidSource(_Decoding):
         return None
 
     def __iter__(self):
+        self._iterating = True
+        try:
+            yield from self._batches()
+        finally:
+            self._iterating = False
+            self._close_device()
+
+    def _close_device(self):
+        if self.device is not None:
+            try:
+                self.device.close()
+            except Exception:
+                pass
+            self.device = None
+
+    def _batches(self):
         while not self._stop:
             if self.device is None:
                 info = self._find()
@@ -430,10 +447,10 @@ class HidSource(_Decoding):
                 yield []
 
     def close(self):
+        """Stop: the reading loop closes the device when it sees this (safe from another thread or a signal)."""
         self._stop = True
-        if self.device is not None:
-            self.device.close()
-            self.device = None
+        if not self._iterating:
+            self._close_device()
 
 
 # ---- scripted sphere and the virtual board -----------------------------------------------------
