@@ -92,7 +92,7 @@ def test_page_connects_and_turns_with_the_sphere(tmp_path):
     t.start()
     chromium = HeadlessChromium(f"http://127.0.0.1:{stream.port}/", tmp_path / "profile")
     try:
-        deadline = time.monotonic() + 20
+        deadline = time.monotonic() + 40
         while time.monotonic() < deadline and chromium.text("quat") != "0.966 0.000 0.000 0.259":
             time.sleep(0.1)
         status, mode, count = chromium.text("status"), chromium.text("mode"), chromium.text("count")

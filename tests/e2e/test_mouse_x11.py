@@ -82,6 +82,14 @@ class ClickRecorder:
         self._thread = threading.Thread(target=self._loop, daemon=True)
         self._thread.start()
 
+    def wait_for(self, presses: int, releases: int | None = None, timeout: float = 10.0) -> None:
+        """Until the X server has delivered that many presses and releases (a busy machine is slow)."""
+        releases = presses if releases is None else releases
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline and (len(self.presses) < presses or self.releases < releases):
+            time.sleep(0.02)
+        time.sleep(0.1)  # and nothing more after them
+
     def _loop(self):
         X = self.X
         while True:
@@ -128,7 +136,7 @@ def test_replay_moves_pointer_clicks_and_toss_switches_mode(xvfb, tmp_path):
     assert result.returncode == 0, result.stderr
     assert "mode tilt" in result.stderr
 
-    time.sleep(0.3)
+    clicks.wait_for(2)
     # two presses of button 1 (a double click), at the aimed point (640-320, 512-160), not where the
     # knocks pushed the sphere
     assert [c[0] for c in clicks.presses] == [1, 1], clicks.presses
@@ -179,7 +187,7 @@ def test_pynput_backend_under_xvfb(xvfb, tmp_path):
                         "--backend", "pynput", "--no-stream", "--config", os.devnull],
                        env=env, capture_output=True, text=True, timeout=60)
     assert r.returncode == 0, r.stderr
-    time.sleep(0.3)
+    clicks.wait_for(1)
     x, y = pointer(xvfb)
     assert abs(x - (700 - 160)) <= 2 and y == 500  # 5° left at 1280 px / 40°
     assert [c[0] for c in clicks.presses] == [1] and abs(clicks.presses[0][1] - 540) <= 2
@@ -206,7 +214,7 @@ def test_virtual_board_taps_toss_and_turn(xvfb):
     clicks = ClickRecorder(xvfb)
     xdotool(xvfb, "mousemove", "400", "300")
     run_simulated(xvfb, "synthetic:taps", 4)  # knocks at 1.0, 2.0 and 2.15 s
-    time.sleep(0.3)
+    clicks.wait_for(2)
     assert len(clicks.presses) >= 2 and all(c[0] == 1 for c in clicks.presses), clicks.presses
     assert all(abs(c[1] - 400) <= 3 and abs(c[2] - 300) <= 3 for c in clicks.presses), clicks.presses
     r = run_simulated(xvfb, "synthetic:toss", 4)  # thrown at 2 s, caught 0.4 s later
