@@ -11,7 +11,7 @@ SphereDevice::SphereDevice(I2cBus& bus, DeviceHal& hal)
     status_ = zero;
     for (uint8_t i = 0; i < 3; ++i) raw_accel_[i] = raw_gyro_[i] = raw_mag_[i] = 0;
     sample_t_us_ = 0;
-    ticks_ = 0;
+    converge_left_ = STARTUP_CONVERGE_SAMPLES;
     phase_ = 0;
     retry_ = 0;
     sensors_found_ = sensors_ok_ = 0;
@@ -155,12 +155,15 @@ void SphereDevice::runFilter() {
     bool acc_ok = (raw_flags_ & RAW_ACCEL_OK) && !tap_active_ && MargFilter::accelPlausible(a);
     bool mag_present = (raw_flags_ & RAW_MAG_OK) != 0;
     bool mag_ok = mag_present && MargFilter::magPlausible(m);
-    if (ticks_ == STARTUP_CONVERGE_TICKS) filter_.setBetaMilli(beta_milli_);
     hal_.margPin(true);
     uint8_t f = filter_.update(g, a, m, acc_ok, mag_ok);
     hal_.margPin(false);
     if (mag_present && !mag_ok) f |= ORI_MAG_REJECTED;
-    if (ticks_ < STARTUP_CONVERGE_TICKS) f |= ORI_CONVERGING;
+    if (converge_left_) {
+        // the start-up gain stays until that many samples actually corrected the orientation
+        f |= ORI_CONVERGING;
+        if (acc_ok && --converge_left_ == 0) filter_.setBetaMilli(beta_milli_);
+    }
     ori_flags_ = f;
 }
 
@@ -194,7 +197,6 @@ void SphereDevice::tick() {
 
     runFilter();
     stream(t0);
-    if (ticks_ < 0xFFFF) ++ticks_;
     if (++phase_ >= IMU_RATE_HZ) phase_ = 0;
 
     uint32_t work = hal_.micros() - t0;
@@ -327,7 +329,7 @@ uint8_t SphereDevice::executeCommand(const Command& c) {
         }
         case CMD_SET_FILTER:
             beta_milli_ = c.set_filter.beta;
-            if (ticks_ >= STARTUP_CONVERGE_TICKS) filter_.setBetaMilli(beta_milli_);
+            if (!converge_left_) filter_.setBetaMilli(beta_milli_);
             return RESULT_OK;
         case CMD_CALIBRATION_STEP: {
             uint8_t step = c.calibration_step.step;

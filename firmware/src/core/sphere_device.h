@@ -41,7 +41,7 @@ protected:
 
 class SphereDevice {
 public:
-    static const uint16_t STARTUP_CONVERGE_TICKS = 400;  // 2 s at the start-up gain
+    static const uint16_t STARTUP_CONVERGE_SAMPLES = 400;  // start-up gain for 2 s of accepted accelerometer
     static const uint16_t STARTUP_BIAS_SAMPLES = 200;    // 1 s still at power-up
     static const uint16_t STARTUP_BIAS_TRIES = 10;       // give up after 10 windows with motion
     static const uint16_t STEP_BIAS_SAMPLES = 400;       // 2 s for CALIBRATION_STEP gyro_bias
@@ -101,7 +101,7 @@ private:
 
     int16_t raw_accel_[3], raw_gyro_[3], raw_mag_[3];
     uint32_t sample_t_us_;
-    uint16_t ticks_;           // since power-up, saturating
+    uint16_t converge_left_;   // accepted samples still to run at the start-up gain
     uint8_t phase_;            // 0 … 199 within the second
     uint8_t retry_;
     uint8_t sensors_found_, sensors_ok_;
