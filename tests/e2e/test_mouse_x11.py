@@ -224,3 +224,22 @@ def test_virtual_board_taps_toss_and_turn(xvfb):
     run_simulated(xvfb, "synthetic:rotation:10", 3)
     x, y = pointer(xvfb)
     assert abs(x - (1000 - 640)) <= 6 and abs(y - 500) <= 3, (x, y)
+
+
+def test_recorded_captures_under_x(xvfb):
+    """The virtual board's recorded captures (tests/captures): the tap is one click received by an X client
+    at the pointer's place, the toss switches to tilt mode."""
+    from sphere.paths import repo_path
+
+    tapping = repo_path("tests", "captures", "sim_24_tapping.bin")
+    toss = repo_path("tests", "captures", "sim_toss.bin")
+    if not tapping.exists() or not toss.exists():
+        pytest.skip("tests/captures has no sim_24_tapping.bin / sim_toss.bin yet")
+    clicks = ClickRecorder(xvfb)
+    xdotool(xvfb, "mousemove", str(WIDTH // 2), str(HEIGHT // 2))
+    r = run_mouse(xvfb, tapping, "--speed", "0")
+    assert r.returncode == 0, r.stderr
+    clicks.wait_for(1)
+    assert [c[0] for c in clicks.presses] == [1], clicks.presses
+    r = run_mouse(xvfb, toss, "--speed", "0")
+    assert r.returncode == 0 and "mode tilt" in r.stderr, r.stderr
