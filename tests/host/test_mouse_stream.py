@@ -89,7 +89,8 @@ def test_page_and_404_over_http(stream):
 
 def test_daemon_streams_orientation_in_3d_mode(tmp_path, stream):
     cap = tmp_path / "c.bin"
-    cap.write_bytes(script_bytes([("still", 0.5), ("turn", (0, 0, 1), 90.0, 1.0), ("tap", "double_tap"), ("still", 0.3)]))
+    cap.write_bytes(script_bytes([("still", 0.5), ("turn", (0, 0, 1), 90.0, 1.0), ("still", 0.3), ("tap", "double_tap"),
+                                  ("still", 0.3)]))
     cfg = Config().with_overrides({"mode": {"start": "3d"}}, "test")
     backend = RecordingBackend()
     daemon = SphereMouse(cfg, ReplaySource(cap, speed=2.0), backend, stream=stream, log=lambda m: None)
@@ -98,7 +99,11 @@ def test_daemon_streams_orientation_in_3d_mode(tmp_path, stream):
     t.join(10)
     oris = [m for m in msgs if m["type"] == "orientation"]
     assert len(oris) > 20
-    w, x, y, z = oris[-1]["quat"]
-    assert abs(abs(w) - 0.7071) < 0.03 and abs(abs(z) - 0.7071) < 0.03  # 90° about the vertical
+    from sphere.quaternion import angle_between_deg, conjugate, multiply
+
+    first, last = oris[0]["quat"], oris[-1]["quat"]
+    assert angle_between_deg(first, last) == pytest.approx(90.0, abs=4.0)  # the turn, whatever the start heading
+    rel = multiply(conjugate(first), last)
+    assert abs(rel[3]) > 0.68 and abs(rel[1]) < 0.05 and abs(rel[2]) < 0.05  # about the vertical
     assert {"type": "event", "event": "double_tap"} == {k: v for k, v in msgs[-1].items() if k != "t_us"}
     assert backend.moves == 0 and backend.clicks == []

@@ -49,7 +49,8 @@ class SphereMouse:
         self.tilt = TiltMapper(TiltSettings.from_config(cfg.tilt, cfg.pointer))
         g = cfg.gyro
         self.motion = MotionTracker(cfg.orientation.source, cfg.orientation.use_mag, cfg.orientation.beta,
-                                    GyroBias(g.still_dps, g.still_time_s, g.auto_bias))
+                                    GyroBias(g.still_dps, g.still_time_s, g.auto_bias),
+                                    filter_name=cfg.orientation.filter)
         self.actions = EventActions(cfg.events, cfg.freeze)
         self.modes = list(cfg.mode.cycle)
         if cfg.mode.start not in self.modes:

@@ -180,7 +180,10 @@ SCHEMA: dict[str, dict[str, Option]] = {
                          choices=("auto", "host", "device")),
         "use_mag": Option(False, bool, "let the host filter use the magnetometer (needs a calibrated one; "
                           "without it yaw drifts slowly, which pointing does not mind)"),
-        "beta": Option(0.1, _num, "host filter gain β (rad/s)", _range(0.0, 2.0)),
+        "filter": Option("auto", str, "host filter: `sphere` (sphere.fusion's SphereFilter: rejects taps, vibration "
+                         "and hand acceleration, learns the gyro bias at rest), `madgwick`; `auto` = the best installed",
+                         choices=("auto", "sphere", "madgwick")),
+        "beta": Option(0.1, _num, "gain β (rad/s) of the host Madgwick filter", _range(0.0, 2.0)),
     },
     "stream": {
         "enabled": Option(True, bool, "serve orientation on a WebSocket and the 3-D page over HTTP"),

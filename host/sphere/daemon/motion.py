@@ -102,26 +102,66 @@ def body_rate_dps(q0, q1, dt_s: float):
     return (x * k, y * k, z * k)
 
 
-def _host_filter(beta: float):
-    """The best host filter available: sphere.fusion's SphereFilter, else its Madgwick; None if neither."""
+_ENU_TO_NWU = (math.sqrt(0.5), 0.0, 0.0, -math.sqrt(0.5))  # conj of protocol/spec.md's NWU→ENU rotation
+
+
+def _qmul(p, q):
+    p0, p1, p2, p3 = p
+    q0, q1, q2, q3 = q
+    return (p0 * q0 - p1 * q1 - p2 * q2 - p3 * q3, p0 * q1 + p1 * q0 + p2 * q3 - p3 * q2,
+            p0 * q2 - p1 * q3 + p2 * q0 + p3 * q1, p0 * q3 + p1 * q2 - p2 * q1 + p3 * q0)
+
+
+class _NwuFilter:
+    """Adapts an ENU filter (sphere.fusion's SphereFilter) to the NWU quaternions the protocol and the
+    stream use: q_NWU = q_ENU→NWU ⊗ q_ENU."""
+
+    def __init__(self, inner):
+        self.inner = inner
+
+    def update(self, *args, **kwargs):
+        q = self.inner.update(*args, **kwargs)
+        return _qmul(_ENU_TO_NWU, tuple(float(v) for v in q))
+
+    @property
+    def quat(self):
+        return _qmul(_ENU_TO_NWU, tuple(float(v) for v in self.inner.quat))
+
+    @quat.setter
+    def quat(self, q):  # SphereFilter initialises itself from its first samples
+        pass
+
+
+def host_filter(name: str = "auto", beta: float = 0.1):
+    """The host fusion filter: ``sphere`` (sphere.fusion's SphereFilter, our best), ``madgwick``, or
+    ``auto`` = the best one installed. None when sphere.fusion is absent. Returns NWU quaternions."""
     try:
-        from sphere.fusion.madgwick import Madgwick  # noqa: F401
-    except Exception:  # the fusion package is another module's work and may be absent
+        if name in ("auto", "sphere"):
+            try:
+                from sphere.fusion.sphere_filter import SphereFilter
+
+                return _NwuFilter(SphereFilter())
+            except ImportError:
+                if name == "sphere":
+                    return None
+        from sphere.fusion.madgwick import Madgwick
+
+        return Madgwick(beta=beta)
+    except Exception:  # the fusion package is another module's work and may be absent or changing
         return None
-    return Madgwick(beta=beta)
 
 
 class MotionTracker:
     """Feed packets in; read ``gyro_dps`` (bias-corrected, sensor axes), ``up`` and ``quat`` (sensor-to-NWU)."""
 
     def __init__(self, orientation_source: str = "auto", use_mag: bool = False, beta: float = 0.1,
-                 bias: GyroBias | None = None, imu_rate_hz: float = 200.0):
+                 bias: GyroBias | None = None, imu_rate_hz: float = 200.0, filter_name: str = "auto"):
         self.bias = bias or GyroBias()
         self.orientation_source = orientation_source
         self.use_mag = use_mag
         self.filter = None
         if orientation_source in ("auto", "host"):
-            self.filter = _host_filter(beta)
+            self.filter = host_filter(filter_name, beta)
         self.quat = None  # (w, x, y, z) sensor-to-NWU, or None until known
         self.up = None  # earth up in sensor axes
         self.gyro_dps = (0.0, 0.0, 0.0)
