@@ -523,3 +523,27 @@ TEST_CASE("gyro bias: a steady turn about the vertical is not mistaken for still
     for (int i = 0; i < 10 && r == 0; ++i) r = e.update(g, a, nullptr);
     CHECK(r == 1);
 }
+
+TEST_CASE("the start-up gain lasts until 400 samples had a usable accelerometer") {
+    Rig r;
+    r.bus.setGyro(0, 0, 0);
+    r.bus.setAccel(0, 0, 500);  // 1.95 g: rejected
+    r.dev.begin();
+    r.run(600);
+    auto f = r.hal.frames();
+    const std::vector<uint8_t>* last = nullptr;
+    for (auto& p : f)
+        if (p[0] == PKT_ORIENTATION) last = &p;
+    REQUIRE(last);
+    CHECK(((*last)[2 + 4] & ORI_CONVERGING));
+    CHECK(((*last)[2 + 4] & ORI_ACCEL_REJECTED));
+    r.bus.setAccel(0, 0, 256);
+    r.run(399);
+    f = r.hal.frames();
+    bool still_converging = (f.back()[2 + 4] & ORI_CONVERGING) || (f[f.size() - 2][2 + 4] & ORI_CONVERGING);
+    CHECK(still_converging);
+    r.run(2);
+    f = r.hal.frames();
+    for (auto& p : f)
+        if (p[0] == PKT_ORIENTATION) CHECK_FALSE((p[2 + 4] & ORI_CONVERGING));
+}
