@@ -5,43 +5,32 @@ namespace sphere {
 void GyroBiasEstimator::start(uint16_t samples) {
     target_ = samples;
     count_ = 0;
-    mag_started_ = false;
     for (uint8_t i = 0; i < 3; ++i) sum_[i] = 0;
 }
 
-static bool widen(int16_t v, int16_t& lo, int16_t& hi, int16_t span) {
-    if (v < lo) lo = v;
-    if (v > hi) hi = v;
-    return (int32_t)hi - lo <= span;
+// Still = every reading within ±span/2 of the window's first one, per axis.
+static bool near(const int16_t* v, const int16_t* ref, int16_t half_span) {
+    for (uint8_t i = 0; i < 3; ++i) {
+        int16_t d = (int16_t)(v[i] - ref[i]);
+        if (d > half_span || d < -half_span) return false;
+    }
+    return true;
 }
 
 int8_t GyroBiasEstimator::update(const int16_t g[3], const int16_t a[3], const int16_t* m) {
     if (!target_) return 0;
-    if (m) {
+    if (count_ == 0) {
         for (uint8_t i = 0; i < 3; ++i) {
-            if (!mag_started_) mmin_[i] = mmax_[i] = m[i];
-            if (!widen(m[i], mmin_[i], mmax_[i], MAG_SPAN_LSB)) {
-                target_ = 0;
-                return -1;
-            }
-        }
-        mag_started_ = true;
-    }
-    for (uint8_t i = 0; i < 3; ++i) {
-        if (count_ == 0) {
-            gmin_[i] = gmax_[i] = g[i];
-            amin_[i] = amax_[i] = a[i];
-        }
-        if (g[i] < gmin_[i]) gmin_[i] = g[i];
-        if (g[i] > gmax_[i]) gmax_[i] = g[i];
-        if (a[i] < amin_[i]) amin_[i] = a[i];
-        if (a[i] > amax_[i]) amax_[i] = a[i];
-        sum_[i] += g[i];
-        if ((int32_t)gmax_[i] - gmin_[i] > GYRO_SPAN_LSB || (int32_t)amax_[i] - amin_[i] > ACCEL_SPAN_LSB) {
-            target_ = 0;
-            return -1;
+            g0_[i] = g[i];
+            a0_[i] = a[i];
+            m0_[i] = m ? m[i] : 0;
         }
     }
+    if (!near(g, g0_, GYRO_SPAN_LSB / 2) || !near(a, a0_, ACCEL_SPAN_LSB / 2) || (m && !near(m, m0_, MAG_SPAN_LSB / 2))) {
+        target_ = 0;
+        return -1;
+    }
+    for (uint8_t i = 0; i < 3; ++i) sum_[i] += g[i];
     if (++count_ < target_) return 0;
     for (uint8_t i = 0; i < 3; ++i) {
         int32_t s = sum_[i], h = (int32_t)(count_ / 2);

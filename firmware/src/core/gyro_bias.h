@@ -1,6 +1,6 @@
 // Gyroscope bias from a still period: averages `samples` gyroscope readings and accepts the mean
-// only when neither the gyroscope, the accelerometer nor (when present) the magnetometer moved more
-// than a few LSB meanwhile. The magnetometer matters: a steady turn about the vertical keeps the gyro
+// only when every gyroscope, accelerometer and (when present) magnetometer reading stayed within half
+// a few-LSB span of the window's first one. The magnetometer matters: a steady turn about the vertical keeps the gyro
 // and the accelerometer constant, and only the field's direction shows it.
 #pragma once
 #include <stdint.h>
@@ -9,9 +9,10 @@ namespace sphere {
 
 class GyroBiasEstimator {
 public:
-    static const int16_t GYRO_SPAN_LSB = 15;   // ≈ 1 °/s peak to peak
-    static const int16_t ACCEL_SPAN_LSB = 16;  // ≈ 62 mg peak to peak
-    static const int16_t MAG_SPAN_LSB = 12;    // ≈ 11 mG peak to peak (≈ 1.3° of heading)
+    // spans wide enough for the chips' noise (ITG-3200 ≈ 0.4 °/s rms, ADXL345 ≈ 4 mg, HMC5883L ≈ 2 mG)
+    static const int16_t GYRO_SPAN_LSB = 58;   // ±2 °/s around the first reading
+    static const int16_t ACCEL_SPAN_LSB = 24;  // ±47 mg
+    static const int16_t MAG_SPAN_LSB = 16;    // ±7 mG: a turn faster than ≈ 1.5 °/s shows
 
     GyroBiasEstimator() : target_(0), count_(0) {}
     void start(uint16_t samples);
@@ -26,8 +27,7 @@ public:
 private:
     uint16_t target_, count_;
     int32_t sum_[3];
-    int16_t gmin_[3], gmax_[3], amin_[3], amax_[3], mmin_[3], mmax_[3];
-    bool mag_started_;
+    int16_t g0_[3], a0_[3], m0_[3];  // the window's first sample
     int16_t bias_[3];
 };
 
