@@ -278,8 +278,13 @@ def run(args) -> int:
         print(f"sphere eval: unknown filter(s) {', '.join(bad)}; known: {', '.join(registry.ALL)}", file=sys.stderr)
         return 2
     print(f"running {', '.join(names)} on {len(paths)} trial(s) from {directory} ...", file=sys.stderr)
-    results = evaluate(paths, names, seconds=args.seconds, jobs=args.jobs, keep_errors=bool(args.plot),
-                       progress=lambda t: print(f"  done {t}", file=sys.stderr))
+    try:
+        results = evaluate(paths, names, seconds=args.seconds, jobs=args.jobs, keep_errors=bool(args.plot),
+                           progress=lambda t: print(f"  done {t}", file=sys.stderr))
+    except ValueError as e:  # e.g. a --seconds slice with no movement phase to score
+        hint = " (a longer --seconds, or another trial)" if args.seconds else ""
+        print(f"sphere eval: {e}{hint}", file=sys.stderr)
+        return 2
     doc = summarise(results, names, trial_groups(directory))
     print(format_report(doc, quiet=args.quiet))
     if args.json:

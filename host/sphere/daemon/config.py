@@ -133,7 +133,7 @@ SCHEMA: dict[str, dict[str, Option]] = {
                                 _non_negative),
         "accel_high_dps": Option(120.0, _num, "rotation speed (°/s) from which the fast sensitivity applies; "
                                  "between the two it is blended linearly", _positive),
-        "tightening_dps": Option(2.0, _num, "rotations slower than this are scaled down in proportion to their "
+        "tightening_dps": Option(1.0, _num, "rotations slower than this are scaled down in proportion to their "
                                  "speed (soft, instead of a dead zone that swallows them); 0 = off", _non_negative),
         "smoothing_dps": Option(8.0, _num, "rotations slower than this are smoothed (fully below half of it), "
                                 "faster ones pass unsmoothed; 0 = off", _non_negative),
