@@ -7,6 +7,7 @@
 
 #include "fixed_math.h"
 #include "marg_filter.h"
+#include "moving_sample.h"
 
 // simavr prints what the UART sends, a line at a time
 static void put(const char* s) {
@@ -41,17 +42,7 @@ static void run(const char* name, bool acc, bool mag, uint16_t overhead) {
     Stats s = {0xFFFF, 0, 0, 0};
     int16_t g[3], a[3], m[3];
     for (uint16_t i = 0; i < 400; ++i) {
-        // a moving sample: rotating rates up to ±2000 °/s, tilted gravity and field
-        int16_t k = (int16_t)(i * 97);
-        g[0] = (int16_t)(k * 3);
-        g[1] = (int16_t)(-k);
-        g[2] = (int16_t)(i & 1 ? 28750 : -350);
-        a[0] = (int16_t)((i * 7) % 200 - 100);
-        a[1] = (int16_t)((i * 13) % 160 - 80);
-        a[2] = 240;
-        m[0] = (int16_t)(300 - (i % 50));
-        m[1] = (int16_t)((i * 3) % 100 - 50);
-        m[2] = -380;
+        movingSample(i, g, a, m);
         uint16_t t0 = TCNT1;
         filter.update(g, a, m, acc, mag);
         uint16_t t1 = TCNT1;

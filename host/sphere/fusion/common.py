@@ -60,3 +60,16 @@ def ecompass_batch(acc, mag, frame: str = "NWU") -> np.ndarray:
     acc = np.asarray(acc, dtype=float)
     mag = np.asarray(mag, dtype=float)
     return np.array([ecompass(*a, *m, frame=frame) for a, m in zip(acc.tolist(), mag.tolist())])
+
+
+def batch_inputs(gyr, acc, mag, acc_valid=None, mag_valid=None):
+    """(N, 3) arrays as the per-sample lists an ``update_batch`` loop walks: gyro, accelerometer,
+    magnetometer (``None`` per sample when ``mag`` is None) and the two validity flags (all True when
+    not given)."""
+    gyr = np.asarray(gyr, dtype=float).tolist()
+    acc = np.asarray(acc, dtype=float).tolist()
+    n = len(gyr)
+    magl = np.asarray(mag, dtype=float).tolist() if mag is not None else [None] * n
+    av = [True] * n if acc_valid is None else [bool(v) for v in acc_valid]
+    mv = [True] * n if mag_valid is None else [bool(v) for v in mag_valid]
+    return gyr, acc, magl, av, mv

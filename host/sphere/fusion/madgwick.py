@@ -36,6 +36,8 @@ import math
 
 import numpy as np
 
+from sphere.fusion.common import batch_inputs
+
 EARTH_FRAME = "NWU"
 DEFAULT_BETA = 0.041  # Madgwick's published default (rad/s); eval uses the β tuned on BROAD, see fusion.md
 
@@ -145,12 +147,9 @@ class Madgwick:
 
     def update_batch(self, gyr, acc, mag, dt_s: float, *, acc_valid=None, mag_valid=None) -> np.ndarray:
         """Run :meth:`update`'s code path over (N, 3) arrays; returns (N, 4). ``mag`` may be None."""
-        gyr = (np.asarray(gyr, dtype=float) - np.asarray(self.gyro_bias)).tolist()
-        acc = np.asarray(acc, dtype=float).tolist()
+        gyr, acc, magl, av, mv = batch_inputs(np.asarray(gyr, dtype=float) - np.asarray(self.gyro_bias), acc, mag,
+                                              acc_valid, mag_valid)
         n = len(gyr)
-        magl = np.asarray(mag, dtype=float).tolist() if mag is not None else [None] * n
-        av = [True] * n if acc_valid is None else [bool(v) for v in acc_valid]
-        mv = [True] * n if mag_valid is None else [bool(v) for v in mag_valid]
         out = np.empty((n, 4))
         q = self._q
         beta = self.beta

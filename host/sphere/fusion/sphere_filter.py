@@ -37,6 +37,8 @@ import math
 
 import numpy as np
 
+from sphere.fusion.common import batch_inputs
+
 EARTH_FRAME = "ENU"
 
 
@@ -154,12 +156,8 @@ class SphereFilter:
 
     def update_batch(self, gyr, acc, mag, dt_s: float, *, acc_valid=None, mag_valid=None) -> np.ndarray:
         """Run the per-sample step over (N, 3) arrays; returns (N, 4). ``mag`` may be None."""
-        gyr = np.asarray(gyr, dtype=float).tolist()
-        acc = np.asarray(acc, dtype=float).tolist()
+        gyr, acc, magl, av, mv = batch_inputs(gyr, acc, mag, acc_valid, mag_valid)
         n = len(gyr)
-        magl = np.asarray(mag, dtype=float).tolist() if mag is not None else [None] * n
-        av = [True] * n if acc_valid is None else [bool(v) for v in acc_valid]
-        mv = [True] * n if mag_valid is None else [bool(v) for v in mag_valid]
         out = np.empty((n, 4))
         dt = float(dt_s)
         step = self._step
