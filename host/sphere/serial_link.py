@@ -11,20 +11,36 @@ class PortError(Exception):
     """The port could not be opened or was lost; the message says what to do."""
 
 
-def open_port(port: str, baud: int = DEFAULT_BAUD, timeout_s: float = 0.1) -> serial.Serial:
-    """Open a port for reading frames: 8N1, no flow control, a short read timeout."""
+def _hint(text: str) -> str:
+    if "No such file" in text or "FileNotFound" in text:
+        return "is the sphere plugged in (or paired)? list ports with `python3 -m serial.tools.list_ports`"
+    if "Permission denied" in text:
+        return ("add yourself to the group that owns the port (usually `dialout`: sudo usermod -aG dialout $USER, "
+                "then log in again)")
+    if "busy" in text.lower():
+        return "another program holds the port (a serial monitor, ModemManager?); close it"
+    return "check the port name"
+
+
+def open_port(port: str, baud: int = DEFAULT_BAUD, timeout_s: float = 0.1, *, reset_on_open: bool = True,
+              write_timeout_s: float | None = None) -> serial.Serial:
+    """Open a port for reading frames: 8N1, no flow control, a short read timeout.
+
+    ``reset_on_open=False`` holds DTR low while opening, so a USB Nano is not reset (the kernel may still
+    pulse it on some adapters); Bluetooth SPP ports have no DTR to pulse.
+    """
+    ser = serial.Serial()
+    ser.port = port
     try:
-        return serial.Serial(port, baud, timeout=timeout_s)
-    except serial.SerialException as e:
-        text = str(e)
-        if "No such file" in text or "could not open port" in text and "FileNotFound" in text:
-            hint = "is the sphere plugged in (or paired)? list ports with `python3 -m serial.tools.list_ports`"
-        elif "Permission denied" in text:
-            hint = "add yourself to the group that owns the port (usually `dialout`: sudo usermod -aG dialout $USER, then log in again)"
-        elif "busy" in text.lower():
-            hint = "another program holds the port (a serial monitor, ModemManager?); close it"
-        else:
-            hint = "check the port name"
-        raise PortError(f"cannot open {port}: {text}; {hint}") from None
+        ser.baudrate = baud
     except ValueError as e:
         raise PortError(f"cannot open {port} at {baud} baud: {e}") from None
+    ser.timeout = timeout_s
+    ser.write_timeout = write_timeout_s
+    if not reset_on_open:
+        ser.dtr = False  # applied at open
+    try:
+        ser.open()
+    except (serial.SerialException, OSError) as e:
+        raise PortError(f"cannot open {port}: {e}; {_hint(str(e))}") from None
+    return ser

@@ -129,12 +129,13 @@ def slow_gain(paths: list[np.ndarray], sweeps: list[Track]) -> float:
     """How much of slow, deliberate motion survives: on each constant slow sweep, the filtered pointer's
     displacement over the true (noise-free) one between 1 s and 3 s, averaged over the sweeps (1.0 = kept
     whole; tightening and dead zones lower it, lag does not)."""
+    from sphere.daemon.pointer import PointerMapper, PointerSettings
+
+    px_per_deg = PointerMapper().screen_width_px / PointerSettings().slow_deg_per_width
     a, b = int(1.0 * RATE_HZ), -1
     gains = []
     for path, sweep, rate in zip(paths, sweeps, SLOW_RATES_DPS):
-        from sphere.daemon.pointer import PointerSettings
-
-        true_px = rate * (len(sweep.position) - 1 - a) / RATE_HZ * 1920.0 / PointerSettings().slow_deg_per_width
+        true_px = rate * (len(sweep.position) - 1 - a) / RATE_HZ * px_per_deg
         gains.append(abs(float(path[b, 0] - path[a, 0])) / true_px)
     return float(np.mean(gains))
 

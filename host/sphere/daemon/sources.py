@@ -21,8 +21,11 @@ import threading
 import time
 from typing import Callable, Iterator
 
+import serial
+
 from sphere.capture import CaptureError, CaptureFile, DecodedPacket
 from sphere.protocol import PROTOCOL_VERSION, FrameDecoder, GetHello, Hello, TimeUnwrapper, encode_frame
+from sphere.serial_link import PortError, open_port
 
 
 class SourceError(Exception):
@@ -165,16 +168,8 @@ class SerialSource(_Decoding):
 
     # -- connecting --
     def _open(self, path: str):
-        import serial
-
-        ser = serial.Serial()
-        ser.port = path
-        ser.baudrate = self.baud
-        ser.timeout = self.read_timeout_s
-        ser.write_timeout = 0.5
-        if not self.reset_on_open:
-            ser.dtr = False  # applied at open; the kernel may still pulse DTR (see host/docs/sphere-mouse.md)
-        ser.open()
+        # DTR held low unless reset_on_open; the kernel may still pulse it (see host/docs/sphere-mouse.md)
+        ser = open_port(path, self.baud, self.read_timeout_s, reset_on_open=self.reset_on_open, write_timeout_s=0.5)
         try:
             ser.reset_input_buffer()  # bytes from before the (DTR) reset belong to an older session
         except Exception:
@@ -188,19 +183,12 @@ class SerialSource(_Decoding):
 
     def _try_port(self, path: str):
         """Open ``path`` and wait for a HELLO: (serial, packets after and including the HELLO) or None."""
-        import serial
-
         try:
             ser = self._open(path)
-        except (serial.SerialException, OSError, ValueError) as e:
-            text = str(e)
+        except PortError as e:
             if path not in self._warned:
                 self._warned.add(path)
-                hint = ""
-                if "Permission denied" in text:
-                    hint = ("; add yourself to the group that owns it (usually dialout: "
-                            "sudo usermod -aG dialout $USER, then log in again)")
-                self.log(f"cannot open {path}: {text}{hint}")
+                self.log(str(e))
             return None
         self._warned.discard(path)
         self.serial = ser
@@ -300,7 +288,6 @@ class SerialSource(_Decoding):
             self._close_port()
 
     def _batches(self) -> Iterator[list[DecodedPacket]]:
-        import serial
 
         last_try = -1e9
         last_byte = time.monotonic()
