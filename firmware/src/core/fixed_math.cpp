@@ -1,34 +1,19 @@
 #include "fixed_math.h"
 
-#ifdef __AVR__
-#include <avr/pgmspace.h>
-#define SPHERE_TABLE PROGMEM
-#define SPHERE_READ_U16(p) pgm_read_word(p)
-#else
-#define SPHERE_TABLE
-#define SPHERE_READ_U16(p) (*(p))
-#endif
+#include "flash_table.h"
 
 namespace sphere {
 
-// 1/√X at the middle of each of the 192 steps of 1/256 covering [0.25, 1), Q14 (seed within 0.4 %).
-static const uint16_t INV_SQRT_SEED[192] SPHERE_TABLE = {
-    32641, 32391, 32146, 31907, 31673, 31445, 31221, 31002, 30787, 30577, 30371, 30169,
-    29972, 29778, 29587, 29401, 29217, 29038, 28861, 28688, 28518, 28350, 28186, 28024,
-    27866, 27709, 27556, 27405, 27256, 27110, 26966, 26825, 26686, 26548, 26413, 26280,
-    26149, 26020, 25893, 25767, 25644, 25522, 25402, 25283, 25167, 25051, 24938, 24826,
-    24715, 24606, 24498, 24392, 24287, 24184, 24081, 23980, 23881, 23782, 23685, 23589,
-    23494, 23400, 23307, 23216, 23125, 23036, 22947, 22860, 22774, 22688, 22604, 22520,
-    22437, 22356, 22275, 22195, 22116, 22037, 21960, 21883, 21808, 21732, 21658, 21585,
-    21512, 21440, 21368, 21298, 21228, 21159, 21090, 21022, 20955, 20888, 20822, 20757,
-    20692, 20628, 20564, 20501, 20439, 20377, 20316, 20255, 20195, 20135, 20076, 20017,
-    19959, 19902, 19845, 19788, 19732, 19676, 19621, 19566, 19512, 19458, 19405, 19352,
-    19299, 19247, 19196, 19144, 19093, 19043, 18993, 18943, 18894, 18845, 18797, 18749,
-    18701, 18653, 18606, 18560, 18513, 18467, 18422, 18376, 18331, 18287, 18242, 18198,
-    18155, 18111, 18068, 18025, 17983, 17941, 17899, 17857, 17816, 17775, 17734, 17694,
-    17654, 17614, 17574, 17535, 17496, 17457, 17418, 17380, 17342, 17304, 17267, 17229,
-    17192, 17155, 17119, 17082, 17046, 17010, 16974, 16939, 16904, 16869, 16834, 16799,
-    16765, 16731, 16697, 16663, 16629, 16596, 16563, 16530, 16497, 16465, 16432, 16400};
+// 1/√X at the middle of each of the 96 steps of 1/128 covering [0.25, 1), Q14 (seed within 0.8 %).
+static const uint16_t INV_SQRT_SEED[96] SPHERE_TABLE = {
+    32515, 32026, 31558, 31111, 30682, 30270, 29874, 29494, 29127, 28774, 28434, 28105,
+    27787, 27480, 27183, 26895, 26617, 26346, 26084, 25830, 25583, 25342, 25109, 24882,
+    24660, 24445, 24235, 24031, 23831, 23637, 23447, 23262, 23080, 22904, 22731, 22562,
+    22396, 22235, 22077, 21922, 21770, 21621, 21476, 21333, 21193, 21056, 20921, 20789,
+    20660, 20533, 20408, 20285, 20165, 20047, 19930, 19816, 19704, 19594, 19485, 19378,
+    19273, 19170, 19068, 18968, 18870, 18773, 18677, 18583, 18490, 18399, 18309, 18220,
+    18133, 18047, 17962, 17878, 17795, 17714, 17634, 17554, 17476, 17399, 17323, 17248,
+    17174, 17100, 17028, 16957, 16886, 16817, 16748, 16680, 16613, 16546, 16481, 16416};
 
 __attribute__((noinline)) int32_t mac2(int16_t a0, int16_t b0, int16_t a1, int16_t b1) {
     return mul16(a0, b0) + mul16(a1, b1);
@@ -39,8 +24,8 @@ __attribute__((noinline)) int32_t mac3(int16_t a0, int16_t b0, int16_t a1, int16
 }
 
 uint16_t invSqrtQ14(uint16_t x) {
-    // seed within 0.4 %, then one Newton step y ← y(3 − X·y²)/2: error about 2e-5
-    uint16_t y = SPHERE_READ_U16(&INV_SQRT_SEED[(uint8_t)((x >> 8) - 64)]);
+    // seed within 0.8 %, then one Newton step y ← y(3 − X·y²)/2: error below 1e-4
+    uint16_t y = SPHERE_READ_U16(&INV_SQRT_SEED[(uint8_t)((x >> 9) - 32)]);
     uint16_t y2 = hi16u(umul16(y, y) << 2);  // y², Q14 (y < 2 here, so no overflow)
     uint16_t t = hi16u(umul16(x, y2));       // X·y², Q14, ≈ 16384
     uint32_t r = umul16(y, (uint16_t)(49152u - t)) + 16384u;
@@ -92,24 +77,24 @@ bool normaliseQ14(const int16_t* v, uint8_t n, int16_t* out) {
         w2 >>= 1;
         w3 >>= 1;
     }
-    uint32_t N = (uint32_t)(mul16(w0, w0) + mul16(w1, w1)) + (uint32_t)(mul16(w2, w2) + mul16(w3, w3));
-    // x = N·4^k in [2^28, 2^30); X = x/2^30 in [0.25, 1); 1/√N = (1/√X)·2^k/2^15
-    bool k = N < (1ul << 28);
-    if (k) N <<= 2;
+    uint32_t N = (uint32_t)mac2(w0, w0, w1, w1) + (uint32_t)mac2(w2, w2, w3, w3);
+    // x = N·4^k in [2^28, 2^30); X = x/2^30 in [0.25, 1); 1/√N = (1/√X)·2^k/2^15. For k = 1 the
+    // components are doubled instead (N < 2^28 means every |w| < 2^14, so 2w fits): N·4 is then their
+    // sum of squares and round(2w·y/2^15) = round(w·y/2^14), so one output path serves both.
+    if (N < (1ul << 28)) {
+        N <<= 2;
+        w0 = (int16_t)(w0 * 2);
+        w1 = (int16_t)(w1 * 2);
+        w2 = (int16_t)(w2 * 2);
+        w3 = (int16_t)(w3 * 2);
+    }
     uint16_t xq = N >= (1ul << 30) ? 0xFFFFu : hi16u(N << 2);
     uint16_t yu = invSqrtQ14(xq);
     int16_t y = (int16_t)(yu > 32767u ? 32767u : yu);  // Q14 (≤ 2.0), as a signed operand
-    if (k) {
-        out[0] = rshift14(mul16(w0, y));
-        out[1] = rshift14(mul16(w1, y));
-        if (n > 2) out[2] = rshift14(mul16(w2, y));
-        if (n > 3) out[3] = rshift14(mul16(w3, y));
-    } else {
-        out[0] = rshift15(mul16(w0, y));
-        out[1] = rshift15(mul16(w1, y));
-        if (n > 2) out[2] = rshift15(mul16(w2, y));
-        if (n > 3) out[3] = rshift15(mul16(w3, y));
-    }
+    out[0] = rshift15(mul16(w0, y));
+    out[1] = rshift15(mul16(w1, y));
+    if (n > 2) out[2] = rshift15(mul16(w2, y));
+    if (n > 3) out[3] = rshift15(mul16(w3, y));
     return true;
 }
 

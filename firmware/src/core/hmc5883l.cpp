@@ -1,5 +1,7 @@
 #include "hmc5883l.h"
 
+#include "flash_table.h"
+
 namespace sphere {
 
 void Hmc5883l::decode(const uint8_t r[6], int16_t out[3]) {
@@ -8,6 +10,13 @@ void Hmc5883l::decode(const uint8_t r[6], int16_t out[3]) {
     out[1] = (int16_t)(((uint16_t)r[4] << 8) | r[5]);  // Y
 }
 
+// 75 Hz single-sample output, ±1.3 Ga (1090 LSB/gauss), continuous measurement
+static const uint8_t HMC_SETUP[][2] SPHERE_TABLE = {
+    {Hmc5883l::CONFIG_A, Hmc5883l::CONFIG_A_75HZ},
+    {Hmc5883l::CONFIG_B, Hmc5883l::CONFIG_B_GAIN1},
+    {Hmc5883l::MODE, Hmc5883l::MODE_CONTINUOUS},
+};
+
 bool Hmc5883l::begin() {
     id_[0] = id_[1] = id_[2] = 0;
     if (!bus_.readRegisters(ADDRESS, ID_A, id_, 3)) {
@@ -15,8 +24,7 @@ bool Hmc5883l::begin() {
         return false;
     }
     if (!idValid(id_)) return false;
-    return bus_.writeRegister(ADDRESS, CONFIG_A, CONFIG_A_75HZ) && bus_.writeRegister(ADDRESS, CONFIG_B, CONFIG_B_GAIN1) &&
-           bus_.writeRegister(ADDRESS, MODE, MODE_CONTINUOUS);
+    return bus_.writeSequence(ADDRESS, HMC_SETUP, sizeof HMC_SETUP / 2);
 }
 
 bool Hmc5883l::poll(int16_t out[3], bool& fresh) {

@@ -14,6 +14,9 @@ public:
 
     bool writeRegister(uint8_t addr, uint8_t reg, uint8_t value) { return writeRegisters(addr, reg, &value, 1); }
     bool readRegister(uint8_t addr, uint8_t reg, uint8_t& value) { return readRegisters(addr, reg, &value, 1); }
+    // Writes `count` register/value pairs in order, one transaction each, from a table declared
+    // SPHERE_TABLE (flash_table.h); false at the first that fails.
+    bool writeSequence(uint8_t addr, const uint8_t (*pairs)[2], uint8_t count);
 
 protected:
     ~I2cBus() {}

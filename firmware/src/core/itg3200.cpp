@@ -1,10 +1,21 @@
 #include "itg3200.h"
 
+#include "flash_table.h"
+
 namespace sphere {
 
 void Itg3200::decode(const uint8_t raw[6], int16_t out[3]) {
     for (uint8_t i = 0; i < 3; ++i) out[i] = (int16_t)(((uint16_t)raw[2 * i] << 8) | raw[2 * i + 1]);
 }
+
+// clock from the X gyro's PLL, 200 Hz from the 1 kHz internal rate, ±2000 °/s with the 98 Hz low-pass,
+// no interrupt pin
+static const uint8_t ITG_SETUP[][2] SPHERE_TABLE = {
+    {Itg3200::PWR_MGM, Itg3200::PWR_MGM_PLL_X},
+    {Itg3200::SMPLRT_DIV, Itg3200::SMPLRT_DIV_200HZ},
+    {Itg3200::DLPF_FS, Itg3200::DLPF_FS_2000DPS_98HZ},
+    {Itg3200::INT_CFG, 0},
+};
 
 bool Itg3200::begin() {
     whoami_ = 0;
@@ -15,9 +26,7 @@ bool Itg3200::begin() {
         whoami_ = id;
         if (!whoamiValid(id)) continue;
         address_ = candidates[i];
-        return bus_.writeRegister(address_, PWR_MGM, PWR_MGM_PLL_X) &&
-               bus_.writeRegister(address_, SMPLRT_DIV, SMPLRT_DIV_200HZ) &&
-               bus_.writeRegister(address_, DLPF_FS, DLPF_FS_2000DPS_98HZ) && bus_.writeRegister(address_, INT_CFG, 0);
+        return bus_.writeSequence(address_, ITG_SETUP, sizeof ITG_SETUP / 2);
     }
     return false;
 }

@@ -82,73 +82,84 @@ static __attribute__((noinline)) void renormalise(const int32_t* n, int32_t* q) 
     for (uint8_t i = 0; i < 4; ++i) q[i] = n[i] + mul16(h[i], d16);
 }
 
+// The update runs in three out-of-line phases, each with a stack frame small enough for the AVR's
+// 6-bit displacement (Y+0 … Y+63): one function holding every temporary needs about 130 bytes of
+// frame, and each access past Y+63 costs a pointer adjustment before and after (about 400 extra
+// bytes of code and cycles). The arithmetic is the same either way.
+
+// 1. gyro: q ← q + ½ q ⊗ [0, ω]·dt, in Q30, on the Q14 copy of q. Sums in Q14·LSB,
+// |sum| ≤ ‖q‖·‖ω‖ < 2^14·1.0001·56756 < 2^30 (q components are within ±16386, so negating them
+// cannot overflow; the gyro may be −32768)
+static __attribute__((noinline)) void gyroStep(const int16_t* q, const int16_t* g, int16_t k, int32_t* n) {
+    int16_t q0 = q[0], q1 = q[1], q2 = q[2], q3 = q[3];
+    n[0] += scaleQ16(mac3((int16_t)-q1, g[0], (int16_t)-q2, g[1], (int16_t)-q3, g[2]), k);
+    n[1] += scaleQ16(mac3(q0, g[0], q2, g[2], (int16_t)-q3, g[1]), k);
+    n[2] += scaleQ16(mac3(q0, g[1], (int16_t)-q1, g[2], q3, g[0]), k);
+    n[3] += scaleQ16(mac3(q0, g[2], q1, g[1], (int16_t)-q2, g[0]), k);
+}
+
+// 2. the normalised gradient ŝ = ∇f/‖∇f‖ (Q14) of the gravity objective, plus the magnetic one when
+// `mn` (the normalised magnetometer, Q14) is given. False when ∇f = 0.
+static __attribute__((noinline)) bool gradient(const int16_t* q, const int16_t* an, const int16_t* mn, int16_t* sn) {
+    int16_t q0 = q[0], q1 = q[1], q2 = q[2], q3 = q[3];
+    // bottom row of the rotation matrix sensor→earth, Q14 (entries within ±1)
+    int16_t r2[3] = {r13(mac2(q1, q3, (int16_t)-q0, q2)), r13(mac2(q0, q1, q2, q3)),
+                     (int16_t)(16384 - r13(mac2(q1, q1, q2, q2)))};
+    // gravity objective (eq. 74), Q13
+    int16_t u[3] = {(int16_t)((r2[0] - an[0]) >> 1), (int16_t)((r2[1] - an[1]) >> 1),
+                    (int16_t)((r2[2] - an[2]) >> 1)};
+    int16_t v[3];
+    if (mn) magTerms(q, r2, mn, u, v);
+    // ∇f/2 = ½J_gᵀ u (+ ½Kᵀ v), Q26. Half the Jacobians (a common factor does not change
+    // ∇f/‖∇f‖): ½J_g = [[−q2, q3, −q0, q1], [q1, q0, q3, q2], [0, −2q1, −2q2, 0]] (eq. 75) and
+    // ½K = [[0, 0, −2q2, −2q3], [−q3, q2, q1, −q0], [q2, q3, q0, q1]]; entries Q13 (c_i = q_i,
+    // and the Q14 value of q_i read as Q13 is 2q_i).
+    int16_t c0 = q0 >> 1, c1 = q1 >> 1, c2 = q2 >> 1, c3 = q3 >> 1;
+    int32_t s[4] = {mac2((int16_t)-c2, u[0], c1, u[1]), mac3(c3, u[0], c0, u[1], (int16_t)-q1, u[2]),
+                    mac3((int16_t)-c0, u[0], c3, u[1], (int16_t)-q2, u[2]), mac2(c1, u[0], c2, u[1])};
+    if (mn) {
+        s[0] += mac2((int16_t)-c3, v[1], c2, v[2]);
+        s[1] += mac2(c2, v[1], c3, v[2]);
+        s[2] += mac3((int16_t)-q2, v[0], c1, v[1], c0, v[2]);
+        s[3] += mac3((int16_t)-q3, v[0], (int16_t)-c0, v[1], c1, v[2]);
+    }
+    return normaliseQ14(s, 4, sn);
+}
+
 uint8_t MargFilter::update(const int16_t g[3], const int16_t a[3], const int16_t m[3], bool acc_valid,
                            bool mag_valid) {
     uint8_t flags = 0;
     // state in Q14 for the products (rounded)
     int16_t q[4] = {q14of(q_[0]), q14of(q_[1]), q14of(q_[2]), q14of(q_[3])};
-    int16_t q0 = q[0], q1 = q[1], q2 = q[2], q3 = q[3];
+    gyroStep(q, g, (int16_t)gyro_k_, q_);
 
-    // 1. gyro: ½ q ⊗ [0, ω]·dt, in Q30. Sums in Q14·LSB, |sum| ≤ ‖q‖·‖ω‖ < 2^14·1.0001·56756 < 2^30
-    // (q components are within ±16386, so negating them cannot overflow; the gyro may be −32768)
-    int32_t n[4];
-    n[0] = q_[0] + scaleQ16(mac3((int16_t)-q1, g[0], (int16_t)-q2, g[1], (int16_t)-q3, g[2]), gyro_k_);
-    n[1] = q_[1] + scaleQ16(mac3(q0, g[0], q2, g[2], (int16_t)-q3, g[1]), gyro_k_);
-    n[2] = q_[2] + scaleQ16(mac3(q0, g[1], (int16_t)-q1, g[2], q3, g[0]), gyro_k_);
-    n[3] = q_[3] + scaleQ16(mac3(q0, g[2], q1, g[1], (int16_t)-q2, g[0]), gyro_k_);
-
-    int16_t an[3];
+    int16_t an[3], mn[3], sn[4];
     if (!acc_valid || !normaliseQ14(a, 3, an)) {
         flags |= ORI_ACCEL_REJECTED;
     } else {
-        // bottom row of the rotation matrix sensor→earth, Q14 (entries within ±1)
-        int16_t r2[3] = {r13(mac2(q1, q3, (int16_t)-q0, q2)), r13(mac2(q0, q1, q2, q3)),
-                         (int16_t)(16384 - r13(mac2(q1, q1, q2, q2)))};
-        // gravity objective (eq. 74), Q13
-        int16_t fg0 = (int16_t)((r2[0] - an[0]) >> 1), fg1 = (int16_t)((r2[1] - an[1]) >> 1),
-                fg2 = (int16_t)((r2[2] - an[2]) >> 1);
-        int16_t u[3] = {fg0, fg1, fg2}, v[3];
-        int16_t mn[3];
         bool marg = mag_valid && normaliseQ14(m, 3, mn);
-        if (marg) {
-            flags |= ORI_MAG_USED;
-            magTerms(q, r2, mn, u, v);
-        }
-        // ∇f/2 = ½J_gᵀ u (+ ½Kᵀ v), Q26. Half the Jacobians (a common factor does not change
-        // ∇f/‖∇f‖): ½J_g = [[−q2, q3, −q0, q1], [q1, q0, q3, q2], [0, −2q1, −2q2, 0]] (eq. 75) and
-        // ½K = [[0, 0, −2q2, −2q3], [−q3, q2, q1, −q0], [q2, q3, q0, q1]]; entries Q13 (c_i = q_i,
-        // and the Q14 value of q_i read as Q13 is 2q_i).
-        int16_t c0 = q0 >> 1, c1 = q1 >> 1, c2 = q2 >> 1, c3 = q3 >> 1;
-        int32_t s[4] = {mac2((int16_t)-c2, u[0], c1, u[1]), mac3(c3, u[0], c0, u[1], (int16_t)-q1, u[2]),
-                        mac3((int16_t)-c0, u[0], c3, u[1], (int16_t)-q2, u[2]), mac2(c1, u[0], c2, u[1])};
-        if (marg) {
-            s[0] += mac2((int16_t)-c3, v[1], c2, v[2]);
-            s[1] += mac2(c2, v[1], c3, v[2]);
-            s[2] += mac3((int16_t)-q2, v[0], c1, v[1], c0, v[2]);
-            s[3] += mac3((int16_t)-q3, v[0], (int16_t)-c0, v[1], c1, v[2]);
-        }
-        int16_t sn[4];
-        if (normaliseQ14(s, 4, sn)) {
+        if (marg) flags |= ORI_MAG_USED;
+        if (gradient(q, an, marg ? mn : 0, sn)) {
             // q̇ −= β ∇f/‖∇f‖ ; step = ŝ(Q14)·β·dt(2^23) → Q30
             // (ŝ·B) >> 7 with B = bh·2^8 + bl, as two 16-bit products (no 32 × 32 multiply)
             int16_t bh = (int16_t)(beta_dt_ >> 8), bl = (int16_t)(beta_dt_ & 0xFF);
             for (uint8_t i = 0; i < 4; ++i)
-                n[i] -= (mul16(sn[i], bh) + ((mul16(sn[i], bl) + 128) >> 8)) << 1;
+                q_[i] -= (mul16(sn[i], bh) + ((mul16(sn[i], bl) + 128) >> 8)) << 1;
         }
     }
-    renormalise(n, q_);
+    renormalise(q_, q_);  // in place: it reads all of n before writing q
     return flags;
 }
 
 bool MargFilter::accelPlausible(const int16_t a[3]) {
-    int32_t n2 = mul16(a[0], a[0]) + mul16(a[1], a[1]) + mul16(a[2], a[2]);
+    int32_t n2 = mac3(a[0], a[0], a[1], a[1], a[2], a[2]);
     return n2 >= 128l * 128l && n2 <= 384l * 384l;
 }
 
 bool MargFilter::magPlausible(const int16_t m[3]) {
     for (uint8_t i = 0; i < 3; ++i)
         if (m[i] == -4096) return false;  // HMC5883L overflow
-    int32_t n2 = mul16(m[0], m[0]) + mul16(m[1], m[1]) + mul16(m[2], m[2]);
+    int32_t n2 = mac3(m[0], m[0], m[1], m[1], m[2], m[2]);
     return n2 >= 164l * 164l && n2 <= 981l * 981l;
 }
 

@@ -1,33 +1,27 @@
 #include "sphere_device.h"
 
+#include <string.h>
+
 namespace sphere {
+
+// The periodic and command functions below are marked noinline. With link-time optimisation avr-gcc
+// otherwise inlines all of them into main(), whose stack frame then grows past what the AVR's 6-bit
+// displacement reaches, and every access to a local costs a pointer adjustment: about 900 bytes of
+// flash (firmware/MARG_FILTER.md, "Flash and RAM").
 
 SphereDevice::SphereDevice(I2cBus& bus, DeviceHal& hal)
     : bus_(bus), hal_(hal), adxl_(bus), itg_(bus), hmc_(bus), filter_(MargFilter::DEFAULT_DT_US) {
     cal_.setDefaults();
     tap_ = Adxl345::DEFAULT_TAP;
     ff_ = Adxl345::DEFAULT_FREE_FALL;
-    Status zero = {};
-    status_ = zero;
-    for (uint8_t i = 0; i < 3; ++i) raw_accel_[i] = raw_gyro_[i] = raw_mag_[i] = 0;
-    sample_t_us_ = 0;
+    // status_ and every member after it start at zero: one memset instead of a store per member
+    // (about 250 bytes of flash less); sphere_device.h keeps them together at the end of the class
+    memset(&status_, 0, (size_t)((uint8_t*)(&last_fall_us_ + 1) - (uint8_t*)&status_));
     converge_left_ = STARTUP_CONVERGE_SAMPLES;
-    phase_ = 0;
-    retry_ = 0;
-    sensors_found_ = sensors_ok_ = 0;
-    raw_flags_ = ori_flags_ = 0;
-    mag_seen_ = mag_fresh_since_raw_ = tap_active_ = false;
     stream_mode_ = STREAM_RAW | STREAM_ORIENTATION | STREAM_STATUS;
     raw_rate_hz_ = 200;
     orientation_rate_hz_ = 100;
     beta_milli_ = MargFilter::DEFAULT_BETA_MILLI;
-    cal_state_ = 0;
-    cal_step_ = 0;
-    bias_at_startup_ = false;
-    bias_tries_ = 0;
-    max_work_us_ = 0;
-    falling_ = false;
-    last_fall_us_ = 0;
 }
 
 void SphereDevice::probe(uint8_t sensor) {
@@ -39,7 +33,7 @@ void SphereDevice::probe(uint8_t sensor) {
     else sensors_ok_ &= (uint8_t)~sensor;
 }
 
-void SphereDevice::begin() {
+__attribute__((noinline)) void SphereDevice::begin() {
     probe(SENSOR_ADXL345);
     probe(SENSOR_ITG3200);
     probe(SENSOR_HMC5883L);
@@ -84,7 +78,7 @@ void SphereDevice::i2cError(uint8_t i) {
     sensors_ok_ &= (uint8_t)~(1u << i);
 }
 
-void SphereDevice::readSensors(uint32_t t_us) {
+__attribute__((noinline)) void SphereDevice::readSensors(uint32_t t_us) {
     sample_t_us_ = t_us;
     raw_flags_ = 0;
     if (sensors_ok_ & SENSOR_ADXL345) {
@@ -122,7 +116,7 @@ void SphereDevice::readSensors(uint32_t t_us) {
     }
 }
 
-void SphereDevice::handleEvents() {
+__attribute__((noinline)) void SphereDevice::handleEvents() {
     uint32_t t_ev;
     if (!hal_.adxlInterrupt(t_ev)) return;
     if (!(sensors_ok_ & SENSOR_ADXL345)) return;
@@ -147,7 +141,7 @@ void SphereDevice::handleEvents() {
     for (uint8_t i = 0; i < n; ++i) sendPacket(PKT_EVENT, body, writeEvent(ev[i], body));
 }
 
-void SphereDevice::runFilter() {
+__attribute__((noinline)) void SphereDevice::runFilter() {
     int16_t g[3], a[3], m[3];
     applyGyro(cal_, raw_gyro_, g);
     applyAccel(cal_, raw_accel_, a);
@@ -167,7 +161,7 @@ void SphereDevice::runFilter() {
     ori_flags_ = f;
 }
 
-void SphereDevice::tick() {
+__attribute__((noinline)) void SphereDevice::tick() {
     uint32_t t0 = hal_.micros();
     readSensors(t0);
     handleEvents();
@@ -204,7 +198,7 @@ void SphereDevice::tick() {
     if (work > max_work_us_) max_work_us_ = (uint16_t)work;
 }
 
-void SphereDevice::stream(uint32_t t_us) {
+__attribute__((noinline)) void SphereDevice::stream(uint32_t t_us) {
     uint8_t body[STATUS_LEN];
     if ((stream_mode_ & STREAM_RAW) && raw_rate_hz_ && phase_ % (IMU_RATE_HZ / raw_rate_hz_) == 0) {
         RawSample r;
@@ -271,11 +265,11 @@ void SphereDevice::sendStatus() {
     sendPacket(PKT_STATUS, body, writeStatus(status_, body));
 }
 
-void SphereDevice::receive(uint8_t byte) {
+__attribute__((noinline)) void SphereDevice::receive(uint8_t byte) {
     if (decoder_.push(byte) == FRAME_OK) execute(decoder_.payload(), decoder_.payloadLength());
 }
 
-void SphereDevice::execute(const uint8_t* payload, uint8_t len) {
+__attribute__((noinline)) void SphereDevice::execute(const uint8_t* payload, uint8_t len) {
     Command c;
     uint8_t result = CommandParser::parse(payload, len, c);
     if (result == RESULT_OK) result = executeCommand(c);
@@ -296,7 +290,7 @@ void SphereDevice::execute(const uint8_t* payload, uint8_t len) {
     else if (c.type == CMD_REBOOT) hal_.reboot();
 }
 
-uint8_t SphereDevice::executeCommand(const Command& c) {
+__attribute__((noinline)) uint8_t SphereDevice::executeCommand(const Command& c) {
     switch (c.type) {
         case CMD_SET_STREAM:
             stream_mode_ = c.set_stream.stream_mode;

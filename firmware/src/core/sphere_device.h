@@ -97,6 +97,7 @@ private:
     FrameDecoder decoder_;
     TapSettings tap_;
     FreeFallSettings ff_;
+    // status_ and the members after it are zeroed together by the constructor; keep last_fall_us_ last
     Status status_;
 
     int16_t raw_accel_[3], raw_gyro_[3], raw_mag_[3];
