@@ -102,3 +102,45 @@ def test_report_has_a_mean_table_and_us_column():
     text = format_report(doc)
     assert "mean over 1 trials" in text and "us_per_sample" in text and "12.50" in text
     assert np.isfinite(1.0)
+
+
+TUNED_ON = ("02_undisturbed_slow_rotation_B", "03_undisturbed_slow_rotation_C",
+            "05_undisturbed_slow_rotation_with_breaks_B", "07_undisturbed_fast_rotation_B",
+            "09_undisturbed_fast_rotation_with_breaks_B", "10_undisturbed_slow_translation_A",
+            "14_undisturbed_slow_translation_with_breaks_B", "16_undisturbed_fast_translation_B",
+            "24_disturbed_tapping_A", "27_disturbed_phone_vibration_B", "30_disturbed_stationary_magnet_C",
+            "32_disturbed_attached_magnet_1cm")
+
+
+@pytest.mark.slow
+def test_kf_beats_tuned_madgwick_on_the_mean_of_all_trials():
+    """Issue 5: the dissertation KF beats plain Madgwick on the mean total RMSE over the shipped trials, each
+    with one parameter set for all trials; and Madgwick's β is at its optimum (both neighbours are worse),
+    so the KF does not win against a detuned Madgwick."""
+    # exactly the trials the parameters were tuned on (a full BROAD download holds more)
+    by_name = {p.stem: p for p in _need_broad()}
+    missing = [n for n in TUNED_ON if n not in by_name]
+    if missing:
+        pytest.skip(f"needs the BROAD trials the filters were tuned on; missing: {', '.join(missing)}")
+    paths = [by_name[n] for n in TUNED_ON]
+    from sphere.commands.eval import evaluate, summarise
+    from sphere.fusion import peers, registry
+
+    doc = summarise(evaluate(paths, ["madgwick", "dissertation-kf"], jobs=2), ["madgwick", "dissertation-kf"])
+    mad = doc["filters"]["madgwick"]["mean"]["total"]
+    kf = doc["filters"]["dissertation-kf"]["mean"]["total"]
+    assert kf < mad - 0.1, (kf, mad)
+    assert doc["filters"]["dissertation-kf"]["settings"]["robust"] == "huber-norm"
+
+    beta = registry.TUNED_MADGWICK_BETA
+    totals = {}
+    for b in (0.9 * beta, 1.1 * beta):
+        errs = []
+        for p in paths:
+            t = broad.load_trial(p)
+            bias = registry.startup_gyro_bias(t.gyr_rad_s, t.dt_s)
+            f = registry.make("madgwick", t.dt_s, t.acc_m_s2[0], t.mag_uT[0], gyro_bias_rad_s=bias, beta=b)
+            q = f.update_batch(t.gyr_rad_s, t.acc_m_s2, t.mag_uT, t.dt_s)
+            errs.append(broad.orientation_error(peers.to_enu(q, f.earth_frame), t).total)
+        totals[b] = float(np.mean(errs))
+    assert all(v > mad for v in totals.values()), (mad, totals)

@@ -79,7 +79,8 @@ def test_madgwick_converges_to_the_ecompass_orientation():
 
 # -- batch == per sample ------------------------------------------------------------------------------
 
-@pytest.mark.parametrize("make", [lambda: Madgwick(0.05), lambda: DissertationKF(0.05, robust="huber"), SphereFilter])
+@pytest.mark.parametrize("make", [lambda: Madgwick(0.05), lambda: DissertationKF(0.05, robust="huber"),
+                                  lambda: DissertationKF(0.5, robust="huber-norm", threshold=0.036), SphereFilter])
 def test_batch_equals_per_sample(make):
     gyr, acc, mag, dt = _synthetic()
     av = np.ones(len(gyr), bool)
@@ -122,6 +123,37 @@ def test_kf_gate_rejects_a_spike_and_huber_limits_it():
     assert 0.0 < jump["huber"] < 0.5 * jump["none"], jump
 
 
+def test_kf_norm_modes_gate_and_scale_the_whole_innovation():
+    """"gate-norm" skips a spike; "huber-norm" shrinks ν as a whole, so the correction turns about the axis
+    the measurement asks for, while per-component "huber" clips the larger component harder and turns the
+    axis towards the diagonal."""
+    acc = np.array([0.0, 0.0, 9.8])
+    # a 40° tilt about the horizontal axis (3, 1, 0); gravity-only, so the measurement z is exactly `spike`
+    spike = quat.from_axis_angle(np.array([3.0, 1.0, 0.0]), math.radians(40.0))
+    acc2 = quat.rotate(quat.conjugate(spike), acc)
+    axis = {}
+    for robust in ("gate-norm", "huber-norm", "huber"):
+        f = DissertationKF(0.05, robust=robust, threshold=0.02)
+        for _ in range(500):
+            f.update((0.0, 0.0, 0.0), acc, None, 0.01)
+        before = f.quat
+        f.update((0.0, 0.0, 0.0), acc2, None, 0.01)
+        step = quat.multiply(f.quat, quat.conjugate(before))
+        if robust == "gate-norm":
+            assert f.rejected == 1 and quat.angle_between_deg(f.quat, before) < 1e-9
+            continue
+        assert 0.0 < quat.angle_between_deg(f.quat, before) < 0.1, robust  # limited, but a correction
+        v = step[1:] * np.sign(step[0])
+        axis[robust] = math.degrees(math.atan2(v[1], v[0]))
+    want = math.degrees(math.atan2(1.0, 3.0))  # 18.4°
+    assert abs(axis["huber-norm"] - want) < 0.5, axis
+    assert abs(axis["huber"] - want) > 10.0, axis  # per component: turned towards 45°
+    f = DissertationKF(0.05, robust="huber-norm", threshold=0.02)
+    assert f.settings["robust"] == "huber-norm"
+    with pytest.raises(ValueError):
+        DissertationKF(0.05, robust="norm")
+
+
 # -- real data ------------------------------------------------------------------------------------------
 
 def _err(f, t, q0=True):
@@ -132,8 +164,7 @@ def _err(f, t, q0=True):
 
 def test_kf_beats_madgwick_on_a_disturbed_slice():
     """With the settings `sphere eval` uses (tuned once on all trials), the KF's robust measurement update
-    beats Madgwick while a magnet rides on the sensor (trial 32). Over all twelve trials it does not:
-    see host/docs/fusion.md."""
+    beats Madgwick while a magnet rides on the sensor (trial 32); host/docs/fusion.md has all twelve."""
     from sphere.fusion import registry
 
     t = _trial("32", 0.0, 90.0)

@@ -16,13 +16,14 @@ from sphere.fusion.kalman import DissertationKF
 from sphere.fusion.madgwick import Madgwick
 from sphere.fusion.sphere_filter import SphereFilter
 
-#: β tuned once on all shipped BROAD trials (mean total RMSE, grid 0.01…0.3); see host/docs/fusion.md
-TUNED_MADGWICK_BETA = 0.015
-#: σ_g tuned the same way for the dissertation KF (R = 10⁻² I fixed by the dissertation)
-TUNED_KF_GYRO_NOISE = 0.3
-
-TUNED_KF_ROBUST = "huber"
-TUNED_KF_THRESHOLD = 0.03
+#: β tuned once on all shipped BROAD trials (mean total RMSE; coarse grid 0.005…0.1, then fine around the
+#: optimum in steps of 0.0002–0.0005); see host/docs/fusion.md
+TUNED_MADGWICK_BETA = 0.0135
+#: σ_g, robust mode and threshold tuned the same way for the dissertation KF (R = 10⁻² I, P₀ = I, H = I fixed
+#: by the dissertation). With "huber-norm" only the product σ_g·threshold matters on BROAD (≈ 0.018)
+TUNED_KF_GYRO_NOISE = 0.5
+TUNED_KF_ROBUST = "huber-norm"
+TUNED_KF_THRESHOLD = 0.036
 #: seconds of still data at the start used as the start-up gyro calibration for madgwick and the KF
 STARTUP_BIAS_S = 1.0
 
