@@ -34,8 +34,10 @@ def test_reference_as_firmware_output_scores_near_zero():
     ok = np.all(np.isfinite(q_ref), axis=1)
     q_ref[~ok] = q_ref[np.argmax(ok)]
     q_nwu = quat.multiply(quat.conjugate(quat.Q_NWU_TO_ENU), q_ref[idx])
-    ori = [Orientation(t_us=int(round(t * 1e6)), flags=1, quat=[int(round(v * 16384)) for v in q])
-           for t, q in zip(t_o, q_nwu)]
+    # flags as the firmware sets them: mag_used, and `converging` (start-up gain) for the first 400
+    # samples, which the host filter follows (it starts at the identity, as the firmware does)
+    ori = [Orientation(t_us=int(round(t * 1e6)), flags=1 | (8 if t < 2.0 else 0),
+                       quat=[int(round(v * 16384)) for v in q]) for t, q in zip(t_o, q_nwu)]
     # RAW_SAMPLE at 200 Hz from the board's conversion of the same slice (after a still lead-in)
     ct = T.to_chips(T.hold_first(T.from_broad(sl), hold))
     n = min(len(ct.accel_lsb), len(ct.gyro_lsb))
@@ -60,3 +62,25 @@ def test_reference_as_firmware_output_scores_near_zero():
         return
     assert row.host is not None and row.host["total"] < 10.0, row.host
     assert row.fw_vs_host_rms_deg is not None
+
+
+def test_firmware_startup_bias_replays_the_devices_windows():
+    """The host's replay of the firmware's power-up bias estimate: a window that moves is dropped at the
+    moving reading, the next starts after it, the mean is rounded half away from zero, and it applies
+    from the window's last reading; ten moving windows give none."""
+    from sphere.sim.analysis import STARTUP_BIAS_SAMPLES as N, firmware_startup_bias
+
+    def raw(gyros):
+        return [RawSample(t_us=5000 * i, flags=7, accel=[0, 0, 256], gyro=list(g), mag=[100, 0, -300])
+                for i, g in enumerate(gyros)]
+
+    still = [(10, -3, 0)] * (N - 1) + [(11, -4, 1)]  # sums 2001, -601, 1 → 10.005, -3.005, 0.005
+    assert firmware_startup_bias(raw(still)) == (N - 1, [10, -3, 0])
+    # a 30 LSB jump (> 29) at reading 50 ends the first window; the second starts at 51
+    moved = [(0, 0, 0)] * 50 + [(30, 0, 0)] + [(-7, 2, 5)] * N
+    assert firmware_startup_bias(raw(moved)) == (51 + N - 1, [-7, 2, 5])
+    # half away from zero: -7.5 → -8
+    half = [(-7, 0, 0)] * (N // 2) + [(-8, 0, 0)] * (N // 2)
+    assert firmware_startup_bias(raw(half))[1] == [-8, 0, 0]
+    always_moving = [((i % 2) * 100, 0, 0) for i in range(12 * N)]
+    assert firmware_startup_bias(raw(always_moving)) is None

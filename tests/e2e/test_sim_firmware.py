@@ -151,3 +151,21 @@ def test_commands_over_the_uart():
     raw_late = [r for r in s.summary.raw if r.t_us / 1e6 > 1.7]
     assert not raw_late, "raw samples still streamed after SET_STREAM turned them off"
     assert s.summary.rate_hz(ori_late) == pytest.approx(50, rel=0.01)
+
+
+def test_firmware_orientation_matches_the_host_madgwick_taking_the_same_decisions():
+    """Issue 3's accuracy target on the device itself: the fixed-point filter in the real image against
+    the double-precision Madgwick run on the RAW_SAMPLEs it sent, with its flags, start and gyro bias
+    (sphere.sim.analysis.accuracy, as `sphere sim --accuracy`), within 0.25° RMS."""
+    from simscenarios import TAPPING_HOLD_S, TAPPING_START_S, TAPPING_TRIAL
+
+    from sphere.broad import find_trial, load_trial
+    from sphere.sim.analysis import accuracy
+
+    s = firmware_scenario("tapping")
+    _ok(s)
+    sl = load_trial(find_trial(TAPPING_TRIAL)).seconds(TAPPING_START_S, 9.0)
+    row = accuracy(s.summary, sl, TAPPING_HOLD_S, beta=0.041, bias_s=TAPPING_HOLD_S)
+    assert row.fw_vs_host_rms_deg is not None, row.note
+    print(f"firmware vs host Madgwick: {row.fw_vs_host_rms_deg:.3f}° RMS")
+    assert row.fw_vs_host_rms_deg < 0.25

@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
+from sphere.chips import ITG3200_LSB_PER_DPS
 from sphere.protocol.decoder import decode_all
 from sphere.protocol.packets import Event, Hello, Orientation, RawSample, Status
 from sphere.protocol.timebase import TimeUnwrapper
@@ -89,6 +90,45 @@ def _held(t_src_s: np.ndarray, values: np.ndarray, t_query_s: np.ndarray) -> np.
 
 
 STARTUP_BETA = 1.0  # the firmware's STARTUP_BETA_MILLI (firmware/src/core/marg_filter.h), while `converging`
+# the firmware's power-up gyro bias estimate (firmware/src/core/sphere_device.h, gyro_bias.h)
+STARTUP_BIAS_SAMPLES = 200
+STARTUP_BIAS_TRIES = 10
+GYRO_SPAN_LSB, ACCEL_SPAN_LSB, MAG_SPAN_LSB = 58, 24, 16
+
+
+def firmware_startup_bias(raw: list):
+    """The firmware's power-up gyro bias estimate replayed on the RAW_SAMPLEs it sent (gyro_bias.cpp and
+    SphereDevice::tick): windows of STARTUP_BIAS_SAMPLES readings, still when every gyro, accelerometer and
+    (when present) magnetometer reading stays within ±span/2 of the window's first; a window that moves
+    ends at the moving reading and the next starts at the reading after it, STARTUP_BIAS_TRIES windows at
+    most. Returns (index of the reading from which the firmware applies it, bias in LSB rounded half away
+    from zero) or None. Assumes a device without a stored calibration (the simulator's blank EEPROM)."""
+    half = (GYRO_SPAN_LSB // 2, ACCEL_SPAN_LSB // 2, MAG_SPAN_LSB // 2)
+
+    def near(v, ref, h):
+        return all(-h <= int(a) - int(b) <= h for a, b in zip(v, ref))
+
+    i, tries = 0, 1
+    while i + STARTUP_BIAS_SAMPLES <= len(raw):
+        first = raw[i]
+        mag_ref = first.mag if first.flags & 0x04 else (0, 0, 0)
+        moved = None
+        for j in range(i, i + STARTUP_BIAS_SAMPLES):
+            p = raw[j]
+            if not (near(p.gyro, first.gyro, half[0]) and near(p.accel, first.accel, half[1])
+                    and (not p.flags & 0x04 or near(p.mag, mag_ref, half[2]))):
+                moved = j
+                break
+        if moved is None:
+            total = np.sum([p.gyro for p in raw[i:i + STARTUP_BIAS_SAMPLES]], axis=0)
+            n, h = STARTUP_BIAS_SAMPLES, STARTUP_BIAS_SAMPLES // 2
+            bias = [int((t + h if t >= 0 else t - h) / n) for t in total.tolist()]  # C division: toward 0
+            return i + STARTUP_BIAS_SAMPLES - 1, bias
+        if tries >= STARTUP_BIAS_TRIES:
+            return None
+        tries += 1
+        i = moved + 1
+    return None
 
 
 def host_madgwick(raw: list, imu_rate_hz: float, beta: float, bias_s: float = 0.0, orientation: list | None = None,
@@ -96,11 +136,13 @@ def host_madgwick(raw: list, imu_rate_hz: float, beta: float, bias_s: float = 0.
     """The host's double-precision Madgwick on the RAW_SAMPLE values the firmware read.
 
     Returns (t_s, q_nwu) or None when sphere.fusion.madgwick is not there. ``bias_s`` > 0: subtract
-    the mean gyro of the first ``bias_s`` seconds (as the firmware's power-up bias estimate does).
+    the mean gyro of the first ``bias_s`` seconds; following the firmware, its power-up estimate exactly
+    (:func:`firmware_startup_bias`, from the reading where the firmware starts applying it).
     With ``orientation`` (the firmware's ORIENTATION packets) the host takes the firmware's decisions
     sample by sample, so that only the arithmetic differs: the accelerometer is left out where the
     firmware flagged a tap (RAW_SAMPLE ``tap_active``) or ``accel_rejected``, the magnetometer where it
-    was missing or ``mag_rejected`` (gravity-only), and β is ``startup_beta`` while ``converging``.
+    was missing or ``mag_rejected`` (gravity-only), β is ``startup_beta`` while ``converging``, and the
+    state starts at the identity as the firmware's does (without ``orientation``: at the e-compass).
     The flags of a raw sample without its own ORIENTATION packet are those of the newest before it.
     """
     try:
@@ -115,7 +157,12 @@ def host_madgwick(raw: list, imu_rate_hz: float, beta: float, bias_s: float = 0.
     acc = np.array([p.accel_g for p in raw], dtype=float)
     mag = np.array([p.mag_uT for p in raw], dtype=float)
     rflags = np.array([p.flags for p in raw], dtype=int)
-    if bias_s > 0:
+    if bias_s > 0 and orientation:
+        found = firmware_startup_bias(raw)
+        if found is not None:
+            k, bias_lsb = found
+            gyr[k:] -= np.radians(np.asarray(bias_lsb, dtype=float) / ITG3200_LSB_PER_DPS)
+    elif bias_s > 0:
         first = t < t[0] + bias_s
         gyr = gyr - gyr[first].mean(axis=0)
     acc_valid = (rflags & 0x01).astype(bool) & ~(rflags & 0x10).astype(bool)
@@ -131,7 +178,9 @@ def host_madgwick(raw: list, imu_rate_hz: float, beta: float, bias_s: float = 0.
         acc_valid &= ~((f & 0x02).astype(bool) & has)
         mag_valid &= ~(((f & 0x04).astype(bool) | ~(f & 0x01).astype(bool)) & has)
         betas = np.where(has & (f & 0x08).astype(bool), startup_beta, betas)
-    q = ecompass(*acc[0], *mag[0], frame="NWU")
+    # following the firmware, start where it starts (identity, converging at the start-up gain);
+    # on its own, from the e-compass of the first sample as `sphere eval` does
+    q = (1.0, 0.0, 0.0, 0.0) if orientation else ecompass(*acc[0], *mag[0], frame="NWU")
     dt = 1.0 / imu_rate_hz
     out = np.empty((len(raw), 4))
     g, a, m = gyr.tolist(), acc.tolist(), mag.tolist()
@@ -190,16 +239,26 @@ def accuracy(summary: CaptureSummary, trial, offset_s: float, beta: float, bias_
         notes.append("host Madgwick unavailable (sphere.fusion.madgwick missing or no RAW_SAMPLE packets)")
     else:
         t_h, q_h = hm
-        q_h_enu = quat.nwu_to_enu(_held(t_h, q_h, t_trial))
+        if q_fw_enu is not None:
+            # sampled where the firmware sent ORIENTATION (100 Hz by default) and held in between, as the
+            # firmware's column is: both columns then carry the same stream-rate hold, and their difference
+            # is the filters' alone
+            q_h_enu = quat.nwu_to_enu(_held(t_o, _held(t_h, q_h, t_o + 1e-7), t_trial))
+        else:
+            q_h_enu = quat.nwu_to_enu(_held(t_h, q_h, t_trial))
         try:
             host = orientation_error(q_h_enu, trial).as_dict()
         except ValueError as e:
             notes.append(str(e))
     diff = None
-    if q_fw_enu is not None and q_h_enu is not None:
-        ok = np.all(np.isfinite(q_fw_enu), axis=1) & np.all(np.isfinite(q_h_enu), axis=1)
+    if q_fw_enu is not None and hm is not None:
+        # at the ORIENTATION packets' own times (the host's q after the raw sample of the same tick), so
+        # that the 100 Hz packets held between ticks do not count as a difference during rotation
+        q_fw = quat.normalize(q_o)
+        q_hf = _held(hm[0], hm[1], t_o + 1e-7)
+        ok = np.all(np.isfinite(q_hf), axis=1)
         if ok.any():
-            tot, _, _ = error_angles_deg(q_fw_enu[ok], q_h_enu[ok])
+            tot, _, _ = error_angles_deg(quat.nwu_to_enu(q_fw[ok]), quat.nwu_to_enu(q_hf[ok]))
             diff = float(np.sqrt(np.mean(tot * tot)))
     return AccuracyRow(trial.name, len(trial) / trial.rate_hz, fw, host, diff, "; ".join(notes))
 
