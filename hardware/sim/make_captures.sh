@@ -14,6 +14,6 @@ sim() { python -m sphere.cli sim --no-build "$@"; }
 make -C hardware/sim >/dev/null
 
 sim --trace 24 --start 49 --hold 1 --seconds 6 --capture $out/sim_24_tapping.bin --stats $out/sim_24_tapping.stats.json
-sim --trace 07 --start 43 --hold 2 --seconds 6 --capture $out/sim_07_fast_rotation.bin --stats $out/sim_07_fast_rotation.stats.json
+sim --trace 07 --start 44.48 --hold 2 --seconds 6 --capture $out/sim_07_fast_rotation.bin --stats $out/sim_07_fast_rotation.stats.json
 sim --trace synthetic:toss --seconds 4 --capture $out/sim_toss.bin --stats $out/sim_toss.stats.json
 sim --trace synthetic:still --seconds 6 --nack hmc5883l:2:4 --capture $out/sim_mag_fault.bin --stats $out/sim_mag_fault.stats.json
