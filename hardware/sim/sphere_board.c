@@ -25,6 +25,9 @@
 #include <string.h>
 #include <time.h>
 #include <unistd.h>
+#ifdef __linux__
+#include <sys/prctl.h>
+#endif
 
 #include "sim_avr.h"
 #include "sim_elf.h"
@@ -344,6 +347,7 @@ static void usage(FILE *f)
 
 int main(int argc, char **argv)
 {
+	pid_t parent0 = getppid();
 	const char *trace_path = NULL, *capture_path = NULL, *stats_path = NULL, *send_path = NULL;
 	double seconds = 10.0, rate_hz = 200.0;
 	int use_pty = 0, realtime = 0, verbose = 0, real_i2c = 0, simavr_status = 0;
@@ -500,6 +504,14 @@ int main(int argc, char **argv)
 
 	signal(SIGINT, on_signal);
 	signal(SIGTERM, on_signal);
+#ifdef __linux__
+	/* Stop (as on SIGTERM: stats written, pty closed) when whoever started us goes: `sphere sim` or the
+	 * daemon killed or crashed would otherwise leave the board holding its pty and a core until its
+	 * --seconds are over. parent0 catches a parent that went before the prctl. */
+	prctl(PR_SET_PDEATHSIG, SIGTERM);
+	if (getppid() != parent0)
+		stop_requested = 1;
+#endif
 
 	avr_cycle_count_t end_cycle = (avr_cycle_count_t)(seconds * avr->frequency);
 	avr_cycle_count_t next_check = 0;

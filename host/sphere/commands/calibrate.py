@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import bisect
 import json
 import sys
 import time
@@ -9,25 +10,42 @@ from pathlib import Path
 
 import numpy as np
 
+from sphere.calibration_session import COVERAGE_BINS, COVERAGE_TARGET, FACE_S, STILL_S, TURN_MIN_S, TURN_S
+from sphere.calibration_session import FACES as _FACES
+
+FACES = tuple(f[0] for f in _FACES)
+DEFAULT_TIMEOUT_S = 120.0
+NO_DATA_S = 5.0  # a step stops when no RAW_SAMPLE arrives for this long
+
 HELP = "calibrate the sphere's sensors (guided on a port, or offline from a capture)"
-DESCRIPTION = """\
-Computes the calibration block (protocol spec §5.2) from raw samples: gyro bias from still phases,
+DESCRIPTION = f"""\
+Computes the calibration block (protocol spec §5.2) from raw samples: gyro bias from a still phase,
 accelerometer offset and scale from six still poses (each face of the sphere up), magnetometer hard and
 soft iron from an ellipsoid fit over readings taken while turning the sphere every way. Prints the
 result with the fit residual and the field norm before and after.
 
---port PORT guides you through the steps with progress shown, sends the result to the sphere
-(SET_CALIBRATION) and asks it to save (SAVE_CALIBRATION). --capture FILE does the same offline from a
-capture recorded with `sphere capture` (lay the sphere still on six faces, a few seconds each, and turn
-it through every direction for ~30 s); nothing is sent."""
+--port PORT guides you through three steps, each waiting for what it asks for, judged from the
+sphere's RAW_SAMPLE stream in the sphere's own time (so a slow link does not matter):
+  1/3 gyro bias: put the sphere down and do not touch it; done once it has been still for {STILL_S:g} s.
+  2/3 accelerometer: lay it on each of its six faces, still, in any order; a face counts once it has
+      lain still for {FACE_S:g} s with that axis up; the progress line shows the faces still missing.
+  3/3 magnetometer: turn it slowly through every direction; done once the field directions cover
+      {round(COVERAGE_TARGET * COVERAGE_BINS)} of {COVERAGE_BINS} direction bins (after at least {TURN_MIN_S:g} s), or after {TURN_S:g} s.
+Without --yes you press Enter before each step. A step not done within --timeout seconds (default
+{DEFAULT_TIMEOUT_S:g}) stops the session with what was not seen and what to do; nothing is sent then. Otherwise the
+result goes to the sphere (SET_CALIBRATION), is saved (SAVE_CALIBRATION, unless --no-save) and read
+back (GET_CALIBRATION) to check that the sphere holds it.
 
-STILL_S = 3.0
-FACE_S = 2.0
-TURN_S = 30.0
-FACES = ("+x up", "−x up", "+y up", "−y up", "+z up (upright)", "−z up (upside down)")
+--capture FILE does the same offline from a capture recorded with `sphere capture` (lay the sphere
+still on six faces, a few seconds each, and turn it through every direction for ~30 s), with the same
+still and face detection; nothing is sent."""
+
 
 
 def add_arguments(p) -> None:
+    import argparse
+
+    p.formatter_class = argparse.RawDescriptionHelpFormatter  # keep the step list as written
     src = p.add_mutually_exclusive_group(required=True)
     src.add_argument("--port", help="the sphere's serial port: guided calibration, result sent and saved")
     src.add_argument("--capture", metavar="FILE", help="a capture file (sphere capture): offline, nothing is sent")
@@ -36,12 +54,15 @@ def add_arguments(p) -> None:
     p.add_argument("--plot", metavar="PNG", help="write the magnetometer cloud before/after as a PNG")
     p.add_argument("--save-capture", metavar="FILE", help="with --port: also keep the session's bytes as a capture")
     p.add_argument("--no-save", action="store_true", help="with --port: apply on the device but do not save to EEPROM")
-    p.add_argument("--yes", action="store_true", help="with --port: do not wait for Enter between steps")
+    p.add_argument("--yes", action="store_true", help="with --port: do not wait for Enter before each step")
+    p.add_argument("--timeout", type=float, default=DEFAULT_TIMEOUT_S, metavar="SECONDS",
+                   help=f"with --port: give up a step not done within this many seconds (default {DEFAULT_TIMEOUT_S:g})")
 
 
-def block_from(cal) -> dict:
+def block_from(cal, base=None) -> dict:
     """The SET_CALIBRATION fields (integers, spec §5.2) for a :class:`sphere.calibration.Calibration`;
-    parts that could not be computed keep the defaults."""
+    parts that could not be computed keep ``base`` (the sphere's current block, a dict of the same
+    fields), or the defaults."""
     q14 = 16384
 
     def i16(v):
@@ -49,6 +70,8 @@ def block_from(cal) -> dict:
 
     out = {"gyro_bias": (0, 0, 0), "accel_offset": (0, 0, 0), "accel_scale": (q14,) * 3, "mag_offset": (0, 0, 0),
            "mag_soft_iron": (q14, 0, 0, 0, q14, 0, 0, 0, q14)}
+    if base:
+        out.update({k: tuple(int(x) for x in v) for k, v in base.items() if k in out})
     if cal.gyro is not None:
         out["gyro_bias"] = tuple(i16(v) for v in cal.gyro.bias_lsb)
     if cal.accel is not None:
@@ -59,28 +82,24 @@ def block_from(cal) -> dict:
         if np.all(np.abs(cal.mag.soft_iron) < 32767 / q14):
             out["mag_soft_iron"] = tuple(i16(v * q14) for v in cal.mag.soft_iron.ravel())
         else:
-            cal.notes.append("mag: soft-iron matrix does not fit Q14 (|entry| ≥ 2); identity kept")
+            cal.notes.append("mag: soft-iron matrix does not fit Q14 (|entry| ≥ 2); the previous one kept")
     return out
+
+
+BLOCK_FIELDS = ("gyro_bias", "accel_offset", "accel_scale", "mag_offset", "mag_soft_iron")
+
+
+def block_of(packet) -> dict:
+    """The block's fields of a SetCalibration packet (e.g. a GET_CALIBRATION reply's data, unpacked)."""
+    return {k: tuple(int(x) for x in getattr(packet, k)) for k in BLOCK_FIELDS}
 
 
 def raw_arrays(packets):
     """(t_s, accel, gyro, mag_fresh) arrays in chip units from decoded RAW_SAMPLE packets."""
-    t, acc, gyr, mag = [], [], [], []
-    for dp in packets:
-        p = getattr(dp, "packet", dp)
-        if p.NAME != "RAW_SAMPLE":
-            continue
-        flags = p.flags
-        if not (flags & 1 and flags & 2):
-            continue
-        tt = getattr(dp, "t_us", None)
-        t.append((tt if tt is not None else p.t_us) * 1e-6)
-        acc.append(p.accel)
-        gyr.append(p.gyro)
-        if flags & 4 and flags & 8:
-            mag.append(p.mag)
-    return (np.array(t, float), np.array(acc, float).reshape(-1, 3), np.array(gyr, float).reshape(-1, 3),
-            np.array(mag, float).reshape(-1, 3))
+    from sphere.calibration_session import series_from_packets
+
+    s = series_from_packets(packets)
+    return s.t, s.accel, s.gyro, s.mag
 
 
 def report(cal, block) -> str:
@@ -106,8 +125,8 @@ def report(cal, block) -> str:
     return "\n".join(lines)
 
 
-def _finish(args, cal, mag) -> dict:
-    block = block_from(cal)
+def _finish(args, cal, mag, base=None) -> dict:
+    block = block_from(cal, base)
     print(report(cal, block))
     if args.json:
         Path(args.json).write_text(json.dumps({"calibration": cal.as_dict(), "block": {k: list(v) for k, v in block.items()}},
@@ -128,52 +147,91 @@ def run(args) -> int:
 
 
 def _run_capture(args) -> int:
-    from sphere import calibration
+    from sphere import calibration_session as session
     from sphere.capture import CaptureError, CaptureFile
 
     try:
         cap = CaptureFile(args.capture)
-        t, acc, gyr, mag = raw_arrays(cap.packets())
+        s = session.series_from_packets(cap.packets())
     except CaptureError as e:
         print(f"sphere calibrate: {e}", file=sys.stderr)
         return 2
-    if len(t) < 50:
-        print(f"sphere calibrate: {args.capture} holds {len(t)} raw samples; record raw samples with "
+    if len(s) < 50:
+        print(f"sphere calibrate: {args.capture} holds {len(s)} raw samples; record raw samples with "
               "`sphere capture` while following the steps in `sphere calibrate --help`", file=sys.stderr)
         return 2
-    rate = 1.0 / float(np.median(np.diff(t))) if len(t) > 1 else 200.0
-    print(f"{len(t)} raw samples at {rate:.0f} Hz, {len(mag)} fresh magnetometer samples", file=sys.stderr)
-    cal = calibration.from_capture(acc, gyr, mag if len(mag) else np.zeros((0, 3)), rate)
-    _finish(args, cal, mag)
+    rate = 1.0 / float(np.median(np.diff(s.t))) if len(s) > 1 else 200.0
+    print(f"{len(s)} raw samples at {rate:.0f} Hz, {len(s.mag)} fresh magnetometer samples", file=sys.stderr)
+    cal, faces = session.from_series(s)
+    seen = [FACES[k] for k in sorted(faces)]
+    print(f"faces seen still for {FACE_S:g} s: {', '.join(seen) or 'none'}", file=sys.stderr)
+    _finish(args, cal, s.mag)
     return 0 if (cal.gyro or cal.accel or cal.mag) else 1
 
 
 class _Link:
-    """A minimal command/reply link over the serial port, feeding RAW_SAMPLEs to a collector."""
+    """A minimal command/reply link over the serial port; RAW_SAMPLE values are kept as they arrive
+    (device time unwrapped), for the steps to judge."""
 
     def __init__(self, port, writer=None):
-        from sphere.protocol import FrameDecoder
+        from sphere.protocol import FrameDecoder, TimeUnwrapper
 
         self.port = port
         self.decoder = FrameDecoder("device")
+        self.unwrap = TimeUnwrapper()
         self.writer = writer
         self.seq = 0
-        self.raw = []
+        self.hello = None
+        self.t, self.acc, self.gyr, self.mag_t, self.mag = [], [], [], [], []
+        self.last_raw_wall = time.monotonic()
 
     def pump(self, seconds: float):
         end = time.monotonic() + seconds
         out = []
-        while time.monotonic() < end:
+        while True:
             data = self.port.read(max(1, self.port.in_waiting or 1))
-            if not data:
-                continue
-            if self.writer:
-                self.writer.write(data)
-            for p in self.decoder.feed(data):
-                out.append(p)
-                if p.NAME == "RAW_SAMPLE":
-                    self.raw.append(p)
-        return out
+            if data:
+                if self.writer:
+                    self.writer.write(data)
+                for p in self.decoder.feed(data):
+                    out.append(p)
+                    if p.NAME == "RAW_SAMPLE":
+                        self._raw(p)
+                    elif p.NAME == "HELLO":
+                        self.hello = p
+                        if p.seq == 0:
+                            self.unwrap.reset()
+            if time.monotonic() >= end:
+                return out
+
+    def _raw(self, p):
+        self.last_raw_wall = time.monotonic()
+        if not (p.flags & 1 and p.flags & 2):
+            return
+        ts = self.unwrap(p.t_us) * 1e-6
+        self.t.append(ts)
+        self.acc.append(p.accel)
+        self.gyr.append(p.gyro)
+        if p.flags & 4 and p.flags & 8:
+            self.mag_t.append(ts)
+            self.mag.append(p.mag)
+
+    def series(self, since: float | None = None):
+        """The RAW_SAMPLE values so far (from device time ``since`` on)."""
+        from sphere.calibration_session import Series
+
+        i = 0 if since is None else bisect.bisect_left(self.t, since)
+        k = 0 if since is None else bisect.bisect_left(self.mag_t, since)
+        f = lambda x: np.array(x, float).reshape(-1, 3)  # noqa: E731
+        return Series(np.array(self.t[i:], float), f(self.acc[i:]), f(self.gyr[i:]), np.array(self.mag_t[k:], float),
+                      f(self.mag[k:]))
+
+    def flush(self):
+        """Drop what arrived while nobody was reading (a person reading the prompt)."""
+        try:
+            self.port.reset_input_buffer()
+        except (AttributeError, OSError):
+            pass
 
     def command(self, packet, timeout_s: float = 1.0):
         from sphere.protocol import encode_frame
@@ -188,21 +246,165 @@ class _Link:
         return None
 
 
-def _record(link, seconds: float, label: str):
-    start = len(link.raw)
-    t0 = time.monotonic()
-    while (el := time.monotonic() - t0) < seconds:
+class _Progress:
+    """One progress line on stderr: rewritten in place on a terminal, else printed when it changes
+    (at most once every 2 s unless its key changes)."""
+
+    def __init__(self):
+        self.tty = sys.stderr.isatty()
+        self.key = None
+        self.last = 0.0
+        self.width = 0
+
+    def show(self, text: str, key=None):
+        now = time.monotonic()
+        if self.tty:
+            if now - self.last >= 0.1:
+                print("\r" + text.ljust(self.width), end="", file=sys.stderr, flush=True)
+                self.width, self.last = len(text), now
+        elif key != self.key or now - self.last >= 2.0:
+            print("  " + text, file=sys.stderr, flush=True)
+            self.key, self.last = key, now
+
+    def done(self, text: str):
+        if self.tty:
+            print("\r" + text.ljust(self.width), file=sys.stderr, flush=True)
+        else:
+            print("  " + text, file=sys.stderr, flush=True)
+        self.key, self.width, self.last = None, 0, 0.0
+
+
+class _StepFailed(Exception):
+    """A step that did not get what it asked for; the message says what was missing and what to do."""
+
+
+def _bar(frac: float, n: int = 20) -> str:
+    k = int(round(n * min(max(frac, 0.0), 1.0)))
+    return "[" + "#" * k + " " * (n - k) + "]"
+
+
+def _follow(link, timeout_s: float, poll, on_timeout):
+    """Read the stream until ``poll(series_of_this_step)`` returns a result that is not None; a
+    ``_StepFailed`` with ``on_timeout(series)`` after ``timeout_s`` of wall time (or when nothing arrives)."""
+    t_wall = time.monotonic()
+    link.pump(0.05)
+    t0 = link.t[-1] if link.t else None
+    while True:
         link.pump(0.1)
-        n = len(link.raw) - start
-        bar = "#" * int(20 * el / seconds)
-        print(f"\r  {label}: [{bar:<20}] {el:4.1f}/{seconds:.0f} s, {n} samples", end="", file=sys.stderr)
-    print(file=sys.stderr)
-    return link.raw[start:]
+        if t0 is None and link.t:
+            t0 = link.t[-1]
+        s = link.series(t0) if t0 is not None else None
+        if s is not None and len(s) > 1:
+            r = poll(s)
+            if r is not None:
+                return r
+        now = time.monotonic()
+        if now - link.last_raw_wall > NO_DATA_S:
+            raise _StepFailed(f"no RAW_SAMPLE from the sphere for {NO_DATA_S:g} s: is it still connected (and the "
+                              "raw stream on, SET_STREAM bit 0)? Nothing was sent.")
+        if now - t_wall > timeout_s:
+            raise _StepFailed(on_timeout(s if s is not None else link.series(float("inf"))))
+
+
+def _step_gyro(link, progress, timeout_s):
+    from sphere import calibration_session as session
+
+    def poll(s):
+        span = session.trailing_still(s)
+        still = span.seconds if span else 0.0
+        if span is not None and still >= STILL_S - 1e-9:
+            progress.done(f"still {_bar(1)} {STILL_S:.1f}/{STILL_S:g} s")
+            return span
+        progress.show(f"still {_bar(still / STILL_S)} {still:.1f}/{STILL_S:g} s" + ("" if still else "  (moving)"),
+                      key=still > 0)
+        return None
+
+    def on_timeout(s):
+        spans = session.still_spans(s)
+        best = max((sp.seconds for sp in spans), default=0.0)
+        return (f"step 1/3 (gyro bias) timed out after {timeout_s:g} s: the sphere was never still for {STILL_S:g} s "
+                f"(longest still {best:.2f} s in {s.duration:.0f} s of samples). Put it down on a table, do not touch "
+                "it, and run `sphere calibrate` again. Nothing was sent.")
+
+    span = _follow(link, timeout_s, poll, on_timeout)
+    s = link.series()
+    sel = (s.t >= span.t0) & (s.t < span.t1)  # the span's samples, by device time
+    return s.gyro[sel]
+
+
+def _step_faces(link, progress, timeout_s):
+    from sphere import calibration_session as session
+
+    state = {"seen": {}}
+
+    def line(now):
+        ticks = "  ".join(f"{name.split()[0]} {'✓' if i in state['seen'] else '·'}" for i, name in enumerate(FACES))
+        if now.still_s <= 0:
+            doing = "moving"
+        elif now.face is None:
+            doing = f"still {now.still_s:.1f} s, but no axis is up (lay it flat on a face)"
+        elif now.face in state["seen"] and now.still_s >= FACE_S:
+            doing = f"{FACES[now.face]} seen"
+        else:
+            doing = f"{FACES[now.face]}: still {now.still_s:.1f}/{FACE_S:g} s"
+        return f"{ticks}   {doing}"
+
+    def poll(s):
+        before = set(state["seen"])
+        state["seen"], now = session.update_faces(state["seen"], s)
+        new = set(state["seen"]) - before
+        for k in sorted(new):
+            missing = session.missing_faces(state["seen"])
+            progress.done(f"{FACES[k]} seen ({len(state['seen'])}/6)"
+                          + (f"; still missing: {', '.join(missing)}" if missing else ""))
+        if len(state["seen"]) == 6:
+            return state["seen"]
+        progress.show(line(now), key=(now.face, now.still_s > 0))
+        return None
+
+    def on_timeout(s):
+        missing = session.missing_faces(state["seen"])
+        seen = [FACES[k] for k in sorted(state["seen"])]
+        return (f"step 2/3 (accelerometer) timed out after {timeout_s:g} s: faces not seen: {', '.join(missing)} "
+                f"(seen: {', '.join(seen) or 'none'}). Lay the sphere on each missing face (that side up) and leave it "
+                f"still for {FACE_S:g} s, then the next; run `sphere calibrate` again. Nothing was sent.")
+
+    return _follow(link, timeout_s, poll, on_timeout)
+
+
+def _step_turn(link, progress, timeout_s):
+    from sphere import calibration_session as session
+
+    need = int(round(COVERAGE_TARGET * COVERAGE_BINS))
+
+    def poll(s):
+        st = session.turn_status(s)
+        c = st.coverage
+        text = (f"turning {_bar(c.fraction / COVERAGE_TARGET)} directions {c.bins_hit}/{COVERAGE_BINS} (need {need}), "
+                f"{st.seconds:4.1f} s (at least {TURN_MIN_S:g}, at most {TURN_S:g})")
+        if st.done:
+            progress.done(text)
+            if st.reason == "time":
+                print(f"  only {c.bins_hit} of {COVERAGE_BINS} directions after {TURN_S:g} s: the fit below may be poor",
+                      file=sys.stderr)
+            return st
+        progress.show(text, key=c.bins_hit // 4)
+        return None
+
+    def on_timeout(s):
+        st = session.turn_status(s)
+        return (f"step 3/3 (magnetometer) timed out after {timeout_s:g} s: {st.seconds:.1f} s of samples arrived, "
+                f"field directions covered {st.coverage.bins_hit} of {COVERAGE_BINS} (needs {need}, or {TURN_S:g} s of "
+                "samples). Keep turning the sphere slowly through every direction — figure eights about every "
+                "axis — and run `sphere calibrate` again. Nothing was sent.")
+
+    return _follow(link, timeout_s, poll, on_timeout)
 
 
 def _run_port(args) -> int:
-    from sphere import calibration
-    from sphere.protocol import GetHello, SaveCalibration, SetCalibration
+    from sphere import calibration_session as session
+    from sphere.protocol import CalibrationBlock, GetCalibration, GetHello, SaveCalibration, SetCalibration
+    from sphere.protocol.packets import CALIBRATION_STATE_BITS, bit_names
     from sphere.serial_link import PortError, open_port
 
     try:
@@ -215,50 +417,64 @@ def _run_port(args) -> int:
         from sphere.capture import CaptureWriter
 
         writer = CaptureWriter(args.save_capture)
-    wait = (lambda msg: print(msg, file=sys.stderr)) if args.yes else (lambda msg: input(msg + " — press Enter "))
+    link = _Link(port, writer)
+    progress = _Progress()
+
+    def wait(msg):
+        if args.yes:
+            print(msg, file=sys.stderr)
+            return
+        input(msg + " — press Enter ")
+        link.flush()
+
     try:
-        link = _Link(port, writer)
-        hello = [p for p in link.pump(0.6) if p.NAME == "HELLO"]
-        if not hello:
+        link.pump(0.6)
+        if link.hello is None:
             link.command(GetHello())
             link.pump(0.3)
-        if not link.raw:
+        if link.hello is not None:
+            from sphere.daemon.sources import version_problem
+
+            problem = version_problem(link.hello)
+            if problem:
+                print(f"sphere calibrate: {problem}", file=sys.stderr)
+                return 1
+        if not link.t:
             link.pump(1.0)
-        if not link.raw:
+        if not link.t:
             print("sphere calibrate: no RAW_SAMPLE from the sphere; is the raw stream on (SET_STREAM)?", file=sys.stderr)
             return 1
-        print("1/3 gyro bias: put the sphere down and do not touch it.", file=sys.stderr)
-        wait("   ready?")
-        still = _record(link, STILL_S, "still")
-        faces = []
-        print("2/3 accelerometer: lay the sphere on each face in turn, still.", file=sys.stderr)
-        for i, face in enumerate(FACES, 1):
-            wait(f"   face {i}/6: {face}")
-            faces.append(_record(link, FACE_S, face))
-        print("3/3 magnetometer: turn the sphere slowly through every direction (figure eights, all axes).",
-              file=sys.stderr)
-        wait("   ready?")
-        turning = _record(link, TURN_S, "turning")
-        _, g_still, gyr_still, _ = raw_arrays(still)
-        cal = calibration.Calibration()
+        reply = link.command(GetCalibration())
+        base = block_of(CalibrationBlock.unpack(reply.data[:CalibrationBlock.SIZE])) if (
+            reply is not None and reply.ok and len(reply.data) >= CalibrationBlock.SIZE) else None
         try:
-            cal.gyro = calibration.gyro_bias(gyr_still)
-        except ValueError as e:
-            cal.notes.append(f"gyro: {e}")
-        try:
-            means = [raw_arrays(f)[1].mean(axis=0) for f in faces if len(f)]
-            cal.accel = calibration.accel_six_position(np.array(means))
-        except ValueError as e:
-            cal.notes.append(f"accel: {e}")
-        _, _, _, mag = raw_arrays(link.raw)
-        try:
-            cal.mag = calibration.mag_ellipsoid(mag)
-        except ValueError as e:
-            cal.notes.append(f"mag: {e}")
-        block = _finish(args, cal, mag)
+            print(f"1/3 gyro bias: put the sphere down and do not touch it (still for {STILL_S:g} s).", file=sys.stderr)
+            wait("   ready?")
+            gyro_still = _step_gyro(link, progress, args.timeout)
+            print(f"2/3 accelerometer: lay the sphere on each of its six faces, still for {FACE_S:g} s each, in any "
+                  "order.", file=sys.stderr)
+            wait("   ready?")
+            faces = _step_faces(link, progress, args.timeout)
+            print("3/3 magnetometer: turn the sphere slowly through every direction (figure eights, all axes).",
+                  file=sys.stderr)
+            wait("   ready?")
+            _step_turn(link, progress, args.timeout)
+        except _StepFailed as e:
+            progress.done("")
+            print(f"sphere calibrate: {e}", file=sys.stderr)
+            return 1
+        except EOFError:
+            print("\nsphere calibrate: no answer on the terminal (use --yes to run without Enter); nothing was sent",
+                  file=sys.stderr)
+            return 1
+        mag = link.series().mag
+        cal = session.calibrate(gyro_still, {k: v.mean for k, v in faces.items()}, mag)
+        block = _finish(args, cal, mag, base)
         if not (cal.gyro or cal.accel or cal.mag):
             print("sphere calibrate: nothing could be computed; nothing sent", file=sys.stderr)
             return 1
+        if base is not None and not (cal.gyro and cal.accel and cal.mag):
+            print("the parts not computed keep the sphere's current values", file=sys.stderr)
         reply = link.command(SetCalibration(**block))
         if reply is None or not reply.ok:
             print(f"sphere calibrate: the sphere did not accept SET_CALIBRATION ({reply})", file=sys.stderr)
@@ -270,7 +486,17 @@ def _run_port(args) -> int:
                 print(f"sphere calibrate: SAVE_CALIBRATION failed ({reply})", file=sys.stderr)
                 return 1
             print("saved to EEPROM", file=sys.stderr)
-        del turning
+        reply = link.command(GetCalibration())
+        if reply is None or not reply.ok or len(reply.data) < CalibrationBlock.SIZE + 1:
+            print(f"sphere calibrate: GET_CALIBRATION did not answer ({reply})", file=sys.stderr)
+            return 1
+        held = block_of(CalibrationBlock.unpack(reply.data[:CalibrationBlock.SIZE]))
+        state = reply.data[CalibrationBlock.SIZE]
+        if held != block:
+            print(f"sphere calibrate: the sphere holds a different block: {held}", file=sys.stderr)
+            return 1
+        print(f"read back: the sphere holds it (calibration_state {', '.join(bit_names(state, CALIBRATION_STATE_BITS))})",
+              file=sys.stderr)
         return 0
     finally:
         port.close()

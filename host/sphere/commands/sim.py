@@ -15,7 +15,8 @@ HELP = "run the firmware on the simulated board (simavr) fed by a BROAD trial or
 DESCRIPTION = (
     "Run the firmware image on a simulated ATmega328P at 16 MHz with register-level ADXL345, ITG-3200 "
     "and HMC5883L models fed by motion: a BROAD trial (a .mat path, a name or its number, e.g. 24), a "
-    "synthetic source (synthetic:still, synthetic:rotation[:DPS], synthetic:toss, synthetic:taps) or a "
+    "synthetic source (synthetic:still, synthetic:rotation[:DPS], synthetic:toss, synthetic:taps, "
+    "synthetic:calibration) or a "
     "prepared trace (.bin). The UART goes into a capture file (--capture, readable by `sphere decode`) "
     "and/or a pseudo-terminal (--pty, for `sphere capture` or sphere-mouse). Prints the run's figures; "
     "--stats writes them as JSON. simavr 1.6 clocks the I2C bus at one SCL period per microsecond (9 us a byte, "

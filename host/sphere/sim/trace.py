@@ -223,11 +223,117 @@ def taps(seconds: float = 4.0, at_s=(1.0, 2.0, 2.15), peak_g: float = 4.0, width
     return Motion(rate_hz, acc, m.gyr_rad_s, m.mag_uT, "taps")
 
 
-SYNTHETIC = {"still": still, "rotation": rotation, "toss": toss, "taps": taps}
+# ---------------------------------------------------------------- a sphere that needs calibrating
+
+#: The imperfections of ``synthetic:calibration``, in physical units, applied before the chip conversion
+#: (tests compare what `sphere calibrate` recovers with them):
+#:   gyro reading  = true + CAL_GYRO_BIAS_DPS                       (°/s)
+#:   accel reading = CAL_ACCEL_SCALE · true + CAL_ACCEL_OFFSET_G    (g, per axis)
+#:   mag reading   = CAL_MAG_SOFT_IRON · true + CAL_MAG_HARD_IRON_UT (µT)
+CAL_GYRO_BIAS_DPS = np.array([1.8, -2.6, 0.9])
+CAL_ACCEL_OFFSET_G = np.array([0.035, -0.025, 0.050])
+CAL_ACCEL_SCALE = np.array([1.030, 0.970, 1.015])
+CAL_MAG_HARD_IRON_UT = np.array([12.0, -8.0, 15.0])
+CAL_MAG_SOFT_IRON = np.array([[1.06, 0.03, -0.02], [0.03, 0.95, 0.04], [-0.02, 0.04, 1.01]])
+#: White noise (RMS per axis) like the chips' datasheets: ITG-3200 0.38 °/s, ADXL345 about 1 LSB
+#: (3.9 mg) on x, y and 1.5 LSB on z, HMC5883L 2 mG (0.2 µT).
+CAL_NOISE_GYRO_DPS = 0.38
+CAL_NOISE_ACCEL_G = np.array([1.0, 1.0, 1.5]) / chips.ADXL345_LSB_PER_G
+CAL_NOISE_MAG_UT = 0.2
+CAL_SEED = 20261122
+
+#: The script: still (z up), then each face up in turn (a smooth rotation, then held still), then
+#: slow tumbling through every direction until the end.
+CAL_STILL_S = 5.0
+CAL_MOVE_S = 1.0
+CAL_HOLD_S = 2.75
+CAL_TUMBLE_DPS = (30.0, 90.0, 120.0)  # nested rotations about the earth's z, y and x axes (°/s)
+
+
+def _face_orientations() -> list[tuple[str, np.ndarray]]:
+    """Sensor-to-ENU orientations with each axis up in turn (a different heading each), ending z up."""
+    x, y, z = np.eye(3)
+    faces = [("+x", quat.from_axis_angle(y, -np.pi / 2)), ("+y", quat.from_axis_angle(x, np.pi / 2)),
+             ("-x", quat.from_axis_angle(y, np.pi / 2)), ("-y", quat.from_axis_angle(x, -np.pi / 2)),
+             ("-z", quat.from_axis_angle(x, np.pi)), ("+z", np.array([1.0, 0.0, 0.0, 0.0]))]
+    return [(name, quat.multiply(quat.from_axis_angle(z, np.radians(50.0 * i)), q)) for i, (name, q) in enumerate(faces)]
+
+
+def _slerp(p: np.ndarray, q: np.ndarray, u: np.ndarray) -> np.ndarray:
+    d = float(np.dot(p, q))
+    if d < 0:
+        q, d = -q, -d
+    th = np.arccos(min(d, 1.0))
+    if th < 1e-9:
+        return np.tile(p, (len(u), 1))
+    u = u[:, None]
+    return (np.sin((1 - u) * th) * p + np.sin(u * th) * q) / np.sin(th)
+
+
+def _body_rates(q: np.ndarray, rate_hz: float) -> np.ndarray:
+    """Sensor-frame angular velocity (rad/s) of a sensor-to-earth orientation history."""
+    dq = quat.multiply(quat.conjugate(q[:-1]), q[1:])
+    dq *= np.where(dq[:, :1] < 0, -1.0, 1.0)
+    s = np.linalg.norm(dq[:, 1:], axis=1)
+    ang = 2.0 * np.arctan2(s, dq[:, 0])
+    w = np.where(s[:, None] > 1e-12, dq[:, 1:] / np.maximum(s, 1e-12)[:, None] * ang[:, None], 0.0) * rate_hz
+    return np.vstack([w, w[-1:]]) if len(w) else np.zeros((len(q), 3))
+
+
+def calibration_script(seconds: float, rate_hz: float = SYNTH_RATE_HZ):
+    """The orientation history of ``synthetic:calibration`` (sensor-to-ENU) and its timeline
+    [(name, start_s, end_s)]: "still", each face's hold ("+x" …), "tumble"."""
+    n = int(round(seconds * rate_hz))
+    qs, timeline = [], []
+    cur = np.array([1.0, 0.0, 0.0, 0.0])
+    t = 0.0
+
+    def hold(q, s, name):
+        nonlocal t
+        qs.append(np.tile(q, (int(round(s * rate_hz)), 1)))
+        timeline.append((name, t, t + s))
+        t += s
+
+    hold(cur, CAL_STILL_S, "still")
+    for name, q in _face_orientations():
+        move = CAL_MOVE_S * (1.5 if float(abs(np.dot(cur, q))) < 0.5 else 1.0)  # 180° turns take longer
+        u = np.arange(int(round(move * rate_hz))) / (move * rate_hz)
+        qs.append(_slerp(cur, q, u * u * (3 - 2 * u)))  # smoothstep: starts and stops gently
+        t += move
+        hold(q, CAL_HOLD_S, name)
+        cur = q
+    m = max(n - sum(len(a) for a in qs), 0)
+    tt = np.arange(m) / rate_hz
+    ramp = np.where(tt < 0.5, tt * tt, tt - 0.25)  # the rates ramp up over 0.5 s
+    rz, ry, rx = (np.radians(r) * ramp for r in CAL_TUMBLE_DPS)
+    ez, ey, ex = np.eye(3)[2], np.eye(3)[1], np.eye(3)[0]
+    tumble = quat.multiply(quat.multiply(quat.multiply(quat.from_axis_angle(ez, rz), quat.from_axis_angle(ey, ry)),
+                                         quat.from_axis_angle(ex, rx)), cur)
+    qs.append(tumble)
+    timeline.append(("tumble", t, t + m / rate_hz))
+    return np.vstack(qs)[:n], timeline
+
+
+def calibration(seconds: float = 45.0, rate_hz: float = SYNTH_RATE_HZ, seed: int = CAL_SEED) -> Motion:
+    """A sphere that needs calibrating, turned as `sphere calibrate` asks: still, six faces, tumbling —
+    with the CAL_* imperfections and chip-like noise applied in physical units."""
+    q, _ = calibration_script(seconds, rate_hz)
+    n = len(q)
+    rng = np.random.default_rng(seed)
+    ideal = _from_orientation(q, _body_rates(q, rate_hz), rate_hz, "calibration")
+    g = chips.STANDARD_GRAVITY_M_S2
+    acc = (ideal.acc_m_s2 * CAL_ACCEL_SCALE + CAL_ACCEL_OFFSET_G * g
+           + rng.normal(0.0, 1.0, (n, 3)) * CAL_NOISE_ACCEL_G * g)
+    gyr = ideal.gyr_rad_s + np.radians(CAL_GYRO_BIAS_DPS + rng.normal(0.0, CAL_NOISE_GYRO_DPS, (n, 3)))
+    mag = ideal.mag_uT @ CAL_MAG_SOFT_IRON.T + CAL_MAG_HARD_IRON_UT + rng.normal(0.0, CAL_NOISE_MAG_UT, (n, 3))
+    return Motion(rate_hz, acc, gyr, mag, "calibration")
+
+
+SYNTHETIC = {"still": still, "rotation": rotation, "toss": toss, "taps": taps, "calibration": calibration}
 
 
 def synthetic(spec: str, seconds: float) -> Motion:
-    """``still``, ``rotation[:DPS]``, ``toss``, ``taps`` for ``seconds``."""
+    """``still``, ``rotation[:DPS]``, ``toss``, ``taps``, ``calibration`` for ``seconds``."""
     name, _, arg = spec.partition(":")
     if name not in SYNTHETIC:
         raise ValueError(f"unknown synthetic source {name!r}; one of {', '.join(SYNTHETIC)}")
