@@ -347,6 +347,37 @@ TEST_CASE("calibration commands: set, get, save, load, reset; a broken EEPROM is
     CHECK(r.hal.frames().back()[4] == RESULT_STORAGE_ERROR);
 }
 
+TEST_CASE("a calibration the host sets or loads is not overwritten by a gyro bias estimate still running") {
+    Rig r;
+    r.dev.begin();  // the power-up estimate runs (gyro 5, -7, 1)
+    r.run(50);
+    std::vector<uint8_t> block;
+    for (int i = 0; i < 21; ++i) {
+        int16_t v = (int16_t)(i < 3 ? -30 + i : i < 6 ? 0 : i < 9 ? 16384 : i < 12 ? 0 : (i % 4 == 0 ? 16384 : 0));
+        block.push_back((uint8_t)v);
+        block.push_back((uint8_t)((uint16_t)v >> 8));
+    }
+    r.send(frameOf(CMD_SET_CALIBRATION, 1, block));
+    r.run(400);  // past where the power-up window would have ended
+    CHECK((int)r.dev.calibration().gyro_bias[0] == -30);
+    CHECK((int)r.dev.calibration().gyro_bias[2] == -28);
+    CHECK_FALSE((r.dev.calibrationState() & CAL_GYRO_BIAS_ESTIMATED));
+    // the same for a CALIBRATION_STEP gyro_bias under way when the stored block is loaded
+    r.send(frameOf(CMD_SAVE_CALIBRATION, 2, {}));
+    r.send(frameOf(CMD_CALIBRATION_STEP, 3, {1, 1}));
+    r.run(100);
+    r.send(frameOf(CMD_LOAD_CALIBRATION, 4, {}));
+    r.run(400);
+    auto f = r.hal.frames();
+    for (auto& p : f)
+        if (p[0] == PKT_REPLY) CHECK(p[4] == RESULT_OK);
+    CHECK((int)r.dev.calibration().gyro_bias[0] == -30);
+    r.send(frameOf(CMD_GET_STATUS, 5, {}));
+    f = r.hal.frames();
+    REQUIRE(f.back()[0] == PKT_STATUS);
+    CHECK(f.back()[2 + 20] == 0);  // the step ended
+}
+
 TEST_CASE("calibration steps: busy, stop, gyro bias over 2 s") {
     Rig r;
     r.dev.begin();

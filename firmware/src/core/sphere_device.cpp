@@ -290,6 +290,13 @@ __attribute__((noinline)) void SphereDevice::execute(const uint8_t* payload, uin
     else if (c.type == CMD_REBOOT) hal_.reboot();
 }
 
+// Stops the power-up gyro bias estimate or a CALIBRATION_STEP gyro_bias, whichever runs.
+void SphereDevice::endBiasEstimate() {
+    if (cal_step_ == 1 || bias_at_startup_) bias_est_.stop();
+    bias_at_startup_ = false;
+    if (cal_step_ == 1) cal_step_ = 0;
+}
+
 __attribute__((noinline)) uint8_t SphereDevice::executeCommand(const Command& c) {
     switch (c.type) {
         case CMD_SET_STREAM:
@@ -328,8 +335,7 @@ __attribute__((noinline)) uint8_t SphereDevice::executeCommand(const Command& c)
         case CMD_CALIBRATION_STEP: {
             uint8_t step = c.calibration_step.step;
             if (c.calibration_step.action == 0) {  // stop ends any step
-                if (cal_step_ == 1 || bias_at_startup_) bias_est_.stop();
-                bias_at_startup_ = false;
+                endBiasEstimate();
                 cal_step_ = 0;
                 return RESULT_OK;
             }
@@ -344,6 +350,7 @@ __attribute__((noinline)) uint8_t SphereDevice::executeCommand(const Command& c)
             return RESULT_OK;
         }
         case CMD_SET_CALIBRATION:
+            endBiasEstimate();  // the block's bias is the host's word: an estimate finishing later must not replace it
             cal_ = c.calibration;
             cal_state_ = (uint8_t)((cal_state_ & ~(CAL_FROM_EEPROM | CAL_GYRO_BIAS_ESTIMATED)) | CAL_GYRO_BIAS_VALID);
             updateCalState();
@@ -364,6 +371,7 @@ __attribute__((noinline)) uint8_t SphereDevice::executeCommand(const Command& c)
             hal_.eepromRead(image, CALIBRATION_EEPROM_LEN);
             Calibration cal;
             if (!readCalibrationImage(image, cal)) return RESULT_STORAGE_ERROR;
+            endBiasEstimate();
             cal_ = cal;
             cal_state_ = (uint8_t)((cal_state_ & ~(CAL_EEPROM_INVALID | CAL_GYRO_BIAS_ESTIMATED)) | CAL_FROM_EEPROM |
                                    CAL_GYRO_BIAS_VALID);

@@ -83,6 +83,7 @@ private:
     void loadCalibration(bool at_start);
     void updateCalState();
     void i2cError(uint8_t sensor_index);
+    void endBiasEstimate();
 
     I2cBus& bus_;
     DeviceHal& hal_;
