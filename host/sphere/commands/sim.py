@@ -138,7 +138,9 @@ def _one(args, source: str, elf, tmp: Path, index: int, multi: bool):
     return source, run, stats, acc
 
 
-def _print_figures(source: str, stats: dict, out=sys.stdout) -> None:
+def _print_figures(source: str, stats: dict, out=None) -> None:
+    out = out or sys.stdout  # looked up per call: a default bound at import outlives a replaced stdout
+
     def c3(k):
         d = stats.get(k) or {}
         return f"min {d.get('min')} / median {d.get('median')} / max {d.get('max')}"
