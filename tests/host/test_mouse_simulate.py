@@ -54,7 +54,8 @@ def test_simulate_runs_the_board_and_ends_with_it(tmp_path, monkeypatch):
     src.close()
     assert seen["trace"] == "synthetic:taps"
     assert abs(backend.x + 240) <= 2  # 5° left at 1920 px / 40°
-    assert any("simulated sphere stopped" in m for m in logs)
+    assert any("simulated sphere's run is over" in m for m in logs), logs
+    assert not any("lost the sphere" in m for m in logs), logs  # the end of the run is not a lost link
 
 
 def test_simulator_that_fails_says_why(tmp_path, monkeypatch):

@@ -535,11 +535,23 @@ class SimulatorSource(SerialSource):
         super().__init__(port=path, log=log, **serial_kwargs)
         self.state = f"simulated sphere on {path}"
 
+    def _lose(self, why: str) -> None:
+        # the pty closes when the board's simulated seconds are over and `sphere sim` exits right after:
+        # that is the end of the run, not a lost link to look for again
+        try:
+            self.proc.wait(2.0)
+        except subprocess.TimeoutExpired:
+            super()._lose(why)
+            return
+        self._close_port()
+
     def _batches(self):
         for batch in super()._batches():
             yield batch
             if self.serial is None and self.proc.poll() is not None:
-                self.log(f"the simulated sphere stopped (exit status {self.proc.returncode})")
+                rc = self.proc.returncode
+                self.log("the simulated sphere's run is over" if rc == 0 else
+                         f"the simulated sphere stopped (exit status {rc})")
                 return
 
     def close(self):
