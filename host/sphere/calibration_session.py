@@ -18,6 +18,8 @@ on how fast the link or the simulated board runs. ``sphere calibrate`` does the 
 
 from __future__ import annotations
 
+import bisect
+import functools
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -85,28 +87,48 @@ class Series:
         return Series(self.t[i:], self.accel[i:], self.gyro[i:], self.mag_t[k:], self.mag[k:])
 
 
-def series_from_packets(packets) -> Series:
-    """A :class:`Series` from decoded packets (RAW_SAMPLE or DecodedPacket; others are skipped). Samples
+class SeriesBuilder:
+    """RAW_SAMPLE values gathered one packet at a time (a live session) into a :class:`Series`. Samples
     without both accelerometer and gyroscope are left out; the magnetometer only where ``mag_ok`` and
-    ``mag_fresh``. Device time is unwrapped (``DecodedPacket.t_us`` already is)."""
+    ``mag_fresh``."""
+
+    def __init__(self):
+        self.t, self.accel, self.gyro, self.mag_t, self.mag = [], [], [], [], []
+
+    def add(self, p, t_s: float) -> None:
+        """One RAW_SAMPLE at device time ``t_s`` (seconds, unwrapped)."""
+        if not (p.flags & 1 and p.flags & 2):
+            return
+        self.t.append(t_s)
+        self.accel.append(p.accel)
+        self.gyro.append(p.gyro)
+        if p.flags & 4 and p.flags & 8:
+            self.mag_t.append(t_s)
+            self.mag.append(p.mag)
+
+    def series(self, since: float | None = None) -> Series:
+        """What was gathered, from device time ``since`` on (all by default)."""
+        i = 0 if since is None else bisect.bisect_left(self.t, since)
+        k = 0 if since is None else bisect.bisect_left(self.mag_t, since)
+        f = lambda x: np.array(x, float).reshape(-1, 3)  # noqa: E731
+        return Series(np.array(self.t[i:], float), f(self.accel[i:]), f(self.gyro[i:]),
+                      np.array(self.mag_t[k:], float), f(self.mag[k:]))
+
+
+def series_from_packets(packets) -> Series:
+    """A :class:`Series` from decoded packets (RAW_SAMPLE or DecodedPacket; others are skipped), as
+    :class:`SeriesBuilder` keeps them. Device time is unwrapped (``DecodedPacket.t_us`` already is)."""
     from sphere.protocol import TimeUnwrapper
 
     unwrap = TimeUnwrapper()
-    t, acc, gyr, mt, mag = [], [], [], [], []
+    out = SeriesBuilder()
     for dp in packets:
         p = getattr(dp, "packet", dp)
-        if p.NAME != "RAW_SAMPLE" or not (p.flags & 1 and p.flags & 2):
+        if p.NAME != "RAW_SAMPLE":
             continue
         tt = getattr(dp, "t_us", None)
-        ts = (tt if tt is not None and dp is not p else unwrap(p.t_us)) * 1e-6
-        t.append(ts)
-        acc.append(p.accel)
-        gyr.append(p.gyro)
-        if p.flags & 4 and p.flags & 8:
-            mt.append(ts)
-            mag.append(p.mag)
-    f = lambda x: np.array(x, float).reshape(-1, 3)  # noqa: E731
-    return Series(np.array(t, float), f(acc), f(gyr), np.array(mt, float), f(mag))
+        out.add(p, (tt if tt is not None and dp is not p else unwrap(p.t_us)) * 1e-6)
+    return out.series()
 
 
 @dataclass
@@ -232,17 +254,15 @@ def missing_faces(seen) -> list[str]:
     return [FACES[i][0] for i in range(6) if i not in seen]
 
 
-_BINS_CACHE: dict = {}
-
-
+@functools.lru_cache(maxsize=None)
 def direction_bins(n: int = COVERAGE_BINS) -> np.ndarray:
     """``n`` unit vectors spread evenly over the sphere (Fibonacci lattice); each is the centre of a bin."""
-    if n not in _BINS_CACHE:
-        i = np.arange(n) + 0.5
-        polar = np.arccos(1.0 - 2.0 * i / n)
-        azim = np.pi * (1.0 + 5.0 ** 0.5) * i
-        _BINS_CACHE[n] = np.stack([np.cos(azim) * np.sin(polar), np.sin(azim) * np.sin(polar), np.cos(polar)], 1)
-    return _BINS_CACHE[n]
+    i = np.arange(n) + 0.5
+    polar = np.arccos(1.0 - 2.0 * i / n)
+    azim = np.pi * (1.0 + 5.0 ** 0.5) * i
+    bins = np.stack([np.cos(azim) * np.sin(polar), np.sin(azim) * np.sin(polar), np.cos(polar)], 1)
+    bins.flags.writeable = False  # shared by every caller
+    return bins
 
 
 def cloud_centre(mag) -> np.ndarray:

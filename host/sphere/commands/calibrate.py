@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import bisect
 import json
 import sys
 import time
@@ -10,8 +9,10 @@ from pathlib import Path
 
 import numpy as np
 
+from sphere import chips
 from sphere.calibration_session import COVERAGE_BINS, COVERAGE_TARGET, FACE_S, STILL_S, TURN_MIN_S, TURN_S
 from sphere.calibration_session import FACES as _FACES
+from sphere.calibration_session import SeriesBuilder
 
 FACES = tuple(f[0] for f in _FACES)
 DEFAULT_TIMEOUT_S = 120.0
@@ -39,7 +40,6 @@ back (GET_CALIBRATION) to check that the sphere holds it.
 --capture FILE does the same offline from a capture recorded with `sphere capture` (lay the sphere
 still on six faces, a few seconds each, and turn it through every direction for ~30 s), with the same
 still and face detection; nothing is sent."""
-
 
 
 def add_arguments(p) -> None:
@@ -94,19 +94,11 @@ def block_of(packet) -> dict:
     return {k: tuple(int(x) for x in getattr(packet, k)) for k in BLOCK_FIELDS}
 
 
-def raw_arrays(packets):
-    """(t_s, accel, gyro, mag_fresh) arrays in chip units from decoded RAW_SAMPLE packets."""
-    from sphere.calibration_session import series_from_packets
-
-    s = series_from_packets(packets)
-    return s.t, s.accel, s.gyro, s.mag
-
-
 def report(cal, block) -> str:
     lines = []
     if cal.gyro is not None:
         g = cal.gyro
-        lines.append(f"gyro bias: {np.round(g.bias_lsb, 1).tolist()} LSB = {np.round(g.bias_lsb / 14.375, 3).tolist()} °/s "
+        lines.append(f"gyro bias: {np.round(g.bias_lsb, 1).tolist()} LSB = {np.round(g.bias_lsb / chips.ITG3200_LSB_PER_DPS, 3).tolist()} °/s "
                      f"(noise {np.round(g.noise_lsb, 1).tolist()} LSB, {g.samples} samples)")
     if cal.accel is not None:
         a = cal.accel
@@ -118,7 +110,7 @@ def report(cal, block) -> str:
                      f"{np.round(m.soft_iron, 3).tolist()}")
         lines.append(f"     fit residual {100 * m.residual:.2f} % of the field; field norm before "
                      f"{m.norm_before[0]:.0f} ± {m.norm_before[1]:.0f} LSB, after {m.norm_after[0]:.0f} ± "
-                     f"{m.norm_after[1]:.0f} LSB ({m.radius_lsb / 10.9:.1f} µT)")
+                     f"{m.norm_after[1]:.0f} LSB ({m.radius_lsb / chips.HMC5883L_LSB_PER_UT:.1f} µT)")
     for n in cal.notes:
         lines.append(f"note: {n}")
     lines.append("SET_CALIBRATION block: " + json.dumps({k: list(v) for k, v in block.items()}))
@@ -182,7 +174,7 @@ class _Link:
         self.writer = writer
         self.seq = 0
         self.hello = None
-        self.t, self.acc, self.gyr, self.mag_t, self.mag = [], [], [], [], []
+        self.values = SeriesBuilder()
         self.last_raw_wall = time.monotonic()
 
     def pump(self, seconds: float):
@@ -206,25 +198,11 @@ class _Link:
 
     def _raw(self, p):
         self.last_raw_wall = time.monotonic()
-        if not (p.flags & 1 and p.flags & 2):
-            return
-        ts = self.unwrap(p.t_us) * 1e-6
-        self.t.append(ts)
-        self.acc.append(p.accel)
-        self.gyr.append(p.gyro)
-        if p.flags & 4 and p.flags & 8:
-            self.mag_t.append(ts)
-            self.mag.append(p.mag)
+        self.values.add(p, self.unwrap(p.t_us) * 1e-6)
 
     def series(self, since: float | None = None):
         """The RAW_SAMPLE values so far (from device time ``since`` on)."""
-        from sphere.calibration_session import Series
-
-        i = 0 if since is None else bisect.bisect_left(self.t, since)
-        k = 0 if since is None else bisect.bisect_left(self.mag_t, since)
-        f = lambda x: np.array(x, float).reshape(-1, 3)  # noqa: E731
-        return Series(np.array(self.t[i:], float), f(self.acc[i:]), f(self.gyr[i:]), np.array(self.mag_t[k:], float),
-                      f(self.mag[k:]))
+        return self.values.series(since)
 
     def flush(self):
         """Drop what arrived while nobody was reading (a person reading the prompt)."""
@@ -288,11 +266,11 @@ def _follow(link, timeout_s: float, poll, on_timeout):
     ``_StepFailed`` with ``on_timeout(series)`` after ``timeout_s`` of wall time (or when nothing arrives)."""
     t_wall = time.monotonic()
     link.pump(0.05)
-    t0 = link.t[-1] if link.t else None
+    t0 = link.values.t[-1] if link.values.t else None
     while True:
         link.pump(0.1)
-        if t0 is None and link.t:
-            t0 = link.t[-1]
+        if t0 is None and link.values.t:
+            t0 = link.values.t[-1]
         s = link.series(t0) if t0 is not None else None
         if s is not None and len(s) > 1:
             r = poll(s)
@@ -439,9 +417,9 @@ def _run_port(args) -> int:
             if problem:
                 print(f"sphere calibrate: {problem}", file=sys.stderr)
                 return 1
-        if not link.t:
+        if not link.values.t:
             link.pump(1.0)
-        if not link.t:
+        if not link.values.t:
             print("sphere calibrate: no RAW_SAMPLE from the sphere; is the raw stream on (SET_STREAM)?", file=sys.stderr)
             return 1
         reply = link.command(GetCalibration())
