@@ -240,10 +240,11 @@ def accuracy(summary: CaptureSummary, trial, offset_s: float, beta: float, bias_
     else:
         t_h, q_h = hm
         if q_fw_enu is not None:
-            # sampled where the firmware sent ORIENTATION (100 Hz by default) and held in between, as the
-            # firmware's column is: both columns then carry the same stream-rate hold, and their difference
-            # is the filters' alone
-            q_h_enu = quat.nwu_to_enu(_held(t_o, _held(t_h, q_h, t_o + 1e-7), t_trial))
+            # the host's q after the raw sample of each ORIENTATION packet's tick, held in between as the
+            # firmware's column is: both columns then carry the same stream-rate hold (100 Hz by default),
+            # and their difference is the filters' alone
+            q_h_at_o = _held(t_h, q_h, t_o + 1e-7)
+            q_h_enu = quat.nwu_to_enu(_held(t_o, q_h_at_o, t_trial))
         else:
             q_h_enu = quat.nwu_to_enu(_held(t_h, q_h, t_trial))
         try:
@@ -252,13 +253,11 @@ def accuracy(summary: CaptureSummary, trial, offset_s: float, beta: float, bias_
             notes.append(str(e))
     diff = None
     if q_fw_enu is not None and hm is not None:
-        # at the ORIENTATION packets' own times (the host's q after the raw sample of the same tick), so
-        # that the 100 Hz packets held between ticks do not count as a difference during rotation
-        q_fw = quat.normalize(q_o)
-        q_hf = _held(hm[0], hm[1], t_o + 1e-7)
-        ok = np.all(np.isfinite(q_hf), axis=1)
+        # at the ORIENTATION packets' own times, so that the packets held between ticks do not count as a
+        # difference during rotation
+        ok = np.all(np.isfinite(q_h_at_o), axis=1)
         if ok.any():
-            tot, _, _ = error_angles_deg(quat.nwu_to_enu(q_fw[ok]), quat.nwu_to_enu(q_hf[ok]))
+            tot, _, _ = error_angles_deg(quat.nwu_to_enu(quat.normalize(q_o[ok])), quat.nwu_to_enu(q_h_at_o[ok]))
             diff = float(np.sqrt(np.mean(tot * tot)))
     return AccuracyRow(trial.name, len(trial) / trial.rate_hz, fw, host, diff, "; ".join(notes))
 
