@@ -15,7 +15,7 @@ SphereDevice::SphereDevice(I2cBus& bus, DeviceHal& hal)
     tap_ = Adxl345::DEFAULT_TAP;
     ff_ = Adxl345::DEFAULT_FREE_FALL;
     // status_ and every member after it start at zero: one memset instead of a store per member
-    // (about 250 bytes of flash less); sphere_device.h keeps them together at the end of the class
+    // (198 bytes of flash less); sphere_device.h keeps them together at the end of the class
     memset(&status_, 0, (size_t)((uint8_t*)(&last_fall_us_ + 1) - (uint8_t*)&status_));
     converge_left_ = STARTUP_CONVERGE_SAMPLES;
     stream_mode_ = STREAM_RAW | STREAM_ORIENTATION | STREAM_STATUS;
