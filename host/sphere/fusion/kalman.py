@@ -52,6 +52,7 @@ DEFAULT_GYRO_NOISE_RAD_S = 0.02
 #: heavy-tail protection modes (§2.9): per component ("gate", "huber") or on the normalised innovation
 #: d = √(νᵀS⁻¹ν) ("gate-norm", "huber-norm"); see the module docstring
 ROBUST = ("none", "gate", "huber", "gate-norm", "huber-norm")
+_GATE, _HUBER, _GATE_NORM, _HUBER_NORM = 1, 2, 3, 4  # their indices, as _kf_step receives them
 
 
 def _inclination_only(x, ax, ay, az):
@@ -143,20 +144,20 @@ def _kf_step(x, P, gx, gy, gz, ax, ay, az, m, dt, sigma, r, robust, threshold, a
     nu = [z[i] - y[i] for i in range(4)]
     # S = P + R; with H = I and R = r I: K = P S⁻¹ = I − r S⁻¹ and (I − K) P = r I − r² S⁻¹
     S = [[P[i][j] + (r if i == j else 0.0) for j in range(4)] for i in range(4)]
-    if robust == 1 or robust == 2:  # per component: |νᵢ|/√Sᵢᵢ
+    if robust == _GATE or robust == _HUBER:  # per component: |νᵢ|/√Sᵢᵢ
         lim = [threshold * math.sqrt(S[i][i]) for i in range(4)]
-        if robust == 1:  # gate (eq. 50)
+        if robust == _GATE:  # gate (eq. 50)
             if any(abs(nu[i]) > lim[i] for i in range(4)):
                 owner.rejected += 1
                 return tuple(y), P
         else:  # Huber influence function (eq. 51)
             nu = [max(-lim[i], min(lim[i], nu[i])) for i in range(4)]
     Si = _inv4(S)
-    if robust >= 3:  # on the normalised innovation d = √(νᵀ S⁻¹ ν), one number for the whole quaternion
+    if robust == _GATE_NORM or robust == _HUBER_NORM:  # on d = √(νᵀ S⁻¹ ν), the whole ν
         Sn = [Si[i][0] * nu[0] + Si[i][1] * nu[1] + Si[i][2] * nu[2] + Si[i][3] * nu[3] for i in range(4)]
         d2 = nu[0] * Sn[0] + nu[1] * Sn[1] + nu[2] * Sn[2] + nu[3] * Sn[3]
         if d2 > threshold * threshold:
-            if robust == 3:  # gate (eq. 50)
+            if robust == _GATE_NORM:  # gate (eq. 50)
                 owner.rejected += 1
                 return tuple(y), P
             f = threshold / math.sqrt(d2)  # Huber (eq. 51): ν scaled to d = threshold, direction kept
