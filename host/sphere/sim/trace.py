@@ -329,16 +329,30 @@ def calibration(seconds: float = 45.0, rate_hz: float = SYNTH_RATE_HZ, seed: int
     return Motion(rate_hz, acc, gyr, mag, "calibration")
 
 
-SYNTHETIC = {"still": still, "rotation": rotation, "toss": toss, "taps": taps, "calibration": calibration}
+#: The synthetic sources: NAME -> a function ``(seconds: float, arg: str) -> Motion`` (``arg`` is the text
+#: after ``synthetic:NAME:``, "" when none), or the same as a lazily imported ``"module:function"`` string
+#: (so a source in its own module under sphere/sim may import this one). A new source = its module + one line.
+SYNTHETIC = {
+    "still": lambda seconds, arg: still(seconds),
+    "rotation": lambda seconds, arg: rotation(seconds, rate_dps=float(arg)) if arg else rotation(seconds),
+    "toss": lambda seconds, arg: toss(seconds, toss_at_s=min(2.0, seconds / 2)),
+    "taps": lambda seconds, arg: taps(seconds),
+    "calibration": lambda seconds, arg: calibration(seconds),
+}
 
 
 def synthetic(spec: str, seconds: float) -> Motion:
-    """``still``, ``rotation[:DPS]``, ``toss``, ``taps``, ``calibration`` for ``seconds``."""
+    """``NAME[:ARG]`` from :data:`SYNTHETIC` for ``seconds``."""
     name, _, arg = spec.partition(":")
     if name not in SYNTHETIC:
         raise ValueError(f"unknown synthetic source {name!r}; one of {', '.join(SYNTHETIC)}")
-    if name == "rotation" and arg:
-        return rotation(seconds, rate_dps=float(arg))
-    if name == "toss":
-        return toss(seconds, toss_at_s=min(2.0, seconds / 2))
-    return SYNTHETIC[name](seconds)
+    fn = SYNTHETIC[name]
+    if isinstance(fn, str):
+        import importlib
+
+        module, _, attr = fn.partition(":")
+        fn = getattr(importlib.import_module(module), attr)
+    try:
+        return fn(seconds, arg)
+    except ValueError as e:
+        raise ValueError(f"synthetic:{spec}: {e}") from None
