@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from sphere.paths import repo_path
+from sphere.paths import vectors_file
 
 OUTCOMES = ("ok", "oversize", "framing_error", "crc_error", "unknown_type", "bad_length")
 
@@ -23,7 +23,7 @@ class Vector:
 
 
 def default_path() -> Path:
-    return repo_path("protocol", "vectors", "frames.txt")
+    return vectors_file()
 
 
 def parse_value(text: str):

@@ -16,13 +16,15 @@ import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from sphere import paths
 from sphere.paths import repo_path
 
-SIM_DIR = repo_path("hardware", "sim")
+# Installed (not a checkout), the board is built from the package's sources in the user's cache (sphere.paths).
+SIM_DIR = paths.sim_build_root()
 BOARD = SIM_DIR / "build" / "sphere-board"
 FIRMWARE_DIR = repo_path("firmware")
-FIRMWARE_ELF = FIRMWARE_DIR / "build" / "sphere.elf"
-BUILD_BOARD_CMD = "make -C hardware/sim"
+FIRMWARE_ELF = paths.firmware_image(".elf")
+BUILD_BOARD_CMD = paths.sim_build_command()
 BUILD_FIRMWARE_CMD = "make -C firmware"
 BOARD_SOURCES = ("sphere_board.c", "sensors.c", "sensors.h", "Makefile")
 
@@ -50,13 +52,18 @@ def _make(directory: Path, cmd_text: str, target: str | None = None, quiet: bool
 
 def board_path(build: bool = True) -> Path:
     """The simulator binary, built first when it is missing or older than its sources."""
-    if _stale(BOARD, [SIM_DIR / s for s in BOARD_SOURCES]):
+    if _stale(BOARD, [paths.sim_source_dir() / s for s in BOARD_SOURCES]):
         if not build:
             raise BoardUnavailable(f"the simulator is not built: run `{BUILD_BOARD_CMD}`")
         if not Path("/usr/include/simavr/sim_avr.h").exists() and not os.environ.get("SIMAVR_CFLAGS"):
             raise BoardUnavailable(
                 "simavr's headers are missing: install Debian's `simavr libsimavr-dev libelf-dev pkg-config` "
-                f"and run `{BUILD_BOARD_CMD}`")
+                + (f"and run `{BUILD_BOARD_CMD}`" if paths.in_checkout() else "and run this command again"))
+        if SIM_DIR != paths.sim_source_dir():  # installed: first use builds a copy in the user's cache
+            print(f"sphere: building the virtual board in {SIM_DIR} (first use)", file=sys.stderr)
+            SIM_DIR.mkdir(parents=True, exist_ok=True)
+            for name in BOARD_SOURCES:
+                shutil.copy2(paths.sim_source_dir() / name, SIM_DIR / name)
         _make(SIM_DIR, BUILD_BOARD_CMD)
     return BOARD
 
@@ -65,6 +72,8 @@ def firmware_elf(build: bool = True) -> Path:
     """The firmware image, built with `make -C firmware` when it is missing and can be built."""
     if FIRMWARE_ELF.exists():
         return FIRMWARE_ELF
+    if os.environ.get(paths.FIRMWARE_ENV) or not paths.in_checkout():
+        raise BoardUnavailable(f"no firmware image at {FIRMWARE_ELF}: {paths.firmware_missing_hint()}")
     if not (FIRMWARE_DIR / "Makefile").exists():
         raise BoardUnavailable(f"no firmware image at {FIRMWARE_ELF} and no firmware/Makefile to build it")
     if not build:
