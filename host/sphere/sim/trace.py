@@ -338,6 +338,7 @@ SYNTHETIC = {
     "toss": lambda seconds, arg: toss(seconds, toss_at_s=min(2.0, seconds / 2)),
     "taps": lambda seconds, arg: taps(seconds),
     "calibration": lambda seconds, arg: calibration(seconds),
+    "hold": "sphere.sim.hold:synthetic",
 }
 
 
