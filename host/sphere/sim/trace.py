@@ -243,10 +243,14 @@ CAL_NOISE_MAG_UT = 0.2
 CAL_SEED = 20261122
 
 #: The script: still (z up), then each face up in turn (a smooth rotation, then held still), then
-#: slow tumbling through every direction until the end.
+#: slow tumbling through every direction for CAL_TUMBLE_S, back to z up, and again from the start, so
+#: `sphere calibrate` started at any time finds every pose it asks for within one round. Each hold is
+#: longer than the calibration's 3 s still (sphere.calibration_session.STILL_S), with room for its
+#: 0.25 s stillness blocks, so a session that joins after the first still phase can use a face's hold.
 CAL_STILL_S = 5.0
 CAL_MOVE_S = 1.0
-CAL_HOLD_S = 2.75
+CAL_HOLD_S = 3.5
+CAL_TUMBLE_S = 30.0
 CAL_TUMBLE_DPS = (30.0, 90.0, 120.0)  # nested rotations about the earth's z, y and x axes (°/s)
 
 
@@ -285,32 +289,43 @@ def calibration_script(seconds: float, rate_hz: float = SYNTH_RATE_HZ):
     [(name, start_s, end_s)]: "still", each face's hold ("+x" …), "tumble"."""
     n = int(round(seconds * rate_hz))
     qs, timeline = [], []
-    cur = np.array([1.0, 0.0, 0.0, 0.0])
+    upright = np.array([1.0, 0.0, 0.0, 0.0])
+    cur = upright
     t = 0.0
+    have = 0  # samples so far
 
-    def hold(q, s, name):
-        nonlocal t
-        qs.append(np.tile(q, (int(round(s * rate_hz)), 1)))
-        timeline.append((name, t, t + s))
-        t += s
+    def add(q, name=None):
+        nonlocal t, have
+        if name is not None:
+            timeline.append((name, t, t + len(q) / rate_hz))
+        qs.append(q)
+        t += len(q) / rate_hz
+        have += len(q)
 
-    hold(cur, CAL_STILL_S, "still")
-    for name, q in _face_orientations():
+    def move_to(q):
         move = CAL_MOVE_S * (1.5 if float(abs(np.dot(cur, q))) < 0.5 else 1.0)  # 180° turns take longer
         u = np.arange(int(round(move * rate_hz))) / (move * rate_hz)
-        qs.append(_slerp(cur, q, u * u * (3 - 2 * u)))  # smoothstep: starts and stops gently
-        t += move
-        hold(q, CAL_HOLD_S, name)
-        cur = q
-    m = max(n - sum(len(a) for a in qs), 0)
-    tt = np.arange(m) / rate_hz
-    ramp = np.where(tt < 0.5, tt * tt, tt - 0.25)  # the rates ramp up over 0.5 s
-    rz, ry, rx = (np.radians(r) * ramp for r in CAL_TUMBLE_DPS)
-    ez, ey, ex = np.eye(3)[2], np.eye(3)[1], np.eye(3)[0]
-    tumble = quat.multiply(quat.multiply(quat.multiply(quat.from_axis_angle(ez, rz), quat.from_axis_angle(ey, ry)),
-                                         quat.from_axis_angle(ex, rx)), cur)
-    qs.append(tumble)
-    timeline.append(("tumble", t, t + m / rate_hz))
+        add(_slerp(cur, q, u * u * (3 - 2 * u)))  # smoothstep: starts and stops gently
+
+    while have < n:
+        if have:  # a new round: back to z up
+            move_to(upright)
+            cur = upright
+        add(np.tile(cur, (int(round(CAL_STILL_S * rate_hz)), 1)), "still")
+        for name, q in _face_orientations():
+            move_to(q)
+            add(np.tile(q, (int(round(CAL_HOLD_S * rate_hz)), 1)), name)
+            cur = q
+        m = int(round(CAL_TUMBLE_S * rate_hz))
+        tt = np.arange(m) / rate_hz
+        ramp = np.where(tt < 0.5, tt * tt, tt - 0.25)  # the rates ramp up over 0.5 s
+        rz, ry, rx = (np.radians(r) * ramp for r in CAL_TUMBLE_DPS)
+        ez, ey, ex = np.eye(3)[2], np.eye(3)[1], np.eye(3)[0]
+        tumble = quat.multiply(quat.multiply(quat.multiply(quat.from_axis_angle(ez, rz), quat.from_axis_angle(ey, ry)),
+                                             quat.from_axis_angle(ex, rx)), cur)
+        add(tumble, "tumble")
+        cur = tumble[-1]
+    timeline = [(name, t0, min(t1, n / rate_hz)) for name, t0, t1 in timeline if t0 < n / rate_hz]
     return np.vstack(qs)[:n], timeline
 
 
@@ -339,6 +354,7 @@ SYNTHETIC = {
     "taps": lambda seconds, arg: taps(seconds),
     "calibration": lambda seconds, arg: calibration(seconds),
     "hold": "sphere.sim.hold:synthetic",
+    "tour": "sphere.sim.tour:synthetic",
 }
 
 
