@@ -1,0 +1,108 @@
+"""`sphere camera`: calibrate a camera from board images; render a BROAD trial as the virtual webcam sees it."""
+
+from __future__ import annotations
+
+import sys
+
+HELP = "camera tools: intrinsics from chessboard images (calibrate); the virtual webcam (render)"
+DESCRIPTION = """\
+calibrate: the camera's focal lengths, principal point and lens distortion from 5 or more images of a
+printed chessboard (OpenCV's calibrateCamera), written as the JSON file that `sphere hybrid-eval
+--camera-file` and the tracker read.
+render: frames of a BROAD trial's ball (8 cm, at the trial's optical positions) as the virtual webcam
+sees them, to an .avi (MJPG) with a .csv of each frame's exposure and arrival times."""
+
+
+def add_arguments(p) -> None:
+    sub = p.add_subparsers(dest="camera_command", metavar="ACTION")
+    c = sub.add_parser("calibrate", help="intrinsics from chessboard images")
+    c.add_argument("images", nargs="+", help="image files, folders of images, or videos (every 10th frame)")
+    c.add_argument("--board", default="9x6", help="squares across x down on the printed board (default 9x6)")
+    c.add_argument("--square-mm", type=float, default=25.0, help="side of one square in mm (default 25)")
+    c.add_argument("-o", "--output", default="camera.json", help="where to write the camera file")
+    r = sub.add_parser("render", help="the virtual webcam's view of a BROAD trial")
+    r.add_argument("--trial", default="16", help="BROAD trial name or number (default 16)")
+    r.add_argument("--start", type=float, default=30.0, help="seconds into the trial (default 30)")
+    r.add_argument("--seconds", type=float, default=5.0, help="how long (default 5)")
+    r.add_argument("--distance", type=float, default=1.0, help="camera to the mean ball position, m (default 1)")
+    r.add_argument("-o", "--output", default="virtual-camera.avi", help="the video to write")
+
+
+def _board(text: str):
+    try:
+        a, b = (int(v) for v in text.lower().split("x"))
+        if a < 3 or b < 3:
+            raise ValueError
+        return a, b
+    except ValueError:
+        raise SystemExit(f"sphere camera: --board {text!r} must be squares across x down, e.g. 9x6 (each ≥ 3)")
+
+
+def run(args) -> int:
+    if args.camera_command is None:
+        print("sphere camera: say what to do: calibrate or render (see sphere camera --help)", file=sys.stderr)
+        return 2
+    try:
+        import cv2  # noqa: F401
+    except ImportError:
+        print("sphere camera: OpenCV is missing; install the camera extra: pip install -e '.[camera]'",
+              file=sys.stderr)
+        return 1
+    if args.camera_command == "calibrate":
+        return _calibrate(args)
+    return _render(args)
+
+
+def _calibrate(args) -> int:
+    from sphere.camera.calibration import CalibrationError, calibrate, read_views
+
+    cols, rows = _board(args.board)
+    if not args.square_mm > 0:
+        print("sphere camera: --square-mm must be positive", file=sys.stderr)
+        return 2
+    try:
+        res = calibrate(list(read_views(args.images)), cols, rows, args.square_mm / 1000.0)
+    except CalibrationError as e:
+        print(f"sphere camera calibrate: {e}", file=sys.stderr)
+        return 1
+    c = res.camera
+    c.save(args.output)
+    print(f"{len(res.used)} views used, {len(res.skipped)} without the board"
+          + (f" ({', '.join(res.skipped[:5])}{' ...' if len(res.skipped) > 5 else ''})" if res.skipped else ""))
+    print(f"{c.width}x{c.height}: fx {c.fx:.2f} fy {c.fy:.2f} px, principal point ({c.cx:.2f}, {c.cy:.2f}), "
+          f"distortion k1 {c.dist[0]:+.4f} k2 {c.dist[1]:+.4f} p1 {c.dist[2]:+.5f} p2 {c.dist[3]:+.5f} "
+          f"k3 {c.dist[4]:+.4f}")
+    print(f"reprojection RMS {c.rms_px:.3f} px (worst view {max(res.per_view_rms_px):.3f} px)")
+    print(f"wrote {args.output}")
+    return 0
+
+
+def _render(args) -> int:
+    import csv
+
+    import cv2
+
+    from sphere import broad
+    from sphere.camera import trials
+
+    try:
+        rt = trials.rendered_trial(args.trial, args.start, args.seconds, distance_m=args.distance)
+    except (broad.BroadMissing, ValueError) as e:
+        print(f"sphere camera render: {e}", file=sys.stderr)
+        return 1
+    cam = rt.scene.camera
+    out = cv2.VideoWriter(args.output, cv2.VideoWriter_fourcc(*"MJPG"), rt.scene.fps, (cam.width, cam.height))
+    if not out.isOpened():
+        print(f"sphere camera render: cannot write {args.output} (use a .avi name in a writable folder)",
+              file=sys.stderr)
+        return 1
+    with open(args.output + ".csv", "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(["frame", "exposure_start_s", "exposure_mid_s", "arrival_s", "ball_x_m", "ball_y_m", "ball_z_m"])
+        for k, fr in enumerate(rt.frames()):
+            out.write(fr.image)
+            w.writerow([k, f"{fr.t_start:.6f}", f"{fr.t_mid:.6f}", f"{fr.t_arrival:.6f}",
+                        *(f"{v:.5f}" for v in fr.truth_cam)])
+    out.release()
+    print(f"wrote {args.output} ({k + 1} frames, {cam.width}x{cam.height} at {rt.scene.fps:g} fps) and {args.output}.csv")
+    return 0
