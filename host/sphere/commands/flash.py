@@ -76,22 +76,22 @@ def find_port(given: str | None) -> str:
 
 def wait_for_hello(port: str, timeout_s: float = HELLO_TIMEOUT_S):
     """Open the port at the firmware's rate and wait for a HELLO (asking with GET_HELLO after 1.5 s)."""
-    from sphere.protocol import GetHello, PacketStream, encode_frame
+    from sphere.protocol import FrameDecoder, GetHello, encode_frame
     from sphere.serial_link import DEFAULT_BAUD, PortError, open_port
 
     try:
         ser = open_port(port, DEFAULT_BAUD, timeout_s=0.1)
     except PortError as e:
         raise FlashError(str(e)) from None
-    stream = PacketStream("device")
+    decoder = FrameDecoder("device")
     start = time.monotonic()
     asked = 0.0
     try:
         while time.monotonic() - start < timeout_s:
             data = ser.read(256)
-            for dp in stream.feed(data):
-                if dp.packet.NAME == "HELLO":
-                    return dp.packet
+            for packet in decoder.feed(data):
+                if packet.NAME == "HELLO":
+                    return packet
             elapsed = time.monotonic() - start
             if elapsed > 1.5 and elapsed - asked > 1.0:  # the bootloader's wait is over by now
                 ser.write(encode_frame(GetHello(), 0))

@@ -113,10 +113,13 @@ def _one(args, source: str, elf, tmp: Path, index: int, multi: bool):
     trace, secs, trial = prepare(source, seconds, start, args.hold, tmp / f"trace{index}.bin", args.full)
     capture = args.capture if (args.capture and not multi) else tmp / f"capture{index}.bin"
     stats_out = args.stats if (args.stats and not multi) else None
-    run = run_board(elf, trace, secs, capture, interactive=args.pty, pty=args.pty, realtime=args.realtime,
-                    stats=stats_out, nack=args.nack, stall=args.stall, send=args.send,
-                    timing_pin=args.timing_pin, loop_pin=args.loop_pin, rate_hz=args.rate,
-                    verbose=args.verbose, build=not args.no_build, i2c_real_timing=args.i2c_real_timing)
+    from sphere.progress import follow_capture
+
+    with follow_capture(None if (multi or args.pty) else capture, secs, desc=f"sim {source}"):
+        run = run_board(elf, trace, secs, capture, interactive=args.pty, pty=args.pty, realtime=args.realtime,
+                        stats=stats_out, nack=args.nack, stall=args.stall, send=args.send,
+                        timing_pin=args.timing_pin, loop_pin=args.loop_pin, rate_hz=args.rate,
+                        verbose=args.verbose, build=not args.no_build, i2c_real_timing=args.i2c_real_timing)
     summary = summarise(Path(capture)) if Path(capture).exists() else None
     stats = dict(run.stats)
     if summary is not None:
@@ -200,8 +203,11 @@ def run(args) -> int:
         elf = snapshot
         try:
             if multi:
+                from sphere.progress import bar
+
                 with ThreadPoolExecutor(max(1, args.jobs)) as ex:
-                    results = list(ex.map(lambda ia: _one(args, ia[1], elf, tmp, ia[0], True), enumerate(sources)))
+                    runs = ex.map(lambda ia: _one(args, ia[1], elf, tmp, ia[0], True), enumerate(sources))
+                    results = list(bar(runs, total=len(sources), desc="sim", unit="trace"))
             else:
                 results = [_one(args, sources[0], elf, tmp, 0, False)]
         except (FileNotFoundError, ValueError) as e:
