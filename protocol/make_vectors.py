@@ -49,30 +49,38 @@ def main() -> None:
         mag_soft_iron=(16500, -120, 40, -120, 16200, 15, 40, 15, 16390),
     )
     out = [
-        "# Golden vectors of the MARG sphere wire protocol, version 1 (format: protocol/spec.md §7).\n"
+        "# Golden vectors of the MARG sphere wire protocol, version 2 (format: protocol/spec.md §7).\n"
         "# Made by protocol/make_vectors.py; host tests (tests/host/test_vectors.py) and the firmware's\n"
         "# native tests read this file.\n"
     ]
-    out.append(ok("hello", p.Hello(1, (0, 1, 0), 7, 0xE5, 0x69, b"H43", 200, 75, 7, 200, 100, 0x21), 0,
-                  "HELLO after power-up: all three sensors, default streams, gyro bias estimated at start"))
-    out.append(ok("hello_no_mag", p.Hello(1, (0, 1, 0), 3, 0xE5, 0x68, b"\0\0\0", 200, 75, 2, 0, 50, 0x10), 0,
-                  "HELLO with the magnetometer missing and an invalid EEPROM (zeros in the body exercise COBS)"))
+    out.append(ok("hello", p.Hello(2, (0, 2, 0), 7, 0xE5, 0x69, b"H43", 200, 100, 7, 200, 100, 0x21, 0x01, 1, 0), 0,
+                  "HELLO after power-up: all three sensors (HMC5883L), default streams, gyro bias estimated at start, "
+                  "power-on reset, aligned board"))
+    out.append(ok("hello_no_mag", p.Hello(2, (0, 2, 0), 3, 0xE5, 0x68, b"\0\0\0", 200, 100, 2, 0, 50, 0x10, 0x08, 0, 1),
+                  0, "HELLO after a watchdog reset with the magnetometer missing, an invalid EEPROM and the SEN-10724 "
+                  "profile (zeros in the body exercise COBS)"))
+    out.append(ok("hello_qmc", p.Hello(2, (0, 2, 0), 7, 0xE5, 0x68, b"\0\0\0", 200, 100, 7, 200, 100, 0x01, 0x02, 2, 2),
+                  0, "HELLO with a QMC5883L (nothing at 0x1E), external reset, GY-85 profile"))
     out.append(ok("raw_sample", p.RawSample(123456789, 0x0F, (-3, 12, 256), (5, -7, 1), (210, -45, -380)), 17,
                   "RAW_SAMPLE at rest, z up: accel (−3, 12, 256) LSB ≈ (−0.012, 0.047, 1.0) g"))
     out.append(ok("raw_sample_extremes", p.RawSample(0xFFFFFFFF, 0x17, (-4096, 4095, 0), (-32768, 32767, 0), (-4096, 2047, -2048)), 255,
                   "RAW_SAMPLE at the limits: saturated accel and gyro, magnetometer x overflow (−4096), seq 255, t_us about to wrap, tap active"))
     out.append(ok("raw_sample_zero", p.RawSample(0, 0, (0, 0, 0), (0, 0, 0), (0, 0, 0)), 0,
                   "RAW_SAMPLE of zeros: a payload with many 0x00 bytes"))
+    out.append(ok("raw_sample_stale", p.RawSample(5005000, 0x47, (-3, 12, 256), (2875, -7, 1), (210, -45, -380)), 18,
+                  "RAW_SAMPLE whose gyro read failed: the last good gyro value held and flagged gyro_stale"))
     out.append(ok("orientation_identity", p.Orientation(5000, 0x01, (16384, 0, 0, 0)), 1,
                   "ORIENTATION: identity quaternion, magnetometer used"))
     out.append(ok("orientation_turned", p.Orientation(2000000, 0x02, (11585, 0, 0, 11585)), 42,
                   "ORIENTATION: 90° about z (w = z = 0.7071 → 11585 in Q14), accelerometer rejected"))
+    out.append(ok("orientation_gyro_missing", p.Orientation(9000000, 0x12, (11585, 0, 0, 11585)), 43,
+                  "ORIENTATION held while the gyroscope is missing (gyro_missing), accelerometer rejected"))
     out.append(ok("event_single_tap", p.Event(777000, 1, 0xC3, 0x01, -1), 3,
                   "EVENT single tap on z, spike negative (INT_SOURCE = DATA_READY|SINGLE_TAP|watermark|overrun bits as read)"))
     out.append(ok("event_double_tap", p.Event(1777000, 2, 0xE0, 0x04, 1), 4, "EVENT double tap on x"))
     out.append(ok("event_free_fall", p.Event(2500000, 3, 0x84, 0x00, 0), 5, "EVENT free fall (toss)"))
-    out.append(ok("status", p.Status(1000000, 0x05, (0, 12, 1), 2, 3, 0, 1, 0x07, 0, 412, 0), 200,
-                  "STATUS: gyroscope missing, 12 failed gyro transactions, load 41.2 %"))
+    out.append(ok("status", p.Status(1000000, 0x05, (0, 12, 1), 2, 3, 0, 1, 0x07, 0, 412, 0, 57, 1), 200,
+                  "STATUS: gyroscope missing (lost once after 12 failed transactions, 57 failed re-probes), load 41.2 %"))
     out.append(ok("reply_ok", p.Reply(9, p.SetStream.TYPE, p.Result.OK), 6, "REPLY ok to SET_STREAM seq 9"))
     out.append(ok("reply_bad_value", p.Reply(10, p.SetStream.TYPE, p.Result.BAD_VALUE), 7,
                   "REPLY bad_value: raw rate that does not divide 200"))
@@ -97,6 +105,7 @@ def main() -> None:
     out.append(ok("cmd_identify", p.Identify(5), 12, "IDENTIFY for 5 s"))
     out.append(ok("cmd_reboot", p.Reboot(p.REBOOT_MAGIC), 13, "REBOOT with its magic"))
     out.append(ok("cmd_get_status", p.GetStatus(), 14, "GET_STATUS"))
+    out.append(ok("cmd_set_board", p.SetBoard(1), 17, "SET_BOARD: SparkFun SEN-10724 sensor stick"))
 
     # broken frames
     good = p.RawSample(123456789, 0x0F, (-3, 12, 256), (5, -7, 1), (210, -45, -380))
@@ -118,7 +127,7 @@ def main() -> None:
     out.append(block("oversize", "device", bytes(range(1, 71)) + b"\0", "oversize",
                      "70 bytes without a delimiter: longer than any frame (65 + 1)"))
     out.append(block("unknown_type", "device", encode_payload(0x3F, 21, b"\x01\x02\x03"), "unknown_type",
-                     "CRC-good frame of type 0x3F, unknown in version 1: dropped, seq still counted",
+                     "CRC-good frame of type 0x3F, unknown in version 2: dropped, seq still counted",
                      type_name="0x3F", seq=21))
     out.append(block("bad_length", "device", encode_payload(p.RawSample.TYPE, 22, good.pack_body()[:-1]), "bad_length",
                      "RAW_SAMPLE with a 22-byte body (23 expected)", type_name="RAW_SAMPLE", seq=22))

@@ -1,5 +1,5 @@
 // MARG sphere firmware for the Arduino Nano (ATmega328P, 16 MHz).
-// Sensors: ADXL345 (0x53), ITG-3200 (0x68/0x69), HMC5883L (0x1E) on I²C at 400 kHz; ADXL345 INT1 on D2.
+// Sensors: ADXL345 (0x53), ITG-3200 (0x68/0x69), HMC5883L (0x1E) or QMC5883L (0x0D) on I²C at 400 kHz; ADXL345 INT1 on D2.
 // Output: framed packets per protocol/spec.md on the UART at 115200 baud. D13 is high exactly while
 // the MARG update runs. All behaviour lives in src/core/ (SphereDevice); this file only wires the
 // Nano's peripherals to it and paces it with the 200 Hz timer.
@@ -15,18 +15,19 @@ static AvrBoard board(twi);
 static sphere::SphereDevice device(twi, board);
 
 void setup() {
-    MCUSR = 0;  // a watchdog reset leaves WDRF set; clear it so the watchdog does not fire again
-    wdt_disable();
+    // MCUSR (the reset cause) was captured and cleared, and the watchdog stopped, in .init3 (avr_board.cpp)
     Serial.begin(115200);
     board.blink(2);      // power-up: two short blinks
     twi.begin();
+    twi.clearBus();      // a sensor left holding SDA by a reset mid-read lets go
     device.begin();      // probes the sensors, loads the calibration, sends 0x00 and HELLO
     board.begin();       // sample clock starts now
     wdt_enable(WDTO_250MS);
 }
 
 void loop() {
-    while (Serial.available() > 0) device.receive((uint8_t)Serial.read());
+    // a command whose reply does not fit the transmit buffer yet stays in the receive buffer
+    while (Serial.available() > 0 && device.receive((uint8_t)Serial.peek())) Serial.read();
     uint8_t ticks = AvrBoard::takeTicks();
     if (ticks) {
         if (ticks > 1) device.noteOverruns((uint16_t)(ticks - 1));

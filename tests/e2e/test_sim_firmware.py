@@ -21,12 +21,14 @@ def test_hello_packet():
     _ok(s)
     h = s.summary.hello
     assert h is not None, "no HELLO in the capture"
-    assert h.protocol_version == 1
+    assert h.protocol_version == 2
     assert h.sensors_found == 0b111
     assert h.adxl345_devid == 0xE5
     assert h.itg3200_whoami & 0x7E == 0x68
     assert bytes(h.hmc5883l_id) == b"H43"
-    assert h.imu_rate_hz == 200 and h.mag_rate_hz == 75
+    assert h.imu_rate_hz == 200 and h.mag_rate_hz == 100  # HMC5883L single measurements every 10 ms
+    assert h.mag_chip == 1 and h.board_profile == 0
+    assert h.reset_cause & 0x01, f"reset_cause {h.reset_cause}: a power-up should show power_on"
     assert s.summary.hellos == 1, "the device restarted"
     assert s.stats["resets"] == 0
 

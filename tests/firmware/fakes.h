@@ -39,6 +39,9 @@ struct FakeBus : sphere::I2cBus {
             c->regs[(reg + i) & 127] = d[i];
             c->writes.push_back({(uint8_t)(reg + i), d[i]});
         }
+        // HMC5883L single measurement: RDY stays set after a data read and clears when the chip starts
+        // writing the next conversion (datasheet, status register); setMag() is that conversion's end
+        if (c == &hmc && reg == 0x02 && n == 1 && d[0] == 0x01) hmc.regs[0x09] &= ~1;
         return true;
     }
     bool readRegisters(uint8_t addr, uint8_t reg, uint8_t* out, uint8_t n) override {
@@ -47,7 +50,6 @@ struct FakeBus : sphere::I2cBus {
         if (!c) return false;
         for (uint8_t i = 0; i < n; ++i) out[i] = c->regs[(reg + i) & 127];
         if (c == &adxl && reg == 0x30) adxl.regs[0x30] &= 0x83;  // INT_SOURCE read clears the events
-        if (c == &hmc && reg == 0x03) hmc.regs[0x09] &= ~1;       // reading the data clears RDY
         return true;
     }
     // sensor values in chip units, written into the registers as each chip lays them out
@@ -85,17 +87,21 @@ struct FakeHal : sphere::DeviceHal {
     uint32_t interrupt_t = 0;
     int identify_s = 0, reboots = 0;
     bool tx_full = false;
+    int tx_room = 255;  // free transmit-buffer bytes txRoom() reports
+    uint8_t reset_cause = sphere::RESET_POWER_ON;
     FakeHal() { std::memset(eeprom, 0xFF, sizeof eeprom); }
+    uint8_t txRoom() override { return tx_full ? 0 : (uint8_t)tx_room; }
+    uint8_t resetCause() override { return reset_cause; }
     uint32_t micros() override { return now += 4; }
     bool send(const uint8_t* f, uint8_t n) override {
         if (tx_full) return false;
         wire.insert(wire.end(), f, f + n);
         return true;
     }
-    void eepromRead(uint8_t* out, uint8_t n) override { std::memcpy(out, eeprom, n); }
-    bool eepromWrite(const uint8_t* d, uint8_t n) override {
+    void eepromRead(uint16_t a, uint8_t* out, uint8_t n) override { std::memcpy(out, eeprom + a, n); }
+    bool eepromWrite(uint16_t a, const uint8_t* d, uint8_t n) override {
         if (eeprom_fails) return false;
-        std::memcpy(eeprom, d, n);
+        std::memcpy(eeprom + a, d, n);
         return true;
     }
     void margPin(bool h) override {

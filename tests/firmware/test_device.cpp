@@ -85,7 +85,7 @@ TEST_CASE("drivers configure the chips as documented") {
     Hmc5883l hmc(bus);
     REQUIRE(adxl.begin(Adxl345::DEFAULT_TAP, Adxl345::DEFAULT_FREE_FALL));
     CHECK(bus.adxl.regs[0x31] == 0x0B);  // FULL_RES, ±16 g
-    CHECK(bus.adxl.regs[0x2C] == 0x0B);  // 200 Hz
+    CHECK(bus.adxl.regs[0x2C] == 0x0C);  // 400 Hz (200 Hz bandwidth)
     CHECK(bus.adxl.regs[0x2D] == 0x08);  // measure
     CHECK(bus.adxl.regs[0x2E] == 0x64);  // single, double tap, free fall
     CHECK(bus.adxl.regs[0x2F] == 0x9B);  // those on INT1
@@ -95,12 +95,12 @@ TEST_CASE("drivers configure the chips as documented") {
     REQUIRE(itg.begin());
     CHECK(itg.address() == 0x68);
     CHECK(bus.itg.regs[0x15] == 4);     // 1 kHz / 5 = 200 Hz
-    CHECK(bus.itg.regs[0x16] == 0x1A);  // FS_SEL 3, DLPF 98 Hz
+    CHECK(bus.itg.regs[0x16] == 0x1B);  // FS_SEL 3, DLPF 42 Hz (below the 100 Hz Nyquist limit)
     CHECK(bus.itg.regs[0x3E] == 0x01);
     REQUIRE(hmc.begin());
-    CHECK(bus.hmc.regs[0x00] == 0x18);  // 75 Hz
+    CHECK(bus.hmc.regs[0x00] == 0x18);  // one sample per measurement
     CHECK(bus.hmc.regs[0x01] == 0x20);  // gain 1
-    CHECK(bus.hmc.regs[0x02] == 0x00);  // continuous
+    CHECK(bus.hmc.regs[0x02] == 0x01);  // single measurement: the first conversion triggered
 
     // ITG-3200 with AD0 high answers at 0x69
     bus.itg.addr = 0x69;
@@ -111,28 +111,33 @@ TEST_CASE("drivers configure the chips as documented") {
     bus.adxl.regs[0] = 0x00;
     Adxl345 bad(bus);
     CHECK_FALSE(bad.begin(Adxl345::DEFAULT_TAP, Adxl345::DEFAULT_FREE_FALL));
-    // HMC5883L gives a new sample only when RDY is set
+    // HMC5883L single measurement: the conversion triggered by begin() is read TRIGGER_TICKS periods
+    // later, when RDY says it is new, and the next one is triggered
     int16_t m[3] = {1, 2, 3};
     bool fresh = true;
-    REQUIRE(hmc.poll(m, fresh));
+    REQUIRE(hmc.poll(m, fresh));  // converting
     CHECK_FALSE(fresh);
     CHECK(m[0] == 1);
-    bus.setMag(-10, 20, -30);
+    bus.setMag(-10, 20, -30);     // the conversion ends
+    bus.hmc.writes.clear();
     REQUIRE(hmc.poll(m, fresh));
     CHECK(fresh);
     CHECK(m[0] == -10);
     CHECK(m[1] == 20);
     CHECK(m[2] == -30);
-    // a chip (or model) whose STATUS never shows RDY: the data are read every fourth poll anyway
-    bus.setMag(7, 8, 9);
-    bus.hmc.regs[0x09] = 0;
+    REQUIRE(bus.hmc.writes.size() == 1);
+    CHECK(bus.hmc.writes[0] == std::make_pair((uint8_t)0x02, (uint8_t)0x01));  // next conversion
+    // RDY still clear when the data are due: nothing is read as fresh, and after TIMEOUT_TICKS the
+    // chip is triggered again (a lost trigger does not stop the magnetometer)
+    bus.hmc.writes.clear();
     int fresh_count = 0;
-    for (int i = 0; i < 8; ++i) {
+    for (int i = 0; i < Hmc5883l::TIMEOUT_TICKS; ++i) {
         REQUIRE(hmc.poll(m, fresh));
         fresh_count += fresh;
     }
-    CHECK(fresh_count == 2);
-    CHECK(m[0] == 7);
+    CHECK(fresh_count == 0);
+    CHECK(bus.hmc.writes.size() == 1);
+    CHECK(m[0] == -10);
 }
 
 TEST_CASE("calibration maths and the EEPROM image") {
@@ -150,6 +155,8 @@ TEST_CASE("calibration maths and the EEPROM image") {
     c.mag_offset[2] = 50;
     c.mag_soft_iron[0] = 0;
     c.mag_soft_iron[1] = 16384;  // x' = y
+    c.mag_soft_iron[3] = 16384;  // y' = x
+    c.mag_soft_iron[4] = 0;
     applyGyro(c, raw, o);
     CHECK(o[0] == 90);
     applyAccel(c, raw, o);
@@ -193,7 +200,7 @@ TEST_CASE("power-up: a 0x00, HELLO, gyro bias estimated while still, then the de
     CHECK(f[0][0] == PKT_HELLO);
     CHECK(f[0][1] == 0);  // seq 0 after power-up
     const uint8_t* h = f[0].data() + 2;
-    CHECK(h[0] == 1);
+    CHECK(h[0] == 2);     // protocol version
     CHECK(h[4] == 7);     // sensors_found
     CHECK(h[5] == 0xE5);
     CHECK(h[6] == 0x69);
@@ -203,6 +210,10 @@ TEST_CASE("power-up: a 0x00, HELLO, gyro bias estimated while still, then the de
     CHECK(getU16(h + 14) == 200);
     CHECK(getU16(h + 16) == 100);
     CHECK(h[18] == CAL_EEPROM_INVALID);
+    CHECK(h[19] == RESET_POWER_ON);     // reset_cause
+    CHECK(h[20] == MAG_CHIP_HMC5883L);  // mag_chip
+    CHECK(h[21] == BOARD_ALIGNED);      // board_profile (EEPROM erased)
+    CHECK(h[12] == 100);                // mag_rate_hz: a conversion every second period
 
     r.run(200);
     f = r.hal.frames();
@@ -210,11 +221,15 @@ TEST_CASE("power-up: a 0x00, HELLO, gyro bias estimated while still, then the de
     CHECK(count(f, PKT_ORIENTATION) == 100);
     CHECK(count(f, PKT_STATUS) == 1);
     for (size_t i = 0; i < f.size(); ++i) CHECK(f[i][1] == (uint8_t)(i + 1));  // no gaps
+    CHECK(f[0][0] == PKT_ORIENTATION);  // orientation first within a period
+    CHECK(f[1][0] == PKT_RAW_SAMPLE);
+    r.run(10);  // the first window restarts once when the magnetometer's first sample arrives
+    f = r.hal.frames();
     CHECK((int)r.dev.calibration().gyro_bias[0] == 5);
     CHECK((int)r.dev.calibration().gyro_bias[1] == -7);
     CHECK((int)r.dev.calibration().gyro_bias[2] == 1);
     CHECK(r.dev.calibrationState() == (CAL_EEPROM_INVALID | CAL_GYRO_BIAS_VALID | CAL_GYRO_BIAS_ESTIMATED));
-    CHECK(r.hal.pin_pulses == 200);
+    CHECK(r.hal.pin_pulses == 210);
     CHECK(r.hal.pin_high == 0);
     const auto* raw = first(f, PKT_RAW_SAMPLE);
     REQUIRE(raw);
@@ -274,9 +289,10 @@ TEST_CASE("every host command vector gets exactly one REPLY with the listed resu
         if (v.name == "cmd_set_tap") CHECK(r.bus.adxl.regs[0x23] == 240);
         if (v.name == "cmd_set_free_fall") CHECK(r.bus.adxl.regs[0x29] == 30);
         if (v.name == "cmd_save_calibration") CHECK(r.hal.eeprom[0] == CALIBRATION_EEPROM_VERSION);
+        if (v.name == "cmd_set_board") CHECK(r.dev.boardProfile() == BOARD_SEN10724);
         ++n;
     }
-    CHECK(n == 17);
+    CHECK(n == 18);
 }
 
 TEST_CASE("SET_STREAM changes the streams; an invalid one changes nothing") {
@@ -358,20 +374,24 @@ TEST_CASE("a calibration the host sets or loads is not overwritten by a gyro bia
         block.push_back((uint8_t)((uint16_t)v >> 8));
     }
     r.send(frameOf(CMD_SET_CALIBRATION, 1, block));
-    r.run(400);  // past where the power-up window would have ended
+    r.run(300);  // past where the power-up window would have ended, before a tracking window ends
     CHECK((int)r.dev.calibration().gyro_bias[0] == -30);
     CHECK((int)r.dev.calibration().gyro_bias[2] == -28);
     CHECK_FALSE((r.dev.calibrationState() & CAL_GYRO_BIAS_ESTIMATED));
+    // still for longer: tracking moves the host's bias by at most TRACK_STEP_LSB per window
+    r.run(120);
+    CHECK((int)r.dev.calibration().gyro_bias[0] == -30 + SphereDevice::TRACK_STEP_LSB);
+    CHECK((r.dev.calibrationState() & CAL_GYRO_BIAS_ESTIMATED));
     // the same for a CALIBRATION_STEP gyro_bias under way when the stored block is loaded
     r.send(frameOf(CMD_SAVE_CALIBRATION, 2, {}));
     r.send(frameOf(CMD_CALIBRATION_STEP, 3, {1, 1}));
     r.run(100);
     r.send(frameOf(CMD_LOAD_CALIBRATION, 4, {}));
-    r.run(400);
+    r.run(300);
     auto f = r.hal.frames();
     for (auto& p : f)
         if (p[0] == PKT_REPLY) CHECK(p[4] == RESULT_OK);
-    CHECK((int)r.dev.calibration().gyro_bias[0] == -30);
+    CHECK((int)r.dev.calibration().gyro_bias[0] == -30 + SphereDevice::TRACK_STEP_LSB);  // as saved
     r.send(frameOf(CMD_GET_STATUS, 5, {}));
     f = r.hal.frames();
     REQUIRE(f.back()[0] == PKT_STATUS);

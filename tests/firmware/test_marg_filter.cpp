@@ -12,6 +12,7 @@
 
 #include "fixed_math.h"
 #include "madgwick_ref.h"
+#include "input_gates.h"
 #include "marg_filter.h"
 #include "test_paths.h"
 
@@ -40,8 +41,11 @@ static Comparison compare(const std::vector<Sample>& s, uint16_t dt_us, uint16_t
     ref.beta = beta_milli / 1000.0;
     double dt = dt_us * 1e-6, sum2 = 0, mx = 0, last = 0;
     Comparison c{};
+    sphere::InputGates gates;
     for (const Sample& x : s) {
-        bool av = MargFilter::accelPlausible(x.acc), mv = MargFilter::magPlausible(x.mag);
+        int16_t up[3];
+        f.up(up);
+        bool av = gates.accel(x.acc), mv = gates.mag(x.mag, up, false);
         c.acc_rejected += !av;
         c.mag_rejected += !mv;
         f.update(x.gyr, x.acc, x.mag, av, mv);

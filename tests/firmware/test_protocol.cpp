@@ -28,7 +28,8 @@ const std::map<std::string, std::pair<uint8_t, std::vector<FieldSpec>>>& layouts
                                {"adxl345_devid", 'B', 1}, {"itg3200_whoami", 'B', 1}, {"hmc5883l_id", 'B', 3},
                                {"imu_rate_hz", 'H', 1}, {"mag_rate_hz", 'B', 1}, {"stream_mode", 'B', 1},
                                {"raw_rate_hz", 'H', 1}, {"orientation_rate_hz", 'H', 1},
-                               {"calibration_state", 'B', 1}}}},
+                               {"calibration_state", 'B', 1}, {"reset_cause", 'B', 1}, {"mag_chip", 'B', 1},
+                               {"board_profile", 'B', 1}}}},
         {"RAW_SAMPLE", {PKT_RAW_SAMPLE, {{"t_us", 'I', 1}, {"flags", 'B', 1}, {"accel", 'h', 3}, {"gyro", 'h', 3},
                                          {"mag", 'h', 3}}}},
         {"ORIENTATION", {PKT_ORIENTATION, {{"t_us", 'I', 1}, {"flags", 'B', 1}, {"quat", 'h', 4}}}},
@@ -37,7 +38,8 @@ const std::map<std::string, std::pair<uint8_t, std::vector<FieldSpec>>>& layouts
         {"STATUS", {PKT_STATUS, {{"t_us", 'I', 1}, {"sensors_ok", 'B', 1}, {"i2c_errors", 'H', 3},
                                  {"i2c_recoveries", 'H', 1}, {"loop_overruns", 'H', 1}, {"frames_dropped", 'H', 1},
                                  {"rx_errors", 'H', 1}, {"calibration_state", 'B', 1}, {"calibration_step", 'B', 1},
-                                 {"cpu_load", 'H', 1}, {"battery_mv", 'H', 1}}}},
+                                 {"cpu_load", 'H', 1}, {"battery_mv", 'H', 1}, {"probe_failures", 'H', 1},
+                                 {"sensor_losses", 'H', 1}}}},
         {"REPLY", {PKT_REPLY, {{"cmd_seq", 'B', 1}, {"cmd_type", 'B', 1}, {"result", 'B', 1}}}},
         {"GET_HELLO", {CMD_GET_HELLO, {}}},
         {"SET_STREAM", {CMD_SET_STREAM, {{"stream_mode", 'B', 1}, {"raw_rate_hz", 'H', 1},
@@ -57,6 +59,7 @@ const std::map<std::string, std::pair<uint8_t, std::vector<FieldSpec>>>& layouts
         {"IDENTIFY", {CMD_IDENTIFY, {{"seconds", 'B', 1}}}},
         {"REBOOT", {CMD_REBOOT, {{"magic", 'H', 1}}}},
         {"GET_STATUS", {CMD_GET_STATUS, {}}},
+        {"SET_BOARD", {CMD_SET_BOARD, {{"board_profile", 'B', 1}}}},
     };
     return L;
 }
@@ -119,6 +122,9 @@ std::vector<uint8_t> firmwareBody(const std::string& type, const Vector& v) {
         p.raw_rate_hz = (uint16_t)field1(v, "raw_rate_hz");
         p.orientation_rate_hz = (uint16_t)field1(v, "orientation_rate_hz");
         p.calibration_state = (uint8_t)field1(v, "calibration_state");
+        p.reset_cause = (uint8_t)field1(v, "reset_cause");
+        p.mag_chip = (uint8_t)field1(v, "mag_chip");
+        p.board_profile = (uint8_t)field1(v, "board_profile");
         n = writeHello(p, body);
     } else if (type == "RAW_SAMPLE") {
         RawSample p;
@@ -157,6 +163,8 @@ std::vector<uint8_t> firmwareBody(const std::string& type, const Vector& v) {
         p.calibration_step = (uint8_t)field1(v, "calibration_step");
         p.cpu_load = (uint16_t)field1(v, "cpu_load");
         p.battery_mv = (uint16_t)field1(v, "battery_mv");
+        p.probe_failures = (uint16_t)field1(v, "probe_failures");
+        p.sensor_losses = (uint16_t)field1(v, "sensor_losses");
         n = writeStatus(p, body);
     } else if (type == "REPLY") {
         auto data = parseHex(v.get("data"));
@@ -388,5 +396,67 @@ TEST_CASE("command ranges: an invalid command gets a reason") {
     CHECK(parse(payload(CMD_REBOOT, {0xB0, 0x07})) == RESULT_BAD_VALUE);
     CHECK(parse(payload(CMD_GET_STATUS, {1})) == RESULT_BAD_LENGTH);
     CHECK(parse(payload(0x02, {})) == RESULT_UNKNOWN_COMMAND);  // a device type sent as a command
-    CHECK(parse(payload(0x4E, {})) == RESULT_UNKNOWN_COMMAND);
+    CHECK(parse(payload(0x4F, {})) == RESULT_UNKNOWN_COMMAND);
+    CHECK(parse(payload(CMD_SET_BOARD, {2})) == RESULT_OK);
+    CHECK(c.set_board.board_profile == 2);
+    CHECK(parse(payload(CMD_SET_BOARD, {3})) == RESULT_BAD_VALUE);
+}
+
+TEST_CASE("SET_CALIBRATION values outside the spec's ranges are bad_value") {
+    Calibration ok;
+    ok.setDefaults();
+    Command c;
+    auto parseCal = [&](const Calibration& cal) {
+        std::vector<uint8_t> p = {CMD_SET_CALIBRATION, 1};
+        const uint8_t* b = (const uint8_t*)&cal;
+        p.insert(p.end(), b, b + CALIBRATION_BLOCK_LEN);
+        uint16_t crc = crc16(p.data(), p.size());
+        p.push_back((uint8_t)crc);
+        p.push_back((uint8_t)(crc >> 8));
+        return CommandParser::parse(p.data(), (uint8_t)p.size(), c);
+    };
+    CHECK(parseCal(ok) == RESULT_OK);
+    Calibration bad = ok;
+    bad.accel_scale[1] = 0;  // scale 0
+    CHECK(parseCal(bad) == RESULT_BAD_VALUE);
+    bad = ok;
+    bad.accel_scale[2] = 8191;  // just under 0.5
+    CHECK(parseCal(bad) == RESULT_BAD_VALUE);
+    bad = ok;
+    bad.gyro_bias[0] = 1001;
+    CHECK(parseCal(bad) == RESULT_BAD_VALUE);
+    bad = ok;
+    bad.accel_offset[2] = -513;
+    CHECK(parseCal(bad) == RESULT_BAD_VALUE);
+    bad = ok;
+    bad.mag_offset[1] = 2049;
+    CHECK(parseCal(bad) == RESULT_BAD_VALUE);
+    bad = ok;  // a singular soft-iron matrix: two equal rows
+    bad.mag_soft_iron[3] = 16384;
+    bad.mag_soft_iron[4] = 0;
+    CHECK(parseCal(bad) == RESULT_BAD_VALUE);
+    bad = ok;  // near-singular: determinant 1/32
+    bad.mag_soft_iron[8] = 16384 / 32;
+    CHECK(parseCal(bad) == RESULT_BAD_VALUE);
+    Calibration swap = ok;  // a reflection (x and y swapped) is invertible
+    swap.mag_soft_iron[0] = swap.mag_soft_iron[4] = 0;
+    swap.mag_soft_iron[1] = swap.mag_soft_iron[3] = 16384;
+    CHECK(parseCal(swap) == RESULT_OK);
+    // the limits themselves are valid
+    Calibration edge = ok;
+    edge.gyro_bias[0] = -1000;
+    edge.accel_offset[0] = 512;
+    edge.accel_scale[0] = 8192;
+    edge.accel_scale[1] = 32767;
+    edge.mag_offset[2] = -2048;
+    CHECK(parseCal(edge) == RESULT_OK);
+    // an EEPROM image with such values is refused at boot like one with a bad CRC
+    uint8_t img[CALIBRATION_EEPROM_LEN];
+    bad = ok;
+    bad.accel_scale[0] = 0;
+    writeCalibrationImage(bad, img);  // version and CRC right
+    Calibration out;
+    out.setDefaults();
+    CHECK_FALSE(readCalibrationImage(img, out));
+    CHECK(out.accelIsDefault());
 }

@@ -63,3 +63,25 @@ def test_packet_built_from_vector_fields_matches_wire():
             fields["data"] = bytes.fromhex(fields["data"])
         packet = cls(**fields, seq=v.seq)
         assert encode_frame(packet, v.seq) == v.wire, v.name
+
+
+def test_version_1_bodies_still_decode():
+    """Version 2 appended fields to HELLO and STATUS: a version-1 body (their prefix) decodes with the
+    new fields at their defaults, so captures from version-1 firmware still play."""
+    from sphere.protocol.framing import encode_payload
+    from sphere.protocol.packets import SUPPORTED_VERSIONS, Hello, Status
+
+    assert SUPPORTED_VERSIONS == (1, 2)
+    v2 = Hello(2, (0, 2, 0), 7, 0xE5, 0x69, b"H43", 200, 100, 7, 200, 100, 0x21, 0x08, 1, 2)
+    v1_body = v2.pack_body()[:19]
+    packets, stats = decode_all(encode_payload(Hello.TYPE, 0, v1_body), "device")
+    assert stats.errors == 0 and len(packets) == 1
+    hello = packets[0]
+    assert hello.protocol_version == 2 and hello.hmc5883l_id == tuple(b"H43") and hello.calibration_state == 0x21
+    assert (hello.reset_cause, hello.mag_chip, hello.board_profile) == (0, 0, 0)
+    status = Status(1000, 7, (1, 2, 3), 4, 5, 6, 7, 1, 0, 300, 0, 9, 10)
+    packets, stats = decode_all(encode_payload(Status.TYPE, 1, status.pack_body()[:25]), "device")
+    assert stats.errors == 0 and packets[0].i2c_errors == (1, 2, 3) and packets[0].probe_failures == 0
+    # any other length is still a bad length
+    packets, stats = decode_all(encode_payload(Hello.TYPE, 2, v2.pack_body()[:20]), "device")
+    assert packets == [] and stats.bad_lengths == 1

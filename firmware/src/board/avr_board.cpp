@@ -7,11 +7,24 @@
 #include <util/atomic.h>
 #include <util/delay.h>
 
+// MCUSR as the chip reset: captured in .init3, before main() and the Arduino core run. Optiboot (the
+// Nano's newer bootloader) clears MCUSR itself and hands its copy over in r2, which nothing touches
+// before .init3; the old bootloader leaves MCUSR as it was.
+static uint8_t g_reset_cause __attribute__((section(".noinit")));
+extern "C" void captureResetCause() __attribute__((naked, used, section(".init3")));
+extern "C" void captureResetCause() {
+    uint8_t from_bootloader;
+    asm volatile("mov %0, r2" : "=r"(from_bootloader));
+    uint8_t m = MCUSR;
+    MCUSR = 0;  // a watchdog reset leaves WDRF set, which keeps the watchdog on: clear it, then stop it
+    wdt_disable();
+    g_reset_cause = (uint8_t)((m ? m : from_bootloader) & 0x0F);
+}
+
 namespace {
 volatile uint8_t g_ticks = 0;
 volatile bool g_int_seen = false;
 volatile uint32_t g_int_t_us = 0;
-const uint16_t EEPROM_CALIBRATION_ADDR = 0;
 
 }  // namespace
 
@@ -64,12 +77,19 @@ bool AvrBoard::send(const uint8_t* frame, uint8_t len) {
     return true;
 }
 
-void AvrBoard::eepromRead(uint8_t* out, uint8_t len) {
-    eeprom_read_block(out, (const void*)EEPROM_CALIBRATION_ADDR, len);
+uint8_t AvrBoard::txRoom() {
+    int n = Serial.availableForWrite();
+    return (uint8_t)(n > 255 ? 255 : n);
 }
 
-bool AvrBoard::eepromWrite(const uint8_t* data, uint8_t len) {
-    eeprom_update_block(data, (void*)EEPROM_CALIBRATION_ADDR, len);  // writes only the bytes that differ
+uint8_t AvrBoard::resetCause() { return g_reset_cause; }
+
+void AvrBoard::eepromRead(uint16_t addr, uint8_t* out, uint8_t len) {
+    eeprom_read_block(out, (const void*)addr, len);
+}
+
+bool AvrBoard::eepromWrite(uint16_t addr, const uint8_t* data, uint8_t len) {
+    eeprom_update_block(data, (void*)addr, len);  // writes only the bytes that differ
     eeprom_busy_wait();
     return true;  // SphereDevice reads the block back to verify
 }
@@ -78,15 +98,17 @@ void AvrBoard::margPin(bool high) {
     // While the update runs, the UART's transmit interrupt is held back, so the update is not stretched
     // by it and the pulse measures the update (Timer0's 1 kHz tick for micros() may still fall inside:
     // about 80 cycles). The UART meanwhile finishes the byte in its shift register; receive and the
-    // ADXL345's INT0 stay enabled.
-    static uint8_t held;
-    if (high) {
-        held = (uint8_t)(UCSR0B & _BV(UDRIE0));
-        UCSR0B &= (uint8_t)~_BV(UDRIE0);
-        if (!identifying_) PORTB |= _BV(PB5);
-    } else {
-        if (!identifying_) PORTB &= (uint8_t)~_BV(PB5);
-        UCSR0B |= held;
+    // ADXL345's INT0 stay enabled. Both steps are atomic, and the interrupt comes back only when the
+    // transmit buffer holds bytes: the core's interrupt switches itself off when the buffer runs empty,
+    // and switching it on over an empty buffer would send the whole stale ring again.
+    ATOMIC_BLOCK(ATOMIC_RESTORESTATE) {
+        if (high) {
+            UCSR0B &= (uint8_t)~_BV(UDRIE0);
+            if (!identifying_) PORTB |= _BV(PB5);
+        } else {
+            if (!identifying_) PORTB &= (uint8_t)~_BV(PB5);
+            if (Serial.availableForWrite() < SERIAL_TX_BUFFER_SIZE - 1) UCSR0B |= _BV(UDRIE0);
+        }
     }
 }
 

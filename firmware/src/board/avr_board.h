@@ -19,8 +19,10 @@ public:
 
     uint32_t micros() override;
     bool send(const uint8_t* frame, uint8_t len) override;
-    void eepromRead(uint8_t* out, uint8_t len) override;
-    bool eepromWrite(const uint8_t* data, uint8_t len) override;
+    uint8_t txRoom() override;
+    uint8_t resetCause() override;
+    void eepromRead(uint16_t addr, uint8_t* out, uint8_t len) override;
+    bool eepromWrite(uint16_t addr, const uint8_t* data, uint8_t len) override;
     void margPin(bool high) override;
     bool adxlInterrupt(uint32_t& t_us) override;
     void identify(uint8_t seconds) override;

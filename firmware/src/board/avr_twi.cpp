@@ -40,6 +40,10 @@ void AvrTwi::stop() {
 
 void AvrTwi::recover() {
     ++recoveries_;
+    clearBus();
+}
+
+void AvrTwi::clearBus() {
     TWCR = 0;  // release the pins to the port
     DDRC &= (uint8_t)~_BV(SDA_BIT);
     PORTC |= _BV(SDA_BIT);

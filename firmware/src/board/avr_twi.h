@@ -12,7 +12,10 @@ public:
     bool writeRegisters(uint8_t addr, uint8_t reg, const uint8_t* data, uint8_t len) override;
     bool readRegisters(uint8_t addr, uint8_t reg, uint8_t* out, uint8_t len) override;
     uint16_t recoveries() const { return recoveries_; }
-    void recover();
+    void recover();   // clearBus(), counted in recoveries()
+    // Up to nine SCL pulses while a slave holds SDA low (one left mid-read by a reset), then a STOP;
+    // the TWI is enabled again. Run once at power-up before the sensors are probed.
+    void clearBus();
 
 private:
     bool wait();                 // TWINT within the bound

@@ -17,7 +17,7 @@ static const uint8_t ADXL_SETUP[][2] SPHERE_TABLE = {
     {Adxl345::POWER_CTL, 0},
     {Adxl345::INT_ENABLE, 0},
     {Adxl345::DATA_FORMAT, Adxl345::DATA_FORMAT_FULL_RES_16G},
-    {Adxl345::BW_RATE, Adxl345::BW_RATE_200HZ},
+    {Adxl345::BW_RATE, Adxl345::BW_RATE_400HZ},
     {Adxl345::INT_MAP, (uint8_t)~Adxl345::EVENT_INTS},
 };
 // after the latched INT_SOURCE was cleared: the event interrupts on, then measurement

@@ -1,5 +1,6 @@
 // ADXL345 accelerometer (Analog Devices, rev. E) at 0x53 (SDO low): full resolution (3.9 mg/LSB,
-// 256 LSB/g) at ±16 g so taps do not saturate, 200 Hz output, tap / double tap / free fall engines
+// 256 LSB/g) at ±16 g so taps do not saturate, 400 Hz output (200 Hz bandwidth, datasheet Table 7),
+// read at 200 Hz, the newest of two samples, tap / double tap / free fall engines
 // routed to INT1 (wired to the Nano's D2).
 #pragma once
 #include <stdint.h>
@@ -31,7 +32,7 @@ public:
         INT_ENABLE = 0x2E, INT_MAP = 0x2F, INT_SOURCE = 0x30, DATA_FORMAT = 0x31, DATAX0 = 0x32,
     };
     enum IntBit : uint8_t { INT_DATA_READY = 0x80, INT_SINGLE_TAP = 0x40, INT_DOUBLE_TAP = 0x20, INT_FREE_FALL = 0x04 };
-    static const uint8_t BW_RATE_200HZ = 0x0B;
+    static const uint8_t BW_RATE_400HZ = 0x0C;
     static const uint8_t DATA_FORMAT_FULL_RES_16G = 0x0B;  // FULL_RES | range ±16 g, INT active high
     static const uint8_t POWER_CTL_MEASURE = 0x08;
     static const uint8_t EVENT_INTS = INT_SINGLE_TAP | INT_DOUBLE_TAP | INT_FREE_FALL;

@@ -32,6 +32,24 @@ bool Calibration::magIsDefault() const {
     return true;
 }
 
+static bool within(const int16_t* v, uint8_t n, int16_t lo, int16_t hi) {
+    for (uint8_t i = 0; i < n; ++i)
+        if (v[i] < lo || v[i] > hi) return false;
+    return true;
+}
+
+bool Calibration::valid() const {
+    if (!within(gyro_bias, 3, -1000, 1000) || !within(accel_offset, 3, -512, 512) ||
+        !within(accel_scale, 3, Q14_ONE / 2, 32767) || !within(mag_offset, 3, -2048, 2048))
+        return false;
+    // determinant from Q7 entries (|entry| ≤ 256): each triple product < 2^24, the sum < 2^27
+    int32_t m[9];
+    for (uint8_t i = 0; i < 9; ++i) m[i] = mag_soft_iron[i] >> 7;
+    int32_t det = m[0] * (m[4] * m[8] - m[5] * m[7]) - m[1] * (m[3] * m[8] - m[5] * m[6]) +
+                  m[2] * (m[3] * m[7] - m[4] * m[6]);  // Q21
+    return det >= (1l << 17) || det <= -(1l << 17);  // |det| ≥ 1/16
+}
+
 void writeCalibrationBlock(const Calibration& c, uint8_t* out) {
     const uint8_t* p = (const uint8_t*)&c;
     for (uint8_t i = 0; i < CALIBRATION_BLOCK_LEN; ++i) out[i] = p[i];
@@ -51,7 +69,10 @@ void writeCalibrationImage(const Calibration& c, uint8_t* image) {
 bool readCalibrationImage(const uint8_t* image, Calibration& c) {
     if (image[0] != CALIBRATION_EEPROM_VERSION) return false;
     if (crc16(image, 1 + CALIBRATION_BLOCK_LEN) != getU16(image + 1 + CALIBRATION_BLOCK_LEN)) return false;
-    readCalibrationBlock(image + 1, c);
+    Calibration read;
+    readCalibrationBlock(image + 1, read);
+    if (!read.valid()) return false;
+    c = read;
     return true;
 }
 

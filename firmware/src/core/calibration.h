@@ -21,6 +21,9 @@ struct __attribute__((packed)) Calibration {
     bool accelIsDefault() const;
     bool magIsDefault() const;
     bool gyroIsDefault() const;
+    // The ranges of protocol/spec.md §5.2: |gyro_bias| ≤ 1000, |accel_offset| ≤ 512, accel_scale
+    // 0.5 … 2.0, |mag_offset| ≤ 2048, |det mag_soft_iron| ≥ 1/16.
+    bool valid() const;
 };
 
 // The struct is the block: 21 little-endian int16 in the order of §5.2 (little-endian targets only).
@@ -31,7 +34,8 @@ void readCalibrationBlock(const uint8_t* in, Calibration& c);
 
 // EEPROM image of CALIBRATION_EEPROM_LEN bytes.
 void writeCalibrationImage(const Calibration& c, uint8_t* image);
-// True and `c` filled when the image has the right version and CRC; otherwise false and `c` untouched.
+// True and `c` filled when the image has the right version and CRC and valid values; otherwise false
+// and `c` untouched.
 bool readCalibrationImage(const uint8_t* image, Calibration& c);
 
 // Applying the calibration (spec §5.2). Results saturate to int16.

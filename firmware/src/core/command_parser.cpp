@@ -1,5 +1,6 @@
 #include "command_parser.h"
 
+#include "board_profile.h"
 #include "bytes.h"
 #include "packets.h"
 
@@ -57,6 +58,11 @@ ResultCode CommandParser::parse(const uint8_t* payload, uint8_t len, Command& cm
             break;
         case CMD_SET_CALIBRATION:
             readCalibrationBlock(b, cmd.calibration);
+            if (!cmd.calibration.valid()) return RESULT_BAD_VALUE;
+            break;
+        case CMD_SET_BOARD:
+            if (b[0] >= BOARD_PROFILE_COUNT) return RESULT_BAD_VALUE;
+            cmd.set_board.board_profile = b[0];
             break;
         case CMD_IDENTIFY:
             if (b[0] < 1 || b[0] > 60) return RESULT_BAD_VALUE;

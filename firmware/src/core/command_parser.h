@@ -21,7 +21,6 @@ enum ResultCode : uint8_t {
 };
 
 const uint16_t IMU_RATE_HZ = 200;
-const uint8_t MAG_RATE_HZ = 75;
 const uint16_t REBOOT_MAGIC = 0xB007;
 const uint16_t BETA_MAX_MILLI = 2000;
 
@@ -36,6 +35,7 @@ struct Command {
         struct { uint8_t step, action; } calibration_step;
         struct { uint8_t seconds; } identify;
         struct { uint16_t magic; } reboot;
+        struct { uint8_t board_profile; } set_board;
     };
     Calibration calibration;  // SET_CALIBRATION
 };

@@ -56,6 +56,8 @@ public:
     uint8_t seq() const { return buf_[1]; }
     const uint8_t* body() const { return buf_ + 2; }
     uint8_t bodyLength() const { return (uint8_t)(len_ - 4); }
+    // Bytes of an unfinished chunk are buffered (the next 0x00 ends a frame or an error).
+    bool pending() const { return fill_ != 0 || overflowed_; }
 
     // Counters of §2.1 (wrap at 65536).
     uint16_t oversize, framing_errors, crc_errors;

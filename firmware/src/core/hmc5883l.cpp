@@ -10,11 +10,11 @@ void Hmc5883l::decode(const uint8_t r[6], int16_t out[3]) {
     out[1] = (int16_t)(((uint16_t)r[4] << 8) | r[5]);  // Y
 }
 
-// 75 Hz single-sample output, ±1.3 Ga (1090 LSB/gauss), continuous measurement
+// one sample per measurement, ±1.3 Ga (1090 LSB/gauss), then the first single measurement
 static const uint8_t HMC_SETUP[][2] SPHERE_TABLE = {
     {Hmc5883l::CONFIG_A, Hmc5883l::CONFIG_A_75HZ},
     {Hmc5883l::CONFIG_B, Hmc5883l::CONFIG_B_GAIN1},
-    {Hmc5883l::MODE, Hmc5883l::MODE_CONTINUOUS},
+    {Hmc5883l::MODE, Hmc5883l::MODE_SINGLE},
 };
 
 bool Hmc5883l::begin() {
@@ -24,19 +24,26 @@ bool Hmc5883l::begin() {
         return false;
     }
     if (!idValid(id_)) return false;
+    since_trigger_ = 0;
     return bus_.writeSequence(ADDRESS, HMC_SETUP, sizeof HMC_SETUP / 2);
 }
 
 bool Hmc5883l::poll(int16_t out[3], bool& fresh) {
     fresh = false;
+    if (since_trigger_ < 255) ++since_trigger_;
+    if (since_trigger_ < TRIGGER_TICKS) return true;  // converting
     uint8_t status;
     if (!bus_.readRegister(ADDRESS, STATUS, status)) return false;
-    if (!(status & STATUS_RDY) && ++idle_polls_ < POLLS_WITHOUT_RDY) return true;
-    idle_polls_ = 0;
-    uint8_t raw[6];
-    if (!bus_.readRegisters(ADDRESS, DATA_X_MSB, raw, 6)) return false;
-    decode(raw, out);
-    fresh = true;
+    if (status & STATUS_RDY) {
+        uint8_t raw[6];
+        if (!bus_.readRegisters(ADDRESS, DATA_X_MSB, raw, 6)) return false;
+        decode(raw, out);
+        fresh = true;
+    } else if (since_trigger_ < TIMEOUT_TICKS) {
+        return true;  // not ready yet
+    }
+    if (!bus_.writeRegister(ADDRESS, MODE, MODE_SINGLE)) return false;
+    since_trigger_ = 0;
     return true;
 }
 

@@ -36,6 +36,9 @@ static inline int16_t r15(int32_t q28) { return rshift15(q28); }
 static inline int16_t r13(int32_t q28) { return rshift13(q28); }
 static inline int16_t q14of(int32_t q30) { return hi16(q30 + 0x8000l); }
 
+// ½·dt·(π/180/14.375)·2^32 for dt ≤ 10 ms: dt_us · 2.607355 = dt_us · 170877/2^16
+static int16_t gyroK(uint16_t dt_us) { return (int16_t)(((uint32_t)dt_us * 170877ul + 32768ul) >> 16); }
+
 // v (int32) × k/2^16 (k < 2^15) → int32, exact to 1 LSB without a 64-bit product
 static inline int32_t scaleQ16(int32_t v, int16_t k) {
     int16_t hi = hi16(v);
@@ -127,11 +130,17 @@ static __attribute__((noinline)) bool gradient(const int16_t* q, const int16_t* 
 }
 
 uint8_t MargFilter::update(const int16_t g[3], const int16_t a[3], const int16_t m[3], bool acc_valid,
-                           bool mag_valid) {
+                           bool mag_valid, uint16_t dt_us) {
     uint8_t flags = 0;
     // state in Q14 for the products (rounded)
     int16_t q[4] = {q14of(q_[0]), q14of(q_[1]), q14of(q_[2]), q14of(q_[3])};
-    gyroStep(q, g, (int16_t)gyro_k_, q_);
+    int16_t k = (int16_t)gyro_k_;
+    if (dt_us && dt_us != dt_us_) {  // after an overrun: the real interval, in steps of ≤ 10 ms
+        if (dt_us > MAX_DT_US) dt_us = MAX_DT_US;
+        for (; dt_us > 10000; dt_us = (uint16_t)(dt_us - 10000)) gyroStep(q, g, gyroK(10000), q_);
+        k = gyroK(dt_us);
+    }
+    gyroStep(q, g, k, q_);
 
     int16_t an[3], mn[3], sn[4];
     if (!acc_valid || !normaliseQ14(a, 3, an)) {
@@ -151,16 +160,12 @@ uint8_t MargFilter::update(const int16_t g[3], const int16_t a[3], const int16_t
     return flags;
 }
 
-bool MargFilter::accelPlausible(const int16_t a[3]) {
-    int32_t n2 = mac3(a[0], a[0], a[1], a[1], a[2], a[2]);
-    return n2 >= 128l * 128l && n2 <= 384l * 384l;
+void MargFilter::up(int16_t r2[3]) const {
+    int16_t q0 = q14of(q_[0]), q1 = q14of(q_[1]), q2 = q14of(q_[2]), q3 = q14of(q_[3]);
+    r2[0] = r13(mac2(q1, q3, (int16_t)-q0, q2));
+    r2[1] = r13(mac2(q0, q1, q2, q3));
+    r2[2] = (int16_t)(16384 - r13(mac2(q1, q1, q2, q2)));
 }
 
-bool MargFilter::magPlausible(const int16_t m[3]) {
-    for (uint8_t i = 0; i < 3; ++i)
-        if (m[i] == -4096) return false;  // HMC5883L overflow
-    int32_t n2 = mac3(m[0], m[0], m[1], m[1], m[2], m[2]);
-    return n2 >= 164l * 164l && n2 <= 981l * 981l;
-}
 
 }  // namespace sphere

@@ -27,17 +27,18 @@ public:
 
     // One update. `acc_valid` false or an all-zero accelerometer: gyro only (no gradient step).
     // `mag_valid` false or an all-zero magnetometer: gravity only (IMU step).
+    // `dt_us`: the time since the previous update when it was not the sample period (after an
+    // overrun; 0 = the period). Up to MAX_DT_US is integrated, in steps of at most 10 ms.
     // Returns ORIENTATION flags: bit 0 mag_used, bit 1 accel_rejected.
     uint8_t update(const int16_t gyro[3], const int16_t accel[3], const int16_t mag[3], bool acc_valid,
-                   bool mag_valid);
+                   bool mag_valid, uint16_t dt_us = 0);
+    static const uint16_t MAX_DT_US = 50000;
+    // The earth's vertical (NWU z) in the sensor frame: the bottom row of the rotation, Q14.
+    void up(int16_t out[3]) const;
 
     const int32_t* quaternionQ30() const { return q_; }
     void quaternionQ14(int16_t out[4]) const;
 
-    // Plausibility gates the device applies before update() (accelerometer at 256 LSB/g,
-    // magnetometer at 1090 LSB/gauss): norm within 0.5 … 1.5 g, and 0.15 … 0.90 gauss.
-    static bool accelPlausible(const int16_t accel_lsb[3]);
-    static bool magPlausible(const int16_t mag_lsb[3]);
 
 private:
     int32_t q_[4];         // Q30 state

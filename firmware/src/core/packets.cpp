@@ -26,6 +26,7 @@ int bodyLength(uint8_t type) {
         case CMD_IDENTIFY: return 1;
         case CMD_REBOOT: return 2;
         case CMD_GET_STATUS: return 0;
+        case CMD_SET_BOARD: return 1;
         default: return -1;
     }
 }

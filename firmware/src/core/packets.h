@@ -1,4 +1,4 @@
-// Packet types and bodies of protocol/spec.md §4–§5 (version 1). Field names are the spec's.
+// Packet types and bodies of protocol/spec.md §4–§5 (version 2). Field names are the spec's.
 #pragma once
 #include <stdint.h>
 
@@ -6,8 +6,8 @@
 
 namespace sphere {
 
-const uint8_t PROTOCOL_VERSION = 1;
-const uint8_t FIRMWARE_VERSION_MAJOR = 0, FIRMWARE_VERSION_MINOR = 1, FIRMWARE_VERSION_PATCH = 0;
+const uint8_t PROTOCOL_VERSION = 2;
+const uint8_t FIRMWARE_VERSION_MAJOR = 0, FIRMWARE_VERSION_MINOR = 2, FIRMWARE_VERSION_PATCH = 0;
 
 enum PacketType : uint8_t {
     PKT_HELLO = 0x01,
@@ -30,9 +30,10 @@ enum PacketType : uint8_t {
     CMD_IDENTIFY = 0x4B,
     CMD_REBOOT = 0x4C,
     CMD_GET_STATUS = 0x4D,
+    CMD_SET_BOARD = 0x4E,
 };
 
-const uint8_t HELLO_LEN = 19, RAW_SAMPLE_LEN = 23, ORIENTATION_LEN = 13, EVENT_LEN = 8, STATUS_LEN = 25;
+const uint8_t HELLO_LEN = 22, RAW_SAMPLE_LEN = 23, ORIENTATION_LEN = 13, EVENT_LEN = 8, STATUS_LEN = 29;
 const uint8_t REPLY_LEN = 3, REPLY_CALIBRATION_LEN = 3 + CALIBRATION_BLOCK_LEN + 1;
 
 // Body length of a packet type, -1 when this firmware does not know the type. REPLY: the length
@@ -44,8 +45,10 @@ const uint8_t SENSOR_ADXL345 = 1, SENSOR_ITG3200 = 2, SENSOR_HMC5883L = 4;
 
 // RAW_SAMPLE flags
 const uint8_t RAW_ACCEL_OK = 1, RAW_GYRO_OK = 2, RAW_MAG_OK = 4, RAW_MAG_FRESH = 8, RAW_TAP_ACTIVE = 16;
+// a sensor's value held from its last good read after a failed transaction: RAW_ACCEL_STALE << index
+const uint8_t RAW_ACCEL_STALE = 32, RAW_GYRO_STALE = 64, RAW_MAG_STALE = 128;
 // ORIENTATION flags
-const uint8_t ORI_MAG_USED = 1, ORI_ACCEL_REJECTED = 2, ORI_MAG_REJECTED = 4, ORI_CONVERGING = 8;
+const uint8_t ORI_MAG_USED = 1, ORI_ACCEL_REJECTED = 2, ORI_MAG_REJECTED = 4, ORI_CONVERGING = 8, ORI_GYRO_MISSING = 16;
 // EVENT kinds
 const uint8_t EVENT_SINGLE_TAP = 1, EVENT_DOUBLE_TAP = 2, EVENT_FREE_FALL = 3;
 // stream_mode bits
@@ -53,6 +56,10 @@ const uint8_t STREAM_RAW = 1, STREAM_ORIENTATION = 2, STREAM_STATUS = 4;
 // calibration_state bits
 const uint8_t CAL_GYRO_BIAS_VALID = 1, CAL_ACCEL_CALIBRATED = 2, CAL_MAG_CALIBRATED = 4, CAL_FROM_EEPROM = 8,
               CAL_EEPROM_INVALID = 16, CAL_GYRO_BIAS_ESTIMATED = 32;
+// HELLO reset_cause bits (the ATmega328P's MCUSR: PORF, EXTRF, BORF, WDRF)
+const uint8_t RESET_POWER_ON = 1, RESET_EXTERNAL = 2, RESET_BROWN_OUT = 4, RESET_WATCHDOG = 8;
+// HELLO mag_chip
+const uint8_t MAG_CHIP_NONE = 0, MAG_CHIP_HMC5883L = 1, MAG_CHIP_QMC5883L = 2;
 
 struct __attribute__((packed)) Hello {
     uint8_t protocol_version;
@@ -67,6 +74,9 @@ struct __attribute__((packed)) Hello {
     uint16_t raw_rate_hz;
     uint16_t orientation_rate_hz;
     uint8_t calibration_state;
+    uint8_t reset_cause;
+    uint8_t mag_chip;
+    uint8_t board_profile;
 };
 
 struct __attribute__((packed)) RawSample {
@@ -103,15 +113,17 @@ struct __attribute__((packed)) Status {
     uint8_t calibration_step;
     uint16_t cpu_load;
     uint16_t battery_mv;
+    uint16_t probe_failures;
+    uint16_t sensor_losses;
 };
 
 // The packet structs are packed and little-endian on both the ATmega328P and the native test hosts,
 // so their bytes are the bodies of §4 as they stand (checked below and by the golden vectors).
-static_assert(sizeof(Hello) == HELLO_LEN, "HELLO body is 19 bytes");
+static_assert(sizeof(Hello) == HELLO_LEN, "HELLO body is 22 bytes");
 static_assert(sizeof(RawSample) == RAW_SAMPLE_LEN, "RAW_SAMPLE body is 23 bytes");
 static_assert(sizeof(Orientation) == ORIENTATION_LEN, "ORIENTATION body is 13 bytes");
 static_assert(sizeof(Event) == EVENT_LEN, "EVENT body is 8 bytes");
-static_assert(sizeof(Status) == STATUS_LEN, "STATUS body is 25 bytes");
+static_assert(sizeof(Status) == STATUS_LEN, "STATUS body is 29 bytes");
 #if defined(__BYTE_ORDER__) && __BYTE_ORDER__ != __ORDER_LITTLE_ENDIAN__
 #error "packet bodies are copied from packed structs: a little-endian target is required"
 #endif

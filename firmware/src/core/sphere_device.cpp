@@ -10,7 +10,7 @@ namespace sphere {
 // flash (firmware/MARG_FILTER.md, "Flash and RAM").
 
 SphereDevice::SphereDevice(I2cBus& bus, DeviceHal& hal)
-    : bus_(bus), hal_(hal), adxl_(bus), itg_(bus), hmc_(bus), filter_(MargFilter::DEFAULT_DT_US) {
+    : bus_(bus), hal_(hal), adxl_(bus), itg_(bus), hmc_(bus), qmc_(bus), filter_(MargFilter::DEFAULT_DT_US) {
     cal_.setDefaults();
     tap_ = Adxl345::DEFAULT_TAP;
     ff_ = Adxl345::DEFAULT_FREE_FALL;
@@ -24,19 +24,33 @@ SphereDevice::SphereDevice(I2cBus& bus, DeviceHal& hal)
     beta_milli_ = MargFilter::DEFAULT_BETA_MILLI;
 }
 
-void SphereDevice::probe(uint8_t sensor) {
-    bool ok = false;
-    if (sensor == SENSOR_ADXL345) ok = adxl_.begin(tap_, ff_);
-    else if (sensor == SENSOR_ITG3200) ok = itg_.begin();
-    else if (sensor == SENSOR_HMC5883L) ok = hmc_.begin();
-    if (ok) sensors_ok_ |= sensor;
-    else sensors_ok_ &= (uint8_t)~sensor;
+// Probes sensor `i` (0 ADXL345, 1 ITG-3200, 2 magnetometer: HMC5883L, else QMC5883L) and configures it.
+bool SphereDevice::probe(uint8_t i) {
+    bool ok;
+    if (i == 0) {
+        ok = adxl_.begin(tap_, ff_);
+    } else if (i == 1) {
+        ok = itg_.begin();
+    } else {
+        mag_chip_ = MAG_CHIP_HMC5883L;
+        ok = hmc_.begin();
+        if (!ok) {
+            mag_chip_ = MAG_CHIP_QMC5883L;
+            ok = qmc_.begin();
+        }
+        if (!ok) mag_chip_ = MAG_CHIP_NONE;
+        mag_seen_ = false;
+    }
+    uint8_t bit = (uint8_t)(1u << i);
+    if (ok) sensors_ok_ |= bit;
+    else sensors_ok_ &= (uint8_t)~bit;
+    return ok;
 }
 
 __attribute__((noinline)) void SphereDevice::begin() {
-    probe(SENSOR_ADXL345);
-    probe(SENSOR_ITG3200);
-    probe(SENSOR_HMC5883L);
+    reset_cause_ = hal_.resetCause();
+    loadBoardProfile();
+    for (uint8_t i = 0; i < 3; ++i) probe(i);
     sensors_found_ = sensors_ok_;
     guard_.setThreshold(tap_.thresh_tap);
     loadCalibration(true);
@@ -52,9 +66,15 @@ __attribute__((noinline)) void SphereDevice::begin() {
     sendHello();
 }
 
+void SphereDevice::loadBoardProfile() {
+    uint8_t b[2];
+    hal_.eepromRead(BOARD_EEPROM_ADDR, b, 2);
+    board_profile_ = (b[0] < BOARD_PROFILE_COUNT && b[1] == (uint8_t)~b[0]) ? b[0] : BOARD_ALIGNED;
+}
+
 void SphereDevice::loadCalibration(bool at_start) {
     uint8_t image[CALIBRATION_EEPROM_LEN];
-    hal_.eepromRead(image, CALIBRATION_EEPROM_LEN);
+    hal_.eepromRead(0, image, CALIBRATION_EEPROM_LEN);
     Calibration c;
     if (readCalibrationImage(image, c)) {
         cal_ = c;
@@ -73,47 +93,67 @@ void SphereDevice::updateCalState() {
     if (!cal_.magIsDefault()) cal_state_ |= CAL_MAG_CALIBRATED;
 }
 
-void SphereDevice::i2cError(uint8_t i) {
-    ++status_.i2c_errors[i];
-    sensors_ok_ &= (uint8_t)~(1u << i);
+// One read of sensor i into raw_[i] (body frame). False on a bus failure (raw_[i] unchanged).
+bool SphereDevice::readSensor(uint8_t i, bool& fresh) {
+    int16_t v[3];
+    bool ok;
+    fresh = true;
+    if (i == 0) ok = adxl_.readAccel(v);
+    else if (i == 1) ok = itg_.readGyro(v);
+    else {
+        v[0] = v[1] = v[2] = 0;
+        ok = mag_chip_ == MAG_CHIP_QMC5883L ? qmc_.poll(v, fresh) : hmc_.poll(v, fresh);
+    }
+    if (ok && fresh) {
+        if (i == 2) mag_overflow_ = v[0] == Hmc5883l::OVERFLOW || v[1] == Hmc5883l::OVERFLOW ||
+                                    v[2] == Hmc5883l::OVERFLOW;  // on the chip's reading, before anything else
+        mapAxes(board_profile_, i, v);
+        for (uint8_t k = 0; k < 3; ++k) raw_[i][k] = v[k];
+    }
+    return ok;
 }
 
+// A failed transaction holds the sensor's last sample (flagged stale); MISSING_AFTER failures in a row
+// declare it missing, and a missing sensor is probed again from the next period on.
 __attribute__((noinline)) void SphereDevice::readSensors(uint32_t t_us) {
     sample_t_us_ = t_us;
     raw_flags_ = 0;
-    if (sensors_ok_ & SENSOR_ADXL345) {
-        if (adxl_.readAccel(raw_accel_)) raw_flags_ |= RAW_ACCEL_OK;
-        else i2cError(0);
-    }
-    if (sensors_ok_ & SENSOR_ITG3200) {
-        if (itg_.readGyro(raw_gyro_)) raw_flags_ |= RAW_GYRO_OK;
-        else i2cError(1);
-    }
-    if (sensors_ok_ & SENSOR_HMC5883L) {
-        bool fresh = false;
-        if (hmc_.poll(raw_mag_, fresh)) {
-            if (fresh) {
+    for (uint8_t i = 0; i < 3; ++i) {
+        uint8_t bit = (uint8_t)(1u << i);
+        if (!(sensors_ok_ & bit)) {
+            if (fails_[i] < FAST_PROBES || phase_ % SLOW_PROBE_TICKS == 0) {
+                if (probe(i)) {
+                    fails_[i] = 0;
+                } else {
+                    ++status_.probe_failures;
+                    if (fails_[i] < 255) ++fails_[i];
+                }
+            }
+            continue;  // read from the next period on
+        }
+        bool fresh;
+        if (readSensor(i, fresh)) {
+            fails_[i] = 0;
+            if (i == 2 && fresh) {
                 mag_seen_ = true;
                 mag_fresh_since_raw_ = true;
             }
-            if (mag_seen_) raw_flags_ |= RAW_MAG_OK;
         } else {
-            i2cError(2);
+            ++status_.i2c_errors[i];
+            if (++fails_[i] >= MISSING_AFTER) {
+                sensors_ok_ &= (uint8_t)~bit;
+                ++status_.sensor_losses;
+                fails_[i] = 0;
+                if (i == 2) mag_seen_ = false;
+                continue;
+            }
+            raw_flags_ |= (uint8_t)(RAW_ACCEL_STALE << i);
         }
+        if (i < 2 || mag_seen_) raw_flags_ |= bit;  // RAW_ACCEL_OK, RAW_GYRO_OK, RAW_MAG_OK are the sensor bits
     }
     // a missing sensor's values are 0
-    if (!(raw_flags_ & RAW_ACCEL_OK)) raw_accel_[0] = raw_accel_[1] = raw_accel_[2] = 0;
-    if (!(raw_flags_ & RAW_GYRO_OK)) raw_gyro_[0] = raw_gyro_[1] = raw_gyro_[2] = 0;
-    if (!(raw_flags_ & RAW_MAG_OK)) {
-        raw_mag_[0] = raw_mag_[1] = raw_mag_[2] = 0;
-        mag_seen_ = false;
-    }
-    // pick missing sensors up again once a second
-    if (++retry_ >= RETRY_TICKS) {
-        retry_ = 0;
-        for (uint8_t s = SENSOR_ADXL345; s <= SENSOR_HMC5883L; s = (uint8_t)(s << 1))
-            if (!(sensors_ok_ & s)) probe(s);
-    }
+    for (uint8_t i = 0; i < 3; ++i)
+        if (!(raw_flags_ & (1u << i))) raw_[i][0] = raw_[i][1] = raw_[i][2] = 0;
 }
 
 __attribute__((noinline)) void SphereDevice::handleEvents() {
@@ -122,7 +162,7 @@ __attribute__((noinline)) void SphereDevice::handleEvents() {
     if (!(sensors_ok_ & SENSOR_ADXL345)) return;
     uint8_t src, act;
     if (!adxl_.readEvent(src, act)) {
-        i2cError(0);
+        ++status_.i2c_errors[0];  // the interrupt line stays high: read again next period
         return;
     }
     if (src & (Adxl345::INT_SINGLE_TAP | Adxl345::INT_DOUBLE_TAP)) guard_.onTapInterrupt();
@@ -141,16 +181,22 @@ __attribute__((noinline)) void SphereDevice::handleEvents() {
     for (uint8_t i = 0; i < n; ++i) sendPacket(PKT_EVENT, body, writeEvent(ev[i], body));
 }
 
-__attribute__((noinline)) void SphereDevice::runFilter() {
-    int16_t g[3], a[3], m[3];
-    applyGyro(cal_, raw_gyro_, g);
-    applyAccel(cal_, raw_accel_, a);
-    applyMag(cal_, raw_mag_, m);
-    bool acc_ok = (raw_flags_ & RAW_ACCEL_OK) && !tap_active_ && MargFilter::accelPlausible(a);
+__attribute__((noinline)) void SphereDevice::runFilter(uint16_t dt_us) {
+    if (!(raw_flags_ & RAW_GYRO_OK)) {
+        // no gyroscope: integrating zeros would turn a moving sphere still; hold the orientation
+        ori_flags_ = (uint8_t)(ORI_GYRO_MISSING | (converge_left_ ? ORI_CONVERGING : 0));
+        return;
+    }
+    int16_t g[3], a[3], m[3], up[3];
+    applyGyro(cal_, raw_[1], g);
+    applyAccel(cal_, raw_[0], a);
+    applyMag(cal_, raw_[2], m);
+    bool acc_ok = (raw_flags_ & RAW_ACCEL_OK) && !tap_active_ && gates_.accel(a);
     bool mag_present = (raw_flags_ & RAW_MAG_OK) != 0;
-    bool mag_ok = mag_present && MargFilter::magPlausible(m);
+    filter_.up(up);
+    bool mag_ok = mag_present && !mag_overflow_ && gates_.mag(m, up, converge_left_ != 0);
     hal_.margPin(true);
-    uint8_t f = filter_.update(g, a, m, acc_ok, mag_ok);
+    uint8_t f = filter_.update(g, a, m, acc_ok, mag_ok, dt_us);
     hal_.margPin(false);
     if (mag_present && !mag_ok) f |= ORI_MAG_REJECTED;
     if (converge_left_) {
@@ -161,35 +207,54 @@ __attribute__((noinline)) void SphereDevice::runFilter() {
     ori_flags_ = f;
 }
 
+// Power-up and CALIBRATION_STEP estimates take the window's mean; between them every still window of
+// TRACK_SAMPLES moves the bias by at most TRACK_STEP_LSB towards its mean (a slow drift with
+// temperature is followed, a slow turn mistaken for stillness costs little).
+void SphereDevice::trackBias() {
+    if (!(raw_flags_ & RAW_GYRO_OK) || (raw_flags_ & (RAW_GYRO_STALE | RAW_ACCEL_STALE))) return;
+    if (!bias_est_.running()) {
+        if (cal_step_ != 0) return;
+        bias_est_.start(TRACK_SAMPLES);
+        tracking_ = true;
+    }
+    int8_t r = bias_est_.update(raw_[1], raw_[0], (raw_flags_ & RAW_MAG_OK) ? raw_[2] : 0);
+    if (r > 0) {
+        bool full = !tracking_ || !(cal_state_ & CAL_GYRO_BIAS_VALID);
+        for (uint8_t i = 0; i < 3; ++i) {
+            int16_t d = (int16_t)(bias_est_.bias()[i] - cal_.gyro_bias[i]);
+            if (!full) d = d > TRACK_STEP_LSB ? TRACK_STEP_LSB : d < -TRACK_STEP_LSB ? -TRACK_STEP_LSB : d;
+            cal_.gyro_bias[i] = (int16_t)(cal_.gyro_bias[i] + d);
+        }
+        cal_state_ |= CAL_GYRO_BIAS_VALID | CAL_GYRO_BIAS_ESTIMATED;
+        cal_state_ &= (uint8_t)~CAL_FROM_EEPROM;
+    }
+    if (r != 0) {
+        if (r < 0 && bias_at_startup_ && bias_tries_ < STARTUP_BIAS_TRIES) {
+            ++bias_tries_;
+            bias_est_.start(STARTUP_BIAS_SAMPLES);  // moved: try again
+        } else {
+            bias_at_startup_ = false;
+            if (cal_step_ == 1) cal_step_ = 0;
+        }
+        if (!bias_est_.running()) tracking_ = false;
+    }
+}
+
 __attribute__((noinline)) void SphereDevice::tick() {
     uint32_t t0 = hal_.micros();
+    // the real interval after an overrun (a period is 5000 µs; the first tick has no predecessor)
+    uint32_t since = t0 - last_t_us_;
+    uint16_t dt = (last_t_us_ && since > MargFilter::DEFAULT_DT_US * 3 / 2)
+                      ? (uint16_t)(since > MargFilter::MAX_DT_US ? MargFilter::MAX_DT_US : since)
+                      : 0;
+    last_t_us_ = t0;
     readSensors(t0);
     handleEvents();
-    if (raw_flags_ & RAW_ACCEL_OK) tap_active_ = guard_.update(raw_accel_);
+    if (raw_flags_ & RAW_ACCEL_OK) tap_active_ = guard_.update(raw_[0]);
     else tap_active_ = false;
     if (tap_active_) raw_flags_ |= RAW_TAP_ACTIVE;
-
-    if (bias_est_.running()) {
-        int8_t r = (raw_flags_ & RAW_GYRO_OK)
-                       ? bias_est_.update(raw_gyro_, raw_accel_, (raw_flags_ & RAW_MAG_OK) ? raw_mag_ : 0)
-                       : -1;
-        if (r > 0) {
-            for (uint8_t i = 0; i < 3; ++i) cal_.gyro_bias[i] = bias_est_.bias()[i];
-            cal_state_ |= CAL_GYRO_BIAS_VALID | CAL_GYRO_BIAS_ESTIMATED;
-            cal_state_ &= (uint8_t)~CAL_FROM_EEPROM;
-        }
-        if (r != 0) {
-            if (r < 0 && bias_at_startup_ && bias_tries_ < STARTUP_BIAS_TRIES && (raw_flags_ & RAW_GYRO_OK)) {
-                ++bias_tries_;
-                bias_est_.start(STARTUP_BIAS_SAMPLES);  // moved: try again
-            } else {
-                bias_at_startup_ = false;
-                if (cal_step_ == 1) cal_step_ = 0;
-            }
-        }
-    }
-
-    runFilter();
+    trackBias();
+    runFilter(dt);
     stream(t0);
     if (++phase_ >= IMU_RATE_HZ) phase_ = 0;
 
@@ -198,20 +263,9 @@ __attribute__((noinline)) void SphereDevice::tick() {
     if (work > max_work_us_) max_work_us_ = (uint16_t)work;
 }
 
+// ORIENTATION first: the pointer's packet does not wait behind the raw sample.
 __attribute__((noinline)) void SphereDevice::stream(uint32_t t_us) {
     uint8_t body[STATUS_LEN];
-    if ((stream_mode_ & STREAM_RAW) && raw_rate_hz_ && phase_ % (IMU_RATE_HZ / raw_rate_hz_) == 0) {
-        RawSample r;
-        r.t_us = t_us;
-        r.flags = (uint8_t)(raw_flags_ | (mag_fresh_since_raw_ ? RAW_MAG_FRESH : 0));
-        for (uint8_t i = 0; i < 3; ++i) {
-            r.accel[i] = raw_accel_[i];
-            r.gyro[i] = raw_gyro_[i];
-            r.mag[i] = raw_mag_[i];
-        }
-        mag_fresh_since_raw_ = false;
-        sendPacket(PKT_RAW_SAMPLE, body, writeRawSample(r, body));
-    }
     if ((stream_mode_ & STREAM_ORIENTATION) && orientation_rate_hz_ &&
         phase_ % (IMU_RATE_HZ / orientation_rate_hz_) == 0) {
         Orientation o;
@@ -219,6 +273,18 @@ __attribute__((noinline)) void SphereDevice::stream(uint32_t t_us) {
         o.flags = ori_flags_;
         filter_.quaternionQ14(o.quat);
         sendPacket(PKT_ORIENTATION, body, writeOrientation(o, body));
+    }
+    if ((stream_mode_ & STREAM_RAW) && raw_rate_hz_ && phase_ % (IMU_RATE_HZ / raw_rate_hz_) == 0) {
+        RawSample r;
+        r.t_us = t_us;
+        r.flags = (uint8_t)(raw_flags_ | (mag_fresh_since_raw_ ? RAW_MAG_FRESH : 0));
+        for (uint8_t i = 0; i < 3; ++i) {
+            r.accel[i] = raw_[0][i];
+            r.gyro[i] = raw_[1][i];
+            r.mag[i] = raw_[2][i];
+        }
+        mag_fresh_since_raw_ = false;
+        sendPacket(PKT_RAW_SAMPLE, body, writeRawSample(r, body));
     }
     if ((stream_mode_ & STREAM_STATUS) && phase_ == IMU_RATE_HZ / 2) sendStatus();
 }
@@ -240,13 +306,16 @@ void SphereDevice::sendHello() {
     h.sensors_found = sensors_found_;
     h.adxl345_devid = adxl_.devid();
     h.itg3200_whoami = itg_.whoami();
-    for (uint8_t i = 0; i < 3; ++i) h.hmc5883l_id[i] = hmc_.id()[i];
+    for (uint8_t i = 0; i < 3; ++i) h.hmc5883l_id[i] = hmc_.id()[i];  // as read at 0x1E (zeros: no answer)
     h.imu_rate_hz = IMU_RATE_HZ;
-    h.mag_rate_hz = MAG_RATE_HZ;
+    h.mag_rate_hz = mag_chip_ == MAG_CHIP_QMC5883L ? 100 : Hmc5883l::RATE_HZ;
     h.stream_mode = stream_mode_;
     h.raw_rate_hz = raw_rate_hz_;
     h.orientation_rate_hz = orientation_rate_hz_;
     h.calibration_state = cal_state_;
+    h.reset_cause = reset_cause_;
+    h.mag_chip = mag_chip_;
+    h.board_profile = board_profile_;
     uint8_t body[HELLO_LEN];
     sendPacket(PKT_HELLO, body, writeHello(h, body));
 }
@@ -265,8 +334,11 @@ void SphereDevice::sendStatus() {
     sendPacket(PKT_STATUS, body, writeStatus(status_, body));
 }
 
-__attribute__((noinline)) void SphereDevice::receive(uint8_t byte) {
+__attribute__((noinline)) bool SphereDevice::receive(uint8_t byte) {
+    // a delimiter ends a command: take it only when its reply fits (it waits in the receive buffer)
+    if (byte == 0 && decoder_.pending() && hal_.txRoom() < REPLY_ROOM) return false;
     if (decoder_.push(byte) == FRAME_OK) execute(decoder_.payload(), decoder_.payloadLength());
+    return true;
 }
 
 __attribute__((noinline)) void SphereDevice::execute(const uint8_t* payload, uint8_t len) {
@@ -292,7 +364,8 @@ __attribute__((noinline)) void SphereDevice::execute(const uint8_t* payload, uin
 
 // Stops the power-up gyro bias estimate or a CALIBRATION_STEP gyro_bias, whichever runs.
 void SphereDevice::endBiasEstimate() {
-    if (cal_step_ == 1 || bias_at_startup_) bias_est_.stop();
+    bias_est_.stop();  // a tracking window too: it restarts from the new bias
+    tracking_ = false;
     bias_at_startup_ = false;
     if (cal_step_ == 1) cal_step_ = 0;
 }
@@ -309,7 +382,7 @@ __attribute__((noinline)) uint8_t SphereDevice::executeCommand(const Command& c)
             TapSettings t = {c.set_tap.thresh_tap, c.set_tap.dur, c.set_tap.latent, c.set_tap.window,
                              c.set_tap.tap_axes};
             if (!adxl_.writeTap(t)) {
-                i2cError(0);
+                ++status_.i2c_errors[0];
                 adxl_.writeTap(tap_);  // best effort: back to the settings in use
                 return RESULT_FAILED;
             }
@@ -321,7 +394,7 @@ __attribute__((noinline)) uint8_t SphereDevice::executeCommand(const Command& c)
             if (!(sensors_ok_ & SENSOR_ADXL345)) return RESULT_SENSOR_MISSING;
             FreeFallSettings f = {c.set_free_fall.thresh_ff, c.set_free_fall.time_ff};
             if (!adxl_.writeFreeFall(f)) {
-                i2cError(0);
+                ++status_.i2c_errors[0];
                 adxl_.writeFreeFall(ff_);
                 return RESULT_FAILED;
             }
@@ -345,6 +418,7 @@ __attribute__((noinline)) uint8_t SphereDevice::executeCommand(const Command& c)
             cal_step_ = step;
             if (step == 1) {
                 bias_at_startup_ = false;
+                tracking_ = false;
                 bias_est_.start(STEP_BIAS_SAMPLES);
             }
             return RESULT_OK;
@@ -358,8 +432,8 @@ __attribute__((noinline)) uint8_t SphereDevice::executeCommand(const Command& c)
         case CMD_SAVE_CALIBRATION: {
             uint8_t image[CALIBRATION_EEPROM_LEN], back[CALIBRATION_EEPROM_LEN];
             writeCalibrationImage(cal_, image);
-            bool ok = hal_.eepromWrite(image, CALIBRATION_EEPROM_LEN);
-            hal_.eepromRead(back, CALIBRATION_EEPROM_LEN);
+            bool ok = hal_.eepromWrite(0, image, CALIBRATION_EEPROM_LEN);
+            hal_.eepromRead(0, back, CALIBRATION_EEPROM_LEN);
             for (uint8_t i = 0; i < CALIBRATION_EEPROM_LEN; ++i)
                 if (back[i] != image[i]) ok = false;
             if (!ok) return RESULT_STORAGE_ERROR;
@@ -368,7 +442,7 @@ __attribute__((noinline)) uint8_t SphereDevice::executeCommand(const Command& c)
         }
         case CMD_LOAD_CALIBRATION: {
             uint8_t image[CALIBRATION_EEPROM_LEN];
-            hal_.eepromRead(image, CALIBRATION_EEPROM_LEN);
+            hal_.eepromRead(0, image, CALIBRATION_EEPROM_LEN);
             Calibration cal;
             if (!readCalibrationImage(image, cal)) return RESULT_STORAGE_ERROR;
             endBiasEstimate();
@@ -386,6 +460,21 @@ __attribute__((noinline)) uint8_t SphereDevice::executeCommand(const Command& c)
         case CMD_IDENTIFY:
             hal_.identify(c.identify.seconds);
             return RESULT_OK;
+        case CMD_SET_BOARD: {
+            uint8_t b[2] = {c.set_board.board_profile, (uint8_t)~c.set_board.board_profile}, back[2];
+            bool ok = hal_.eepromWrite(BOARD_EEPROM_ADDR, b, 2);
+            hal_.eepromRead(BOARD_EEPROM_ADDR, back, 2);
+            if (!ok || back[0] != b[0] || back[1] != b[1]) return RESULT_STORAGE_ERROR;
+            if (board_profile_ != b[0]) {
+                // another frame for the samples: the orientation and the field reference start again
+                board_profile_ = b[0];
+                filter_.begin(MargFilter::DEFAULT_DT_US);
+                filter_.setBetaMilli(MargFilter::STARTUP_BETA_MILLI);
+                converge_left_ = STARTUP_CONVERGE_SAMPLES;
+                gates_.reset();
+            }
+            return RESULT_OK;
+        }
         default:  // GET_HELLO, GET_CALIBRATION, GET_STATUS, REBOOT: the reply and what follows it
             return RESULT_OK;
     }

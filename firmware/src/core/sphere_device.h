@@ -5,15 +5,18 @@
 #include <stdint.h>
 
 #include "adxl345.h"
+#include "board_profile.h"
 #include "calibration.h"
 #include "command_parser.h"
 #include "framing.h"
 #include "gyro_bias.h"
 #include "hmc5883l.h"
 #include "i2c_bus.h"
+#include "input_gates.h"
 #include "itg3200.h"
 #include "marg_filter.h"
 #include "packets.h"
+#include "qmc5883l.h"
 #include "tap_guard.h"
 
 namespace sphere {
@@ -23,8 +26,12 @@ public:
     virtual uint32_t micros() = 0;
     // Queues a whole frame for the UART, or nothing (false) when the transmit buffer lacks room.
     virtual bool send(const uint8_t* frame, uint8_t len) = 0;
-    virtual void eepromRead(uint8_t* out, uint8_t len) = 0;
-    virtual bool eepromWrite(const uint8_t* data, uint8_t len) = 0;
+    // Free bytes in the transmit buffer now.
+    virtual uint8_t txRoom() = 0;
+    virtual void eepromRead(uint16_t addr, uint8_t* out, uint8_t len) = 0;
+    virtual bool eepromWrite(uint16_t addr, const uint8_t* data, uint8_t len) = 0;
+    // Why the chip last reset: HELLO reset_cause bits (captured before anything cleared them).
+    virtual uint8_t resetCause() = 0;
     // Timing pin (D13): high exactly while the MARG update runs.
     virtual void margPin(bool high) = 0;
     // True when the ADXL345's INT1 fired (edge captured or line high); t_us = when it was seen.
@@ -45,8 +52,16 @@ public:
     static const uint16_t STARTUP_BIAS_SAMPLES = 200;    // 1 s still at power-up
     static const uint16_t STARTUP_BIAS_TRIES = 10;       // give up after 10 windows with motion
     static const uint16_t STEP_BIAS_SAMPLES = 400;       // 2 s for CALIBRATION_STEP gyro_bias
-    static const uint8_t RETRY_TICKS = 200;              // look for a missing sensor once a second
+    static const uint16_t TRACK_SAMPLES = 400;           // 2 s still windows for bias tracking
+    static const int16_t TRACK_STEP_LSB = 2;             // the most one tracking window moves the bias
+    static const uint8_t MISSING_AFTER = 10;   // consecutive failed reads (50 ms) before a sensor is missing
+    static const uint8_t FAST_PROBES = 200;    // a missing sensor is probed every period this many times,
+    static const uint8_t SLOW_PROBE_TICKS = 20;  // then every 20th period (10 Hz)
     static const uint32_t FREE_FALL_GAP_US = 250000;     // FREE_FALL quiet this long ends a fall
+    static const uint16_t BOARD_EEPROM_ADDR = 64;        // board profile byte and its complement
+    // The longest reply and what follows it (GET_CALIBRATION's 52-byte frame): a command is taken
+    // from the receive buffer only when the transmit buffer has this much room, so it is never dropped.
+    static const uint8_t REPLY_ROOM = 52;
 
     SphereDevice(I2cBus& bus, DeviceHal& hal);
 
@@ -54,8 +69,9 @@ public:
     void begin();
     // One period of the 200 Hz sample clock.
     void tick();
-    // One byte from the host.
-    void receive(uint8_t byte);
+    // One byte from the host. False when the byte was not taken: it ends a command whose reply does
+    // not fit the transmit buffer yet; offer it again later (it waits in the UART's receive buffer).
+    bool receive(uint8_t byte);
     // Sample periods whose work ran past the next tick (counted by the timer adapter).
     void noteOverruns(uint16_t n) { status_.loop_overruns = (uint16_t)(status_.loop_overruns + n); }
 
@@ -65,15 +81,23 @@ public:
     uint8_t sensorsOk() const { return sensors_ok_; }
     uint8_t streamMode() const { return stream_mode_; }
     uint8_t calibrationState() const { return cal_state_; }
+    uint8_t boardProfile() const { return board_profile_; }
+    uint8_t magChip() const { return mag_chip_; }
+    uint8_t rawFlags() const { return raw_flags_; }
+    uint8_t orientationFlags() const { return ori_flags_; }
     const Calibration& calibration() const { return cal_; }
     const MargFilter& filter() const { return filter_; }
+    InputGates& gates() { return gates_; }
     bool tapActive() const { return tap_active_; }
 
 private:
-    void probe(uint8_t sensor);
+    bool probe(uint8_t index);
+    bool readSensor(uint8_t index, bool& fresh);
     void readSensors(uint32_t t_us);
+    void trackBias();
+    bool magAccepted(const int16_t m[3]);
     void handleEvents();
-    void runFilter();
+    void runFilter(uint16_t dt_us);
     void stream(uint32_t t_us);
     void execute(const uint8_t* payload, uint8_t len);
     uint8_t executeCommand(const Command& c);
@@ -82,17 +106,19 @@ private:
     void sendStatus();
     void loadCalibration(bool at_start);
     void updateCalState();
-    void i2cError(uint8_t sensor_index);
     void endBiasEstimate();
+    void loadBoardProfile();
 
     I2cBus& bus_;
     DeviceHal& hal_;
     Adxl345 adxl_;
     Itg3200 itg_;
     Hmc5883l hmc_;
+    Qmc5883l qmc_;
     MargFilter filter_;
     TapGuard guard_;
     GyroBiasEstimator bias_est_;
+    InputGates gates_;
     Calibration cal_;
     FrameEncoder encoder_;
     FrameDecoder decoder_;
@@ -101,14 +127,16 @@ private:
     // status_ and the members after it are zeroed together by the constructor; keep last_fall_us_ last
     Status status_;
 
-    int16_t raw_accel_[3], raw_gyro_[3], raw_mag_[3];
-    uint32_t sample_t_us_;
+    int16_t raw_[3][3];        // accelerometer, gyroscope, magnetometer: body frame, last good read
+    uint32_t sample_t_us_, last_t_us_;
     uint16_t converge_left_;   // accepted samples still to run at the start-up gain
     uint8_t phase_;            // 0 … 199 within the second
-    uint8_t retry_;
+    uint8_t fails_[3];         // consecutive failed reads (present) or failed probes (missing)
     uint8_t sensors_found_, sensors_ok_;
+    uint8_t mag_chip_, board_profile_, reset_cause_;
+    bool tracking_;            // the bias estimator runs a still-window for bias tracking
     uint8_t raw_flags_, ori_flags_;
-    bool mag_seen_, mag_fresh_since_raw_, tap_active_;
+    bool mag_seen_, mag_fresh_since_raw_, tap_active_, mag_overflow_;
     uint8_t stream_mode_;
     uint16_t raw_rate_hz_, orientation_rate_hz_;
     uint16_t beta_milli_;

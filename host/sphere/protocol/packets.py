@@ -12,7 +12,10 @@ from typing import ClassVar
 
 from sphere import chips
 
-PROTOCOL_VERSION = 1
+PROTOCOL_VERSION = 2
+# Versions this host decodes: version 2 only appended fields to HELLO and STATUS (a version-1 body is
+# their prefix; the new fields then read as their defaults) and added flags and SET_BOARD.
+SUPPORTED_VERSIONS = (1, 2)
 
 Q14 = 16384.0
 
@@ -33,8 +36,11 @@ class Result(enum.IntEnum):
 EVENT_NAMES = {1: "single_tap", 2: "double_tap", 3: "free_fall"}
 CALIBRATION_STEPS = {0: "none", 1: "gyro_bias", 2: "accel", 3: "mag"}
 
-RAW_FLAGS = ("accel_ok", "gyro_ok", "mag_ok", "mag_fresh", "tap_active")
-ORIENTATION_FLAGS = ("mag_used", "accel_rejected", "mag_rejected", "converging")
+RAW_FLAGS = ("accel_ok", "gyro_ok", "mag_ok", "mag_fresh", "tap_active", "accel_stale", "gyro_stale", "mag_stale")
+ORIENTATION_FLAGS = ("mag_used", "accel_rejected", "mag_rejected", "converging", "gyro_missing")
+RESET_CAUSE_BITS = ("power_on", "external", "brown_out", "watchdog")
+MAG_CHIPS = {0: "none", 1: "hmc5883l", 2: "qmc5883l"}
+BOARD_PROFILES = {0: "aligned", 1: "sen10724", 2: "gy85"}
 SENSOR_BITS = ("adxl345", "itg3200", "hmc5883l")
 CALIBRATION_STATE_BITS = (
     "gyro_bias_valid",
@@ -54,10 +60,11 @@ def bit_names(value: int, names: tuple[str, ...]) -> list[str]:
 class Field:
     """One spec field: struct code, element count, and how to show it in physical units."""
 
-    __slots__ = ("name", "code", "count", "scale", "show")
+    __slots__ = ("name", "code", "count", "scale", "show", "default")
 
-    def __init__(self, name: str, code: str, count: int = 1, scale: float | None = None, show=None):
+    def __init__(self, name: str, code: str, count: int = 1, scale: float | None = None, show=None, default=None):
         self.name, self.code, self.count, self.scale, self.show = name, code, count, scale, show
+        self.default = default  # a field appended in a later version: its value when absent
 
     def physical(self, value):
         if self.show is not None:
@@ -76,13 +83,19 @@ class Packet:
     NAME: ClassVar[str]
     DIRECTION: ClassVar[str]  # "device" (device → host) or "host" (host → device)
     FIELDS: ClassVar[tuple[Field, ...]] = ()
+    # fields of protocol version 1 when a later version appended some (None: the body never changed)
+    V1_FIELDS: ClassVar[int | None] = None
     _struct: ClassVar[struct.Struct]
+    _v1_struct: ClassVar[struct.Struct | None]
     _plan: ClassVar[tuple[tuple[str, int], ...]]
 
     def __init_subclass__(cls, **kwargs):
         super().__init_subclass__(**kwargs)
         cls._struct = struct.Struct("<" + "".join(f"{f.count}{f.code}" for f in cls.FIELDS))
         cls._plan = tuple((f.name, f.count) for f in cls.FIELDS)
+        cls._v1_struct = None
+        if cls.V1_FIELDS is not None:
+            cls._v1_struct = struct.Struct("<" + "".join(f"{f.count}{f.code}" for f in cls.FIELDS[: cls.V1_FIELDS]))
 
     def __init__(self, *args, seq: int = 0, **kwargs):
         names = [f.name for f in self.FIELDS]
@@ -93,6 +106,9 @@ class Packet:
             if key not in names:
                 raise TypeError(f"{self.NAME} has no field {key!r}")
             values[key] = value
+        for f in self.FIELDS:
+            if f.name not in values and f.default is not None:
+                values[f.name] = f.default
         missing = [n for n in names if n not in values]
         if missing:
             raise TypeError(f"{self.NAME} is missing {', '.join(missing)}")
@@ -106,6 +122,11 @@ class Packet:
     def body_size(cls) -> int:
         return cls._struct.size
 
+    @classmethod
+    def body_sizes(cls) -> tuple[int, ...]:
+        """Every body length this host decodes: the current one, and version 1's where it differed."""
+        return (cls._struct.size,) if cls._v1_struct is None else (cls._struct.size, cls._v1_struct.size)
+
     def pack_body(self) -> bytes:
         flat = []
         for f in self.FIELDS:
@@ -118,11 +139,14 @@ class Packet:
 
     @classmethod
     def unpack_body(cls, body: bytes, seq: int = 0) -> "Packet":
-        flat = cls._struct.unpack(body)
+        v1 = cls._v1_struct is not None and len(body) == cls._v1_struct.size
+        flat = (cls._v1_struct if v1 else cls._struct).unpack(body)
         obj = cls.__new__(cls)
         i = 0
-        for name, count in cls._plan:
-            if count == 1:
+        for k, (name, count) in enumerate(cls._plan):
+            if v1 and k >= cls.V1_FIELDS:
+                setattr(obj, name, cls.FIELDS[k].default)
+            elif count == 1:
                 setattr(obj, name, flat[i])
             else:
                 setattr(obj, name, flat[i : i + count])
@@ -169,7 +193,12 @@ class Hello(Packet):
         Field("raw_rate_hz", "H"),
         Field("orientation_rate_hz", "H"),
         Field("calibration_state", "B", show=lambda v: bit_names(v, CALIBRATION_STATE_BITS)),
+        # version 2
+        Field("reset_cause", "B", show=lambda v: bit_names(v, RESET_CAUSE_BITS), default=0),
+        Field("mag_chip", "B", show=lambda v: MAG_CHIPS.get(v, v), default=0),
+        Field("board_profile", "B", show=lambda v: BOARD_PROFILES.get(v, v), default=0),
     )
+    V1_FIELDS = 12
 
 
 class RawSample(Packet):
@@ -251,7 +280,11 @@ class Status(Packet):
         Field("calibration_step", "B", show=lambda v: CALIBRATION_STEPS.get(v, v)),
         Field("cpu_load", "H", scale=0.001),
         Field("battery_mv", "H"),
+        # version 2
+        Field("probe_failures", "H", default=0),
+        Field("sensor_losses", "H", default=0),
     )
+    V1_FIELDS = 11
 
 
 class Reply(Packet):
@@ -408,6 +441,11 @@ class GetStatus(Packet):
     TYPE, NAME, DIRECTION = 0x4D, "GET_STATUS", "host"
 
 
+class SetBoard(Packet):
+    TYPE, NAME, DIRECTION = 0x4E, "SET_BOARD", "host"
+    FIELDS = (Field("board_profile", "B", show=lambda v: BOARD_PROFILES.get(v, v)),)
+
+
 ALL_TYPES: tuple[type[Packet], ...] = (
     Hello,
     RawSample,
@@ -429,6 +467,7 @@ ALL_TYPES: tuple[type[Packet], ...] = (
     Identify,
     Reboot,
     GetStatus,
+    SetBoard,
 )
 BY_TYPE = {cls.TYPE: cls for cls in ALL_TYPES}
 BY_NAME = {cls.NAME: cls for cls in ALL_TYPES}
@@ -444,4 +483,4 @@ def packet_class(type_or_name: int | str) -> type[Packet]:
 
 def body_sizes(cls: type[Packet]) -> tuple[int, ...]:
     """The body lengths a packet type may have."""
-    return cls.body_sizes() if hasattr(cls, "body_sizes") else (cls.body_size(),)
+    return cls.body_sizes()

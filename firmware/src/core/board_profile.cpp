@@ -1,0 +1,32 @@
+#include "board_profile.h"
+
+#include "flash_table.h"
+
+namespace sphere {
+
+// [profile][chip][body axis]. Sources: SparkFun SEN-10724 (9DoF Sensor Stick) — the sign table of the
+// Razor AHRS firmware for hardware version 10724 (accelerometer and gyroscope share one frame there,
+// the HMC5883L is turned 90° about z); GY-85 — as the virtual board models it (hardware/sim/README.md).
+static const uint8_t MAPS[BOARD_PROFILE_COUNT][3][3] SPHERE_TABLE = {
+    {{0, 1, 2}, {0, 1, 2}, {0, 1, 2}},                                 // aligned
+    {{0, 1, 2}, {0, 1, 2}, {1, 0 | AXIS_NEG, 2}},                      // sen10724: mag (+y, −x, +z)
+    {{0, 1, 2}, {0 | AXIS_NEG, 1 | AXIS_NEG, 2}, {1 | AXIS_NEG, 0, 2}},  // gy85: gyro (−x, −y, +z), mag (−y, +x, +z)
+};
+
+void axisMap(uint8_t profile, uint8_t chip, uint8_t out[3]) {
+    for (uint8_t i = 0; i < 3; ++i) out[i] = SPHERE_READ_U8(&MAPS[profile][chip][i]);
+}
+
+void mapAxes(uint8_t profile, uint8_t chip, int16_t v[3]) {
+    uint8_t m[3];
+    axisMap(profile, chip, m);
+    int16_t in[3] = {v[0], v[1], v[2]};
+    for (uint8_t i = 0; i < 3; ++i) {
+        int16_t x = in[m[i] & 3];
+        // negating −32768 saturates; the overflow mark −4096 keeps its meaning
+        if ((m[i] & AXIS_NEG) && x != -4096) x = x == -32768 ? 32767 : (int16_t)-x;
+        v[i] = x;
+    }
+}
+
+}  // namespace sphere
