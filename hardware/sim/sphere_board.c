@@ -168,15 +168,49 @@ typedef struct {
 	uint64_t bytes;
 	uint32_t frames;
 	int last_nonzero;
+	/* the host side: a USB-serial adapter whose buffer overflows while the host does not read */
+	avr_t *avr;
+	int host_reading;
+	uint32_t adapter_buffer, buffered;
+	uint64_t host_dropped;
 } uart_out_t;
 
 static uart_out_t uart_out;
+
+/* ---------------------------------------------------------------- fault log (for --stats) */
+
+typedef struct {
+	double t_s;
+	const char *kind;
+	int chip;
+} fault_event_t;
+static fault_event_t *fault_log;
+static size_t n_fault_log, cap_fault_log;
+
+static void log_fault(double t_s, const char *kind, int chip)
+{
+	if (n_fault_log == cap_fault_log) {
+		cap_fault_log = cap_fault_log ? 2 * cap_fault_log : 64;
+		fault_log = realloc(fault_log, cap_fault_log * sizeof *fault_log);
+	}
+	fault_log[n_fault_log++] = (fault_event_t){t_s, kind, chip};
+}
+
+static void board_fault(board_t *b, const char *kind, int chip) { log_fault(board_time_s(b), kind, chip); }
 
 static void uart_hook(struct avr_irq_t *irq, uint32_t value, void *param)
 {
 	(void)irq;
 	uart_out_t *u = param;
 	uint8_t byte = (uint8_t)value;
+	if (!u->host_reading) { /* the adapter keeps what fits in its buffer and drops the rest */
+		if (u->buffered >= u->adapter_buffer) {
+			u->host_dropped++;
+			u->bytes++;
+			return;
+		}
+		u->buffered++;
+	}
 	if (u->capture)
 		fputc(byte, u->capture);
 	u->bytes++;
@@ -261,7 +295,7 @@ static int chip_by_name(const char *name)
 {
 	if (!strcmp(name, "adxl345") || !strcmp(name, "accel")) return CHIP_ADXL345;
 	if (!strcmp(name, "itg3200") || !strcmp(name, "gyro")) return CHIP_ITG3200;
-	if (!strcmp(name, "hmc5883l") || !strcmp(name, "mag")) return CHIP_HMC5883L;
+	if (!strcmp(name, "hmc5883l") || !strcmp(name, "qmc5883l") || !strcmp(name, "mag")) return CHIP_HMC5883L;
 	return -1;
 }
 
@@ -301,7 +335,14 @@ static double wall_now(void)
 }
 
 static uint32_t resets;
-static void on_reset(avr_t *avr) { (void)avr; resets++; }
+static board_t *the_board;
+static void on_reset(avr_t *avr)
+{
+	(void)avr;
+	resets++;
+	if (the_board)
+		board_avr_reset(the_board); /* the chips keep their power: one in the middle of a read holds SDA */
+}
 
 static void no_sleep(avr_t *avr, avr_cycle_count_t howLong) { (void)avr; (void)howLong; }
 
@@ -340,7 +381,20 @@ static void usage(FILE *f)
 		"  --send FILE          bytes for the device's UART: lines \"SECONDS HEX HEX ...\"\n"
 		"  --timing-pin PIN     the pin high during the MARG update (default B5 = D13)\n"
 		"  --loop-pin PIN       a pin high during a whole sample period's work (optional)\n"
-		"  --i2c-real-timing    stretch each I2C byte to 9 SCL periods at the TWBR rate (simavr: 1 us)\n"
+		"  --board NAME         board variant: aligned (default), sen10724, gy85, gy85-qmc\n"
+		"  --noise              the chips' datasheet noise, turn-on offsets and gyro warm-up drift\n"
+		"  --seed N             seed of the noise, the offsets, --clocks random and --glitch (default 1)\n"
+		"  --clock-ppm CHIP:PPM a chip's oscillator off the Nano's crystal by PPM (repeatable)\n"
+		"  --clocks random      every chip's oscillator off by a seeded amount within its datasheet's tolerance\n"
+		"  --glitch RATE        transient faults, RATE a second on average (seeded): single NACKs, clock\n"
+		"                       stretching, an AVR reset in the middle of a read (the chip then holds SDA)\n"
+		"  --reset-mid-read T   reset the AVR at the first byte a chip sends after T s (the chip holds SDA)\n"
+		"  --brownout T         the supply dips at T s: the AVR and the chips restart (repeatable)\n"
+		"  --sda-held           at power-up the magnetometer holds SDA low (left mid-read by a reset)\n"
+		"  --host-stall T0:T1   the host stops reading from T0 to T1 s: the adapter's buffer fills, bytes drop\n"
+		"  --adapter NAME       the USB-serial adapter: ftdi (256-byte buffer, default) or ch340 (32 bytes)\n"
+		"  --simavr-i2c-timing  simavr's 1 us per I2C step (default: 9 SCL periods a byte at the TWBR rate)\n"
+		"  --i2c-real-timing    (the default; kept for old scripts)\n"
 		"  --simavr-twi-status  keep simavr 1.6's status 0x28/0x30 after SLA+W (default: the real 0x18/0x20)\n"
 		"  -v                   log the bus (twice: every byte)\n");
 }
@@ -350,7 +404,14 @@ int main(int argc, char **argv)
 	pid_t parent0 = getppid();
 	const char *trace_path = NULL, *capture_path = NULL, *stats_path = NULL, *send_path = NULL;
 	double seconds = 10.0, rate_hz = 200.0;
-	int use_pty = 0, realtime = 0, verbose = 0, real_i2c = 0, simavr_status = 0;
+	int use_pty = 0, realtime = 0, verbose = 0, real_i2c = 1, simavr_status = 0;
+	const char *variant_name = "aligned";
+	imperfections_t imp;
+	memset(&imp, 0, sizeof imp);
+	imp.seed = 1;
+	int clocks_random = 0, sda_held = 0, n_brownouts = 0, n_stalls = 0, n_resets_mid = 0;
+	double glitch_rate = 0, brownouts[MAX_FAULTS], resets_mid[MAX_FAULTS], host_stalls[MAX_FAULTS][2];
+	const char *adapter = "ftdi";
 	char tpin_port = 'B', lpin_port = 0;
 	int tpin_bit = 5, lpin_bit = 0;
 	fault_t faults[MAX_FAULTS];
@@ -363,7 +424,13 @@ int main(int argc, char **argv)
 		{"rate", required_argument, 0, 'R'}, {"nack", required_argument, 0, 'N'},
 		{"stall", required_argument, 0, 'S'}, {"send", required_argument, 0, 'i'},
 		{"timing-pin", required_argument, 0, 'T'}, {"loop-pin", required_argument, 0, 'L'},
-		{"i2c-real-timing", no_argument, 0, 'I'}, {"simavr-twi-status", no_argument, 0, 'Z'}, {"help", no_argument, 0, 'h'}, {0, 0, 0, 0}};
+		{"i2c-real-timing", no_argument, 0, 'I'}, {"simavr-twi-status", no_argument, 0, 'Z'}, {"help", no_argument, 0, 'h'},
+		{"board", required_argument, 0, 'B'}, {"noise", no_argument, 0, 'n'}, {"seed", required_argument, 0, 'e'},
+		{"clock-ppm", required_argument, 0, 'P'}, {"clocks", required_argument, 0, 'C'},
+		{"glitch", required_argument, 0, 'g'}, {"reset-mid-read", required_argument, 0, 'm'},
+		{"brownout", required_argument, 0, 'b'}, {"sda-held", no_argument, 0, 'H'},
+		{"host-stall", required_argument, 0, 'o'}, {"adapter", required_argument, 0, 'a'},
+		{"simavr-i2c-timing", no_argument, 0, 'U'}, {0, 0, 0, 0}};
 	int o;
 	while ((o = getopt_long(argc, argv, "t:s:c:prj:vh", opts, NULL)) != -1) {
 		switch (o) {
@@ -377,6 +444,42 @@ int main(int argc, char **argv)
 		case 'i': send_path = optarg; break;
 		case 'v': verbose++; break;
 		case 'I': real_i2c = 1; break;
+		case 'U': real_i2c = 0; break;
+		case 'B': variant_name = optarg; break;
+		case 'n': imp.noise = 1; break;
+		case 'e': imp.seed = strtoull(optarg, NULL, 0); break;
+		case 'H': sda_held = 1; break;
+		case 'g': glitch_rate = atof(optarg); break;
+		case 'a':
+			if (strcmp(optarg, "ftdi") && strcmp(optarg, "ch340")) { fprintf(stderr, "--adapter ftdi or ch340, not %s\n", optarg); return 2; }
+			adapter = optarg;
+			break;
+		case 'C':
+			if (strcmp(optarg, "random")) { fprintf(stderr, "--clocks random (or --clock-ppm CHIP:PPM)\n"); return 2; }
+			clocks_random = 1;
+			break;
+		case 'P': {
+			char buf[64];
+			snprintf(buf, sizeof buf, "%s", optarg);
+			char *c = strchr(buf, ':');
+			int chip = c ? (*c = 0, chip_by_name(buf)) : -1;
+			if (chip < 0) { fprintf(stderr, "--clock-ppm CHIP:PPM with CHIP adxl345, itg3200 or hmc5883l\n"); return 2; }
+			imp.ppm[chip] = atof(c + 1);
+			break;
+		}
+		case 'b': case 'm':
+			if ((o == 'b' ? n_brownouts : n_resets_mid) >= MAX_FAULTS) { fprintf(stderr, "too many faults\n"); return 2; }
+			if (o == 'b') brownouts[n_brownouts++] = atof(optarg);
+			else resets_mid[n_resets_mid++] = atof(optarg);
+			break;
+		case 'o': {
+			char *c = strchr(optarg, ':');
+			if (!c || n_stalls >= MAX_FAULTS) { fprintf(stderr, "--host-stall T0:T1\n"); return 2; }
+			host_stalls[n_stalls][0] = atof(optarg);
+			host_stalls[n_stalls][1] = atof(c + 1);
+			n_stalls++;
+			break;
+		}
 		case 'Z': simavr_status = 1; break;
 		case 'T':
 			if (parse_pin(optarg, &tpin_port, &tpin_bit)) { fprintf(stderr, "bad pin %s (e.g. B5)\n", optarg); return 2; }
@@ -444,8 +547,36 @@ int main(int argc, char **argv)
 	avr->sleep = no_sleep;     /* sleep is simulated time, never wall time */
 	avr->reset = on_reset;     /* counts resets after power-up (the watchdog's) */
 
-	board_t board;
-	board_init(&board, avr, &trace, verbose);
+	const board_variant_t *variant = board_variant_find(variant_name);
+	if (!variant) {
+		fprintf(stderr, "sphere-board: unknown board %s; one of", variant_name);
+		for (const board_variant_t *v = board_variants; v->name; v++)
+			fprintf(stderr, " %s", v->name);
+		fprintf(stderr, "\n");
+		return 2;
+	}
+	uint64_t glitch_rng = imp.seed * 0x9E3779B97F4A7C15ULL + 12345;
+	if (clocks_random) { /* within each oscillator's tolerance (README: "Own clocks") */
+		static const double tol_ppm[CHIP_COUNT] = {10000, 20000, 10000};
+		uint64_t r = imp.seed * 0xD1B54A32D192ED03ULL + 777;
+		for (int i = 0; i < CHIP_COUNT; i++) {
+			r ^= r >> 12; r ^= r << 25; r ^= r >> 27;
+			double u = (double)((r * 0x2545F4914F6CDD1DULL) >> 11) / 9007199254740992.0;
+			imp.ppm[i] = (2 * u - 1) * tol_ppm[i];
+		}
+	}
+	static board_t board;
+	board_init(&board, avr, &trace, verbose, variant, &imp);
+	board.on_fault = board_fault;
+	the_board = &board;
+	if (sda_held) {
+		board.chip[CHIP_HMC5883L].holds_sda = 9;
+		board.sda_held_events++;
+		log_fault(0, "sda_held_at_power_up", CHIP_HMC5883L);
+	}
+	uart_out.avr = avr;
+	uart_out.host_reading = 1;
+	uart_out.adapter_buffer = strcmp(adapter, "ch340") ? 256 : 32;
 
 	/* UART 0 */
 	uint32_t flags = 0;
@@ -518,15 +649,68 @@ int main(int argc, char **argv)
 	const avr_cycle_count_t check_every = avr->frequency / 1000; /* 1 ms */
 	double wall0 = wall_now();
 	int stall = 0, state = cpu_Running;
+	double next_glitch = glitch_rate > 0 ? 0.5 : INFINITY;
+	int brown_i = 0, reset_i = 0;
+	uint32_t resets_seen = resets;
 	while (avr->cycle < end_cycle && !stop_requested) {
 		state = avr_run(avr);
 		if (state == cpu_Done || state == cpu_Crashed)
 			break;
-		if (stall && twi)
-			hold_twi(avr, twi);
+		if (resets != resets_seen) { /* simavr's reset cancelled every cycle timer: ours start again */
+			resets_seen = resets;
+			board_restart_timers(&board);
+			if (send_path) {
+				avr_cycle_timer_cancel(avr, uart_send_timer, NULL);
+				avr_cycle_timer_register(avr, avr->frequency / 10000, uart_send_timer, NULL);
+			}
+		}
+		if ((stall || board.chip[0].holds_sda || board.chip[1].holds_sda || board.chip[2].holds_sda) && twi)
+			hold_twi(avr, twi); /* a held clock, or SDA held low: the TWI cannot finish a step */
+		if (board.reset_pending) {
+			board.reset_pending = 0;
+			log_fault(board_time_s(&board), "reset_mid_read", board.cur_chip);
+			avr_reset(avr);
+		}
 		if (avr->cycle >= next_check) {
 			next_check = avr->cycle + check_every;
 			double t = (double)avr->cycle / avr->frequency;
+			for (int i = 0; i < n_stalls; i++) {
+				int stalled_host = t >= host_stalls[i][0] && t < host_stalls[i][1];
+				if (stalled_host && uart_out.host_reading) {
+					uart_out.host_reading = 0;
+					uart_out.buffered = 0;
+					log_fault(t, "host_stall", -1);
+				} else if (!stalled_host && !uart_out.host_reading && t >= host_stalls[i][1] && t < host_stalls[i][1] + 0.002) {
+					uart_out.host_reading = 1;
+					log_fault(t, "host_reads", -1);
+				}
+			}
+			while (brown_i < n_brownouts && t >= brownouts[brown_i]) {
+				brown_i++;
+				log_fault(t, "brownout", -1);
+				avr_reset(avr);
+				board_power_cycle(&board);
+			}
+			while (reset_i < n_resets_mid && t >= resets_mid[reset_i]) {
+				reset_i++;
+				board.reset_on_read = 1;
+			}
+			while (t >= next_glitch) {
+				double u = 0;
+				glitch_rng ^= glitch_rng >> 12; glitch_rng ^= glitch_rng << 25; glitch_rng ^= glitch_rng >> 27;
+				u = (double)((glitch_rng * 0x2545F4914F6CDD1DULL) >> 11) / 9007199254740992.0;
+				int kind = (int)(u * 20) ;   /* 0..9 NACK, 10..17 stretch, 18..19 reset mid-read */
+				int chip = (int)(u * 60) % 3;
+				if (kind < 10)
+					board.chip[chip].glitch_nack = 1;
+				else if (kind < 18)
+					board.stretch_cycles = avr->frequency / 10000 * (1 + (int)(u * 977) % 20); /* 0.1..2 ms */
+				else
+					board.reset_on_read = 1;
+				glitch_rng ^= glitch_rng >> 12; glitch_rng ^= glitch_rng << 25; glitch_rng ^= glitch_rng >> 27;
+				u = (double)((glitch_rng * 0x2545F4914F6CDD1DULL) >> 11) / 9007199254740992.0;
+				next_glitch += -log(1.0 - u) / glitch_rate; /* Poisson arrivals */
+			}
 			int stall_now = 0;
 			for (int i = 0; i < n_faults; i++) {
 				fault_t *f = &faults[i];
@@ -535,6 +719,7 @@ int main(int argc, char **argv)
 					stall_now |= on;
 				} else if (on != f->active) {
 					board.chip[f->chip].nack = on;
+					log_fault(t, on ? "nack_start" : "nack_end", f->chip);
 					if (verbose)
 						fprintf(stderr, "[%.3f] %s %s\n", t, board.chip[f->chip].name, on ? "stops answering" : "answers again");
 				}
@@ -547,6 +732,7 @@ int main(int argc, char **argv)
 					board.bus_busy = 0;
 					board.cur_chip = -1;
 				}
+				log_fault(t, stall_now ? "stall_start" : "stall_end", -1);
 				stall = stall_now;
 				board.stalled = stall;
 			}
@@ -624,6 +810,22 @@ int main(int argc, char **argv)
 		fprintf(sf, "  \"wall_seconds\": %.3f,\n", wall);
 		fprintf(sf, "  \"speed\": %.3f,\n", wall > 0 ? sim_s / wall : 0);
 		fprintf(sf, "  \"resets\": %u,\n", resets);
+		fprintf(sf, "  \"board\": \"%s\",\n  \"magnetometer\": \"%s\",\n  \"noise\": %s,\n  \"seed\": %llu,\n",
+			variant->name, board.chip[CHIP_HMC5883L].name, imp.noise ? "true" : "false", (unsigned long long)imp.seed);
+		fprintf(sf, "  \"clock_ppm\": {\"adxl345\": %.1f, \"itg3200\": %.1f, \"hmc5883l\": %.1f},\n",
+			board.imp.ppm[0], board.imp.ppm[1], board.imp.ppm[2]);
+		fprintf(sf, "  \"i2c_real_timing\": %s,\n", real_i2c ? "true" : "false");
+		fprintf(sf, "  \"glitches\": {\"nacks\": %u, \"clock_stretches\": %u, \"sda_held\": %u},\n",
+			board.glitch_nacks, board.clock_stretches, board.sda_held_events);
+		fprintf(sf, "  \"hmc5883l_measurements\": %u,\n  \"hmc5883l_held_by_lock\": %u,\n",
+			board.hmc.measurements, board.hmc.dropped_locked);
+		fprintf(sf, "  \"host_dropped_bytes\": %llu,\n", (unsigned long long)uart_out.host_dropped);
+		fprintf(sf, "  \"faults\": [");
+		for (size_t i = 0; i < n_fault_log; i++)
+			fprintf(sf, "%s{\"t\": %.6f, \"kind\": \"%s\", \"chip\": %s%s%s}", i ? ", " : "", fault_log[i].t_s,
+				fault_log[i].kind, fault_log[i].chip >= 0 ? "\"" : "",
+				fault_log[i].chip >= 0 ? board.chip[fault_log[i].chip].name : "null", fault_log[i].chip >= 0 ? "\"" : "");
+		fprintf(sf, "],\n");
 		fprintf(sf, "  \"crashed\": %s\n", state == cpu_Crashed ? "true" : "false");
 		fprintf(sf, "}\n");
 		fclose(sf);

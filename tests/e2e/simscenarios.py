@@ -144,3 +144,70 @@ def sketch_scenario(name: str) -> Scenario:
     if name == "stall":
         return _run(name, elf, T.still(4.0), 4.0, stall=["1.5:1.6"])
     raise KeyError(name)
+
+
+# ---------------------------------------------------------------- the bench I2C master (hardware/sim/probe)
+
+
+@dataclass
+class ProbeLine:
+    t_us: int
+    tag: str
+    data: list  # bytes read, [] for a write / bus clear, None for a NACK
+
+
+@dataclass
+class ProbeRun:
+    lines: list
+    stats: dict
+    stderr: str
+
+    def tagged(self, tag: str) -> list:
+        return [x for x in self.lines if x.tag == tag]
+
+
+def need_probe() -> Path:
+    if shutil.which("avr-g++") is None or not Path("/usr/share/arduino/hardware/arduino/avr/cores/arduino").is_dir():
+        pytest.skip("avr-g++ or Debian's arduino-core-avr missing: cannot build the board's probe sketch")
+    from sphere.sim.board import probe_elf
+
+    try:
+        return probe_elf(build=True)
+    except BoardUnavailable as e:
+        pytest.skip(str(e))
+
+
+def probe(commands, motion, seconds: float, **kw) -> ProbeRun:
+    """Run the probe sketch on the board: ``commands`` are (simulated time s, "w 1e 02 00"-style text);
+    ``motion`` a Motion or a ChipTrace (for chip rates other than the default trace's)."""
+    need_board()
+    elf = need_probe()
+    with tempfile.TemporaryDirectory(prefix="sphere-probe-") as tmp:
+        ct = motion if isinstance(motion, T.ChipTrace) else T.to_chips(motion)
+        trace = ct.write(Path(tmp) / "trace.bin")
+        send = Path(tmp) / "send.txt"
+        send.write_text("".join(f"{t:.6f} {(c + chr(10)).encode().hex(' ')}\n" for t, c in commands))
+        cap = Path(tmp) / "capture.bin"
+        r = run_board(elf, trace, seconds, cap, send=send, **kw)
+        text = cap.read_bytes().decode("latin-1") if cap.exists() else ""
+    lines = []
+    for ln in text.splitlines():
+        parts = ln.split()
+        if len(parts) < 2 or not parts[0].isdigit():
+            continue
+        try:
+            data = None if parts[2:3] == ["NACK"] else [int(x, 16) for x in parts[2:] if x != "ok"]
+        except ValueError:  # a line cut short by a reset of the AVR, then the next one
+            continue
+        lines.append(ProbeLine(int(parts[0]), parts[1], data))
+    assert r.returncode == 0, r.stderr
+    return ProbeRun(lines, r.stats, r.stderr)
+
+
+def s16be(hi: int, lo: int) -> int:
+    v = hi << 8 | lo
+    return v - 65536 if v & 0x8000 else v
+
+
+def s16le(lo: int, hi: int) -> int:
+    return s16be(hi, lo)

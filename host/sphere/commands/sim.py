@@ -19,9 +19,12 @@ DESCRIPTION = (
     "synthetic:calibration) or a "
     "prepared trace (.bin). The UART goes into a capture file (--capture, readable by `sphere decode`) "
     "and/or a pseudo-terminal (--pty, for `sphere capture` or sphere-mouse). Prints the run's figures; "
-    "--stats writes them as JSON. simavr 1.6 clocks the I2C bus at one SCL period per microsecond (9 us a byte, "
-    "not 400 kHz's 22.5 us) unless --i2c-real-timing; the MARG update's cycle counts (from the timing pin D13) "
-    "are exact."
+    "--stats writes them as JSON. The I2C bus runs at its real 400 kHz timing (--simavr-i2c-timing: simavr's "
+    "1 us per step); the MARG update's cycle counts (from the timing pin D13) are exact. The board can be "
+    "one of several variants (--board), its chips noisy and on their own clocks (--noise, --clocks random), and "
+    "faults can be injected (--nack, --stall, --glitch, --brownout, --reset-mid-read, --sda-held, --host-stall). "
+    "--soak SECONDS runs the firmware on BROAD motion under a random schedule of all faults and checks the "
+    "stream's invariants (hardware/sim/README.md)."
 )
 
 DEFAULT_BETA = 0.041  # the firmware's DEFAULT_BETA_MILLI (firmware/src/core/marg_filter.h)
@@ -55,7 +58,30 @@ def add_arguments(p) -> None:
     p.add_argument("--loop-pin", default=None, help="pin high during a whole period's work, if the firmware has one")
     p.add_argument("--rate", type=float, default=None, help="the firmware's sample rate in Hz (default 200)")
     p.add_argument("--i2c-real-timing", action="store_true",
-                   help="stretch each I2C byte to 9 SCL periods at the firmware's TWBR rate (default: simavr's 1 us per step)")
+                   help="(the default now) each I2C byte takes 9 SCL periods at the firmware's TWBR rate")
+    p.add_argument("--simavr-i2c-timing", action="store_true",
+                   help="simavr's own I2C timing (1 us per step), faster but not the real bus")
+    p.add_argument("--board", default=None, metavar="NAME",
+                   help="board variant: aligned (default), sen10724, gy85, gy85-qmc (each chip's axes as mounted there)")
+    p.add_argument("--noise", action="store_true",
+                   help="the chips' datasheet noise, turn-on offsets and gyro warm-up drift")
+    p.add_argument("--seed", type=int, default=None, help="seed of the noise, the clocks and the faults (default 1)")
+    p.add_argument("--clock-ppm", action="append", default=[], metavar="CHIP:PPM",
+                   help="a chip's oscillator off the Nano's crystal by PPM")
+    p.add_argument("--clocks", choices=["random"], default=None,
+                   help="every chip's oscillator off by a seeded amount within its datasheet's tolerance")
+    p.add_argument("--glitch", type=float, default=None, metavar="RATE",
+                   help="transient I2C faults, RATE a second on average: single NACKs, clock stretching, a reset "
+                        "in the middle of a read (the chip then holds SDA low)")
+    p.add_argument("--brownout", action="append", type=float, default=[], metavar="T",
+                   help="the supply dips at T s: the AVR and the chips restart")
+    p.add_argument("--reset-mid-read", action="append", type=float, default=[], metavar="T",
+                   help="reset the AVR at the first byte a chip sends after T s (the chip holds SDA)")
+    p.add_argument("--sda-held", action="store_true", help="at power-up a sensor holds SDA low")
+    p.add_argument("--host-stall", action="append", default=[], metavar="T0:T1",
+                   help="the host stops reading from T0 to T1 s (the adapter's buffer overflows)")
+    p.add_argument("--adapter", choices=["ftdi", "ch340"], default=None,
+                   help="the USB-serial adapter (its buffer size for --host-stall)")
     p.add_argument("--accuracy", action="store_true",
                    help="compare the firmware's quaternions with BROAD's optical reference and the host Madgwick")
     p.add_argument("--beta", type=float, default=DEFAULT_BETA, help="β of the host Madgwick (default the firmware's)")
@@ -104,6 +130,14 @@ def prepare(source: str, seconds: float | None, start_s, hold_s: float, out: Pat
     return out, hold_s + len(sl) / sl.rate_hz, sl
 
 
+def board_options(args) -> dict:
+    """The board's variant, imperfections and faults from the command line (run_board's keywords)."""
+    return dict(i2c_real_timing=not args.simavr_i2c_timing, board=args.board, noise=args.noise, seed=args.seed,
+                clock_ppm=args.clock_ppm, clocks_random=args.clocks == "random", glitch=args.glitch,
+                brownout=args.brownout, reset_mid_read=args.reset_mid_read, sda_held=args.sda_held,
+                host_stall=args.host_stall, adapter=args.adapter)
+
+
 def _one(args, source: str, elf, tmp: Path, index: int, multi: bool):
     from sphere.sim.analysis import accuracy, summarise
     from sphere.sim.board import run_board
@@ -119,7 +153,7 @@ def _one(args, source: str, elf, tmp: Path, index: int, multi: bool):
         run = run_board(elf, trace, secs, capture, interactive=args.pty, pty=args.pty, realtime=args.realtime,
                         stats=stats_out, nack=args.nack, stall=args.stall, send=args.send,
                         timing_pin=args.timing_pin, loop_pin=args.loop_pin, rate_hz=args.rate,
-                        verbose=args.verbose, build=not args.no_build, i2c_real_timing=args.i2c_real_timing)
+                        verbose=args.verbose, build=not args.no_build, **board_options(args))
     summary = summarise(Path(capture)) if Path(capture).exists() else None
     stats = dict(run.stats)
     if summary is not None:

@@ -84,14 +84,27 @@ def firmware_elf(build: bool = True) -> Path:
     return FIRMWARE_ELF
 
 
+def _sketch_elf(name: str, build: bool) -> Path:
+    elf = SIM_DIR / "build" / f"{name}.elf"
+    if _stale(elf, [SIM_DIR / name / f"{name}.cpp", SIM_DIR / "Makefile"]):
+        if not build:
+            raise BoardUnavailable(f"the {name} sketch is not built: run `make -C hardware/sim {name}`")
+        _make(SIM_DIR, f"make -C hardware/sim {name}", name)
+    return elf
+
+
 def testfw_elf(build: bool = True) -> Path:
     """The board's own test sketch (hardware/sim/testfw), for checking the board without the firmware."""
-    elf = SIM_DIR / "build" / "testfw.elf"
-    if _stale(elf, [SIM_DIR / "testfw" / "testfw.cpp"]):
-        if not build:
-            raise BoardUnavailable("the test sketch is not built: run `make -C hardware/sim testfw`")
-        _make(SIM_DIR, "make -C hardware/sim testfw", "testfw")
-    return elf
+    return _sketch_elf("testfw", build)
+
+
+def probe_elf(build: bool = True) -> Path:
+    """The bench I2C master (hardware/sim/probe): text commands on the UART, one result line each."""
+    return _sketch_elf("probe", build)
+
+
+#: The board variants sphere-board knows (hardware/sim/sensors.c, board_variants).
+BOARD_VARIANTS = ("aligned", "sen10724", "gy85", "gy85-qmc")
 
 
 @dataclass
@@ -105,7 +118,10 @@ class BoardRun:
 
 def board_command(elf, trace, seconds: float, capture=None, pty=False, realtime=False, stats=None,
                   nack=(), stall=(), send=None, timing_pin=None, loop_pin=None, rate_hz=None,
-                  verbose=0, build=True, i2c_real_timing=False) -> list[str]:
+                  verbose=0, build=True, i2c_real_timing=True, board=None, noise=False, seed=None,
+                  clock_ppm=(), clocks_random=False, glitch=None, reset_mid_read=(), brownout=(), sda_held=False,
+                  host_stall=(), adapter=None) -> list[str]:
+    """sphere-board's command line. I2C runs at its real 400 kHz timing unless ``i2c_real_timing=False``."""
     cmd = [str(board_path(build)), str(elf), "--trace", str(trace), "--seconds", f"{seconds:g}"]
     if capture:
         cmd += ["--capture", str(capture)]
@@ -127,8 +143,30 @@ def board_command(elf, trace, seconds: float, capture=None, pty=False, realtime=
         cmd += ["--loop-pin", loop_pin]
     if rate_hz:
         cmd += ["--rate", f"{rate_hz:g}"]
-    if i2c_real_timing:
-        cmd.append("--i2c-real-timing")
+    if not i2c_real_timing:
+        cmd.append("--simavr-i2c-timing")
+    if board:
+        cmd += ["--board", board]
+    if noise:
+        cmd.append("--noise")
+    if seed is not None:
+        cmd += ["--seed", str(int(seed))]
+    for c in clock_ppm:
+        cmd += ["--clock-ppm", c]
+    if clocks_random:
+        cmd += ["--clocks", "random"]
+    if glitch:
+        cmd += ["--glitch", f"{glitch:g}"]
+    for t in reset_mid_read:
+        cmd += ["--reset-mid-read", f"{t:g}"]
+    for t in brownout:
+        cmd += ["--brownout", f"{t:g}"]
+    if sda_held:
+        cmd.append("--sda-held")
+    for h in host_stall:
+        cmd += ["--host-stall", h]
+    if adapter:
+        cmd += ["--adapter", adapter]
     cmd += ["-v"] * verbose
     return cmd
 

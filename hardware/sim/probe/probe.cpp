@@ -1,0 +1,128 @@
+// probe.cpp - a bench I2C master for the virtual board's own chip tests (not the sphere's firmware).
+// Part of the MARG sphere's virtual board (hardware/sim); GPL-3.0-or-later like the board.
+//
+// Takes text commands on the UART (the board's --send), one per line, runs them over Wire at 400 kHz
+// and prints one line per result: "<micros> <tag> <hex bytes or NACK>". Hex numbers throughout.
+//   w AA RR VV              write VV to register RR of the chip at 7-bit address AA       -> "w ok|NACK"
+//   r AA RR N               burst read of N bytes from RR                                  -> "r xx xx .."
+//   p AA RR N PERIOD COUNT  COUNT burst reads, one every PERIOD microseconds (decimal)      -> COUNT "p" lines
+//   f AA RR MASK COUNT      COUNT one-byte reads as fast as the bus allows, kept in RAM and printed after:
+//                           one "f" line per change of (value & MASK): "<micros> f <value>" (COUNT <= 2000)
+//   n AA RR MASK MS         for MS milliseconds, count the reads where (value & MASK) went from 0 to set
+//                           -> "n <count> <elapsed us>" (hex count, decimal elapsed)
+//   c                       bus clear: TWI off, nine SCL pulses and a STOP on the pins, TWI on -> "c"
+#include <Arduino.h>
+#include <Wire.h>
+
+static char line[64];
+static uint8_t len;
+
+static void hex(uint8_t v) {
+  const char *d = "0123456789abcdef";
+  Serial.write(d[v >> 4]); Serial.write(d[v & 15]);
+}
+
+static bool rd(uint8_t a, uint8_t r, uint8_t *b, uint8_t n) {
+  Wire.beginTransmission(a); Wire.write(r);
+  if (Wire.endTransmission(false) != 0) { Wire.endTransmission(); return false; }
+  if (Wire.requestFrom(a, n) != n) return false;
+  for (uint8_t i = 0; i < n; i++) b[i] = Wire.read();
+  return true;
+}
+
+static void report_read(const char *tag, uint32_t t, bool ok, const uint8_t *b, uint8_t n) {
+  Serial.print(t); Serial.write(' '); Serial.print(tag);
+  if (!ok) Serial.print(" NACK");
+  else for (uint8_t i = 0; i < n; i++) { Serial.write(' '); hex(b[i]); }
+  Serial.write('\n');
+}
+
+static void bus_clear() {
+  TWCR = 0;                       // TWI off: the pins are ours
+  pinMode(SDA, INPUT_PULLUP);
+  for (uint8_t i = 0; i < 9; i++) {  // open drain: low = output 0, high = released (pull-up)
+    pinMode(SCL, OUTPUT); digitalWrite(SCL, LOW); delayMicroseconds(5);
+    pinMode(SCL, INPUT_PULLUP); delayMicroseconds(5);
+  }
+  pinMode(SDA, OUTPUT); digitalWrite(SDA, LOW); delayMicroseconds(5);  // STOP: SDA rises while SCL high
+  pinMode(SDA, INPUT_PULLUP);
+  Wire.begin(); Wire.setClock(400000); Wire.setWireTimeout(3000, true);
+}
+
+static void run(char *s) {
+  unsigned long v[6] = {0};
+  uint8_t n = 0;
+  char cmd = s[0];
+  char *p = s + 1;
+  while (n < 6) {
+    while (*p == ' ') p++;
+    if (!*p) break;
+    char *end;
+    v[n] = strtoul(p, &end, n >= 3 ? 10 : 16);
+    if (end == p) break;
+    n++;
+    p = end;
+  }
+  uint8_t b[16];
+  if (cmd == 'w' && n == 3) {
+    Wire.beginTransmission((uint8_t)v[0]); Wire.write((uint8_t)v[1]); Wire.write((uint8_t)v[2]);
+    bool ok = Wire.endTransmission() == 0;
+    Serial.print(micros()); Serial.print(ok ? " w ok\n" : " w NACK\n");
+  } else if (cmd == 'r' && n == 3) {
+    uint8_t k = v[2] > 16 ? 16 : v[2];
+    uint32_t t = micros();
+    report_read("r", t, rd(v[0], v[1], b, k), b, k);
+  } else if (cmd == 'p' && n == 5) {
+    uint8_t k = v[2] > 16 ? 16 : v[2];
+    uint32_t t0 = micros();
+    for (unsigned long i = 0; i < v[4]; i++) {
+      while ((uint32_t)(micros() - t0) < i * v[3]) {}
+      uint32_t t = micros();
+      report_read("p", t, rd(v[0], v[1], b, k), b, k);
+    }
+  } else if (cmd == 'f' && n == 4) {
+    static uint32_t ts[120];
+    static uint8_t vs[120];
+    uint8_t k = 0, last = 0xFF, mask = (uint8_t)v[2];
+    for (unsigned long i = 0; i < v[3] && k < 120; i++) {
+      uint32_t t = micros();
+      if (!rd(v[0], v[1], b, 1)) continue;
+      if ((b[0] & mask) != last) { last = b[0] & mask; ts[k] = t; vs[k++] = b[0]; }
+    }
+    for (uint8_t i = 0; i < k; i++) report_read("f", ts[i], true, vs + i, 1);
+  } else if (cmd == 'n' && n == 4) {
+    uint8_t mask = (uint8_t)v[2], prev = 1;
+    uint16_t count = 0;
+    uint32_t t0 = micros(), t = t0;
+    while ((uint32_t)(t - t0) < v[3] * 1000UL) {
+      if (rd(v[0], v[1], b, 1)) {
+        uint8_t set = (b[0] & mask) != 0;
+        if (set && !prev) count++;
+        prev = set;
+      }
+      t = micros();
+    }
+    Serial.print(micros()); Serial.print(" n "); hex(count >> 8); hex(count & 0xFF);
+    Serial.write(' '); Serial.print(t - t0); Serial.write('\n');
+  } else if (cmd == 'c') {
+    bus_clear();
+    Serial.print(micros()); Serial.print(" c\n");
+  } else {
+    Serial.print(micros()); Serial.print(" ? "); Serial.print(s); Serial.write('\n');
+  }
+}
+
+void setup() {
+  Serial.begin(115200);
+  Wire.begin(); Wire.setClock(400000); Wire.setWireTimeout(3000, true);
+  Serial.print(micros()); Serial.print(" probe\n");
+}
+
+void loop() {
+  while (Serial.available()) {
+    char c = Serial.read();
+    if (c == '\n' || c == '\r') {
+      if (len) { line[len] = 0; run(line); len = 0; }
+    } else if (len < sizeof line - 1) line[len++] = c;
+  }
+}
