@@ -62,3 +62,89 @@ def test_hybrid_sim_command_prints_both_tables(tmp_path, capsys):
     assert "Table 2: orientation" in text and "Table 3: position" in text and "dissertation" in text
     doc = json.loads(out.read_text())
     assert doc["seed"] == hybrid.SEED and set(doc["orientation"]) == {"GT", "SF", "CV", "KF"}
+
+
+# -- the camera + IMU tracker (issue 16) ------------------------------------------------------------------
+
+def _motion(t):
+    """A hand's motion in the earth frame (m), and its acceleration: three incommensurate sways."""
+    w = np.array([2.1, 3.3, 1.7])
+    amp = np.array([0.15, 0.10, 0.08])
+    p = np.array([0.2, 1.0, 1.3]) + amp * np.sin(np.outer(t, w) + [0.0, 1.0, 2.0])
+    a = -amp * w * w * np.sin(np.outer(t, w) + [0.0, 1.0, 2.0])
+    return p, a
+
+
+def _camera_rotation():
+    from scipy.spatial.transform import Rotation
+
+    return Rotation.from_euler("zyx", [40.0, -15.0, 100.0], degrees=True).as_matrix()
+
+
+def _run_tracker(delay=0.04, stamp="exposure", outlier_at=None, seconds=6.0, noise=0.001, seed=0):
+    """The tracker fed like the real thing: IMU at 200 Hz (identity orientation, gravity in the reading),
+    camera at 30 Hz, fixes arriving `delay` after their exposure; returns (t, estimate, truth) in the
+    camera frame, and the tracker."""
+    rng = np.random.default_rng(seed)
+    R = _camera_rotation()
+    T = np.array([0.05, -0.1, 0.2])
+    trk = hybrid.CameraImuTracker()
+    t_imu = np.arange(0, seconds, 0.005)
+    t_cam = np.arange(0.02, seconds, 1 / 30)
+    p_cam = _motion(t_cam)[0] @ R.T + T + rng.normal(0, noise, (len(t_cam), 3))
+    _, a = _motion(t_imu)
+    acc = a + [0, 0, hybrid.STANDARD_GRAVITY] + rng.normal(0, 0.05, a.shape)
+    out = np.full((len(t_imu), 3), np.nan)
+    k = 0
+    for i, t in enumerate(t_imu):
+        while k < len(t_cam) and t_cam[k] + delay <= t:
+            z = p_cam[k]
+            if outlier_at is not None and abs(t_cam[k] - outlier_at) < 1e-3:
+                z = z + np.array([0.2, 0.0, 0.0])
+            trk.camera(t_cam[k] if stamp == "exposure" else t_cam[k] + delay, z, np.eye(3) * noise ** 2)
+            k += 1
+        p = trk.imu(t, [1.0, 0.0, 0.0, 0.0], acc[i])
+        if p is not None:
+            out[i] = p
+    truth = _motion(t_imu)[0] @ R.T + T
+    return t_imu, out, truth, trk
+
+
+def test_alignment_of_camera_to_earth_is_estimated_from_the_motion():
+    *_, trk = _run_tracker()
+    assert trk.alignment.ready
+    dR = trk.alignment.R @ _camera_rotation().T
+    assert np.degrees(np.arccos((np.trace(dR) - 1) / 2)) < 1.0
+
+
+def test_latency_compensation_applies_fixes_at_their_exposure_time():
+    t, est, truth, _ = _run_tracker(stamp="exposure")
+    late = _run_tracker(stamp="arrival")[1]
+    use = t > 3.0  # the alignment has formed
+    e_ok = np.sqrt(np.mean(np.sum((est[use] - truth[use]) ** 2, axis=1)))
+    e_late = np.sqrt(np.mean(np.sum((late[use] - truth[use]) ** 2, axis=1)))
+    assert e_ok < 0.003
+    assert e_late > 3 * e_ok
+
+
+def test_an_outlier_fix_is_gated_and_a_lost_track_is_reacquired():
+    t, est, truth, trk = _run_tracker(outlier_at=0.02 + 120 / 30)
+    assert trk.stats["gated"] == 1 and trk.stats["reacquired"] == 0
+    after = (t > 4.0) & (t < 4.2)
+    assert np.abs(est[after] - truth[after]).max() < 0.01
+    # a track that jumps for good (the camera was bumped) is taken up after three agreeing fixes
+    trk2 = hybrid.CameraImuTracker()
+    for k in range(40):
+        trk2.imu(k * 0.01, [1, 0, 0, 0], [0, 0, hybrid.STANDARD_GRAVITY])
+        if k % 3 == 0:
+            trk2.camera(k * 0.01, [0.0, 0.0, 1.0] if k < 20 else [0.3, 0.0, 1.0])
+    assert trk2.stats["reacquired"] == 1
+    assert np.allclose(trk2.x[:3], [0.3, 0.0, 1.0], atol=0.01)
+
+
+def test_output_at_the_imu_rate_between_frames():
+    t, est, truth, _ = _run_tracker()
+    ok = np.all(np.isfinite(est), axis=1)
+    assert ok[t > 0.1].all()  # one output per IMU sample (200 Hz), not per frame (30 Hz)
+    steps = np.linalg.norm(np.diff(est[t > 3.0], axis=0), axis=1)
+    assert steps.max() < 0.01  # no jumps at the frames

@@ -227,7 +227,7 @@ class BallDetector:
             cands = self._candidates(small, x0, y0, scale)
             if not cands:
                 continue
-            if hint is not None:
+            if scale == 1:  # tracking: the candidate nearest the last ball, in the window around it
                 cands.sort(key=lambda c: np.linalg.norm(c[0] - np.asarray(hint[0])) / max(hint[1], 1.0)
                            - c[2] - 0.02 * c[1])
                 for centre, r0, _ in cands[:3]:
@@ -236,7 +236,8 @@ class BallDetector:
                         det.candidates = len(cands)
                         return det
                 continue
-            # a cold start: measure the likeliest few and keep the most circle-like outline
+            # the whole frame (a cold start, or the track lost): measure the likeliest few and keep the
+            # most circle-like outline, if it is clearly one
             cands.sort(key=lambda c: -(c[1] * c[2] * c[2]))
             found = [d for d in (self._measure(bgr, centre, r0) for centre, r0, _ in cands[:4]) if d is not None
                      and d.inliers >= COLD_START_INLIERS * self.n_rays and d.residual_px <= COLD_START_RESIDUAL_PX]

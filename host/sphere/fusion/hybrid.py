@@ -233,3 +233,279 @@ def table(values: dict) -> dict:
         rmspe = 100.0 * rmse / float(np.mean(gt)) if rmse is not None else None
         out[name] = (float(np.mean(x[ok])), float(np.std(x[ok])), rmse, rmspe, float(np.sqrt(np.mean(x[ok] ** 2))))
     return out
+
+
+# -- the hybrid tracker with a real camera (issue 16): chapter 3 extended ---------------------------------
+
+#: chapter 3's outlier gate (eq. 104): an innovation beyond 5 % of the measurement is not trusted
+Z_TH = 0.05
+STANDARD_GRAVITY = 9.80665
+
+
+def _rot(q) -> np.ndarray:
+    """Rotation matrix of a unit quaternion [w, x, y, z] (sensor → earth)."""
+    w, x, y, z = np.asarray(q, float) / np.linalg.norm(q)
+    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+                     [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+                     [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+
+
+class CameraAlignment:
+    """The rotation from the earth frame of the orientation filter to the camera's frame, estimated from
+    the motion itself (not assumed).
+
+    For three camera positions at t₀ < t₁ < t₂ (the centre's exposure times), the second divided
+    difference (p₂ − p₁)/h₂ − (p₁ − p₀)/h₁ equals ∫ a(s) w(s) ds exactly, w the hat function rising over
+    [t₀, t₁] and falling over [t₁, t₂], whatever the motion. The same integral of the IMU's acceleration
+    (rotated to the earth frame, gravity removed) gives the same vector in the earth frame. Pairs of
+    these vectors give the rotation by the SVD solution of Wahba's problem (Kabsch, on the centred pairs,
+    so an error in the gravity removed drops out); it is used once the pairs span two directions well.
+    """
+
+    def __init__(self, spacing_s: float = 0.2, min_pairs: int = 15, min_ratio: float = 0.08,
+                 min_energy: float = 0.5):
+        self.spacing_s = spacing_s
+        self.min_pairs, self.min_ratio, self.min_energy = min_pairs, min_ratio, min_energy
+        self.cam: list[tuple[float, np.ndarray]] = []  # (t, p) of recent camera fixes
+        self.acc: list[tuple[float, np.ndarray]] = []  # (t, a_earth) of recent IMU samples
+        self.H = np.zeros((3, 3))
+        self.sum_earth = np.zeros(3)
+        self.sum_cam = np.zeros(3)
+        self.pairs = 0
+        self.energy = 0.0
+        self.R = None  # earth → camera, once ready
+        self.residual = None
+
+    def add_imu(self, t: float, a_earth: np.ndarray) -> None:
+        self.acc.append((t, np.asarray(a_earth, float)))
+        while self.acc and self.acc[0][0] < t - 4 * self.spacing_s - 0.5:
+            self.acc.pop(0)
+
+    def add_camera(self, t: float, p_cam: np.ndarray) -> None:
+        if self.cam and t - self.cam[-1][0] > 0.15:  # a gap: start a new run of fixes
+            self.cam.clear()
+        self.cam.append((t, np.asarray(p_cam, float)))
+        while self.cam[0][0] < t - 2 * self.spacing_s - 0.1:
+            self.cam.pop(0)
+        self._pair()
+
+    def _pair(self) -> None:
+        t2, p2 = self.cam[-1]
+        older = [c for c in self.cam if c[0] <= t2 - self.spacing_s + 0.02]
+        if not older:
+            return
+        t1, p1 = older[-1]
+        oldest = [c for c in self.cam if c[0] <= t1 - self.spacing_s + 0.02]
+        if not oldest or not self.acc or self.acc[0][0] > oldest[-1][0] or self.acc[-1][0] < t2:
+            return
+        t0, p0 = oldest[-1]
+        h1, h2 = t1 - t0, t2 - t1
+        d_cam = (p2 - p1) / h2 - (p1 - p0) / h1
+        ts = np.array([a[0] for a in self.acc])
+        A = np.array([a[1] for a in self.acc])
+        use = (ts > t0) & (ts < t2)
+        if use.sum() < 5:
+            return
+        s = ts[use]
+        w = np.where(s <= t1, (s - t0) / h1, (t2 - s) / h2)
+        dt = np.gradient(ts)[use]
+        d_earth = (A[use] * (w * dt)[:, None]).sum(axis=0)
+        self.H += np.outer(d_earth, d_cam)
+        self.sum_earth += d_earth
+        self.sum_cam += d_cam
+        self.pairs += 1
+        self.energy += float(d_earth @ d_earth)
+        self._solve()
+
+    def _solve(self) -> None:
+        # centred (the cross-covariance): a constant error in the removed gravity, which adds the same
+        # vector to every earth-frame pair, drops out
+        n = self.pairs
+        U, S, Vt = np.linalg.svd(self.H - np.outer(self.sum_earth, self.sum_cam) / n)
+        if self.pairs < self.min_pairs or self.energy < self.min_energy or S[1] < self.min_ratio * S[0]:
+            return
+        d = np.sign(np.linalg.det(Vt.T @ U.T))
+        self.R = Vt.T @ np.diag([1.0, 1.0, d]) @ U.T
+
+    @property
+    def ready(self) -> bool:
+        return self.R is not None
+
+
+class CameraImuTracker:
+    """Position of the ball in the camera's frame from camera fixes (at their exposure times) and the IMU.
+
+    State x = [p, v, b] (camera frame): position, velocity and the acceleration's slowly varying bias.
+    - **Predict** at the IMU's rate with its acceleration as the control input (chapter 3's "SF drives the
+      process"): a_cam = R_ce (R(q) a_sensor − g ẑ) with q the host orientation filter's quaternion and
+      R_ce the estimated :class:`CameraAlignment`. Until the alignment is known the prediction is
+      constant-velocity with a hand's acceleration as process noise.
+    - **Correct** with a camera fix at its exposure time: the filter goes back to the state saved at the
+      last IMU sample before the exposure, applies the fix there and re-propagates the IMU samples since
+      (latency compensation), so the output at the IMU's rate never waits for the camera.
+    - **Gate** (chapter 3, z_TH = 5 %): a fix whose innovation exceeds 5 % of its distance, widened by 3σ of
+      the prediction's own uncertainty, is not applied; three such fixes in a row that agree with each
+      other (after a loss, when dead reckoning has drifted) re-acquire: the state restarts from them.
+    """
+
+    def __init__(self, accel_noise: float = 0.5, free_accel_noise: float = 6.0, bias_walk: float = 0.05,
+                 z_th: float = Z_TH, history_s: float = 0.3, reacquire_after: int = 3,
+                 cam_floor_m=(0.0005, 0.0005, 0.002), use_imu: bool = True):
+        self.use_imu = use_imu
+        self.accel_noise, self.free_accel_noise, self.bias_walk = accel_noise, free_accel_noise, bias_walk
+        self.z_th = z_th
+        self.history_s = history_s
+        self.reacquire_after = reacquire_after
+        self.cam_floor = np.asarray(cam_floor_m, float)
+        self.alignment = CameraAlignment()
+        self.x = None
+        self.P = None
+        self.t = None
+        self.g = STANDARD_GRAVITY
+        self.hist: list = []  # [t, a_earth, x, P] after the prediction to t
+        self.rejected: list = []
+        self.stats = {"accepted": 0, "gated": 0, "reacquired": 0, "late": 0}
+
+    # -- IMU ---------------------------------------------------------------------------------------------
+    def imu(self, t: float, q_sensor_to_earth, acc_sensor):
+        """One IMU sample; returns the position estimate (camera frame, m) at t, or None before the first fix."""
+        # standard gravity removed; the local difference (and the accelerometer's offset) is a constant that
+        # the alignment's centring and the filter's bias state take up
+        a_earth = _rot(q_sensor_to_earth) @ np.asarray(acc_sensor, float) - np.array([0.0, 0.0, self.g])
+        self.alignment.add_imu(t, a_earth)
+        if self.x is None:
+            self.hist.append([t, a_earth, None, None])
+            self._trim(t)
+            self.t = t
+            return None
+        self._predict(t - self.t, a_earth)
+        self.t = t
+        self.hist.append([t, a_earth, self.x.copy(), self.P.copy()])
+        self._trim(t)
+        return self.x[:3].copy()
+
+    def _trim(self, t):
+        while self.hist and self.hist[0][0] < t - self.history_s:
+            self.hist.pop(0)
+
+    def _predict(self, dt: float, a_earth) -> None:
+        if dt <= 0:
+            return
+        R = self.alignment.R if self.use_imu else None
+        F = np.eye(9)
+        F[0:3, 3:6] = np.eye(3) * dt
+        F[0:3, 6:9] = -0.5 * dt * dt * np.eye(3)
+        F[3:6, 6:9] = -dt * np.eye(3)
+        if R is not None:
+            u = R @ a_earth
+            q_a, q_b = self.accel_noise, self.bias_walk
+        else:
+            u = np.zeros(3)
+            q_a, q_b = self.free_accel_noise, 0.0
+        x = F @ self.x
+        x[0:3] += 0.5 * dt * dt * u
+        x[3:6] += dt * u
+        G = np.zeros((9, 3))
+        G[0:3] = 0.5 * dt * dt * np.eye(3)
+        G[3:6] = dt * np.eye(3)
+        Q = (q_a * q_a) * (G @ G.T)
+        Q[6:9, 6:9] += (q_b * q_b * dt) * np.eye(3)
+        self.x = x
+        self.P = F @ self.P @ F.T + Q
+
+    # -- camera ------------------------------------------------------------------------------------------
+    def camera(self, t_exposure: float, p_cam, cov=None) -> str:
+        """A camera fix of the ball's centre (camera frame, m) exposed at ``t_exposure``; ``cov`` its 3×3
+        covariance. Returns what was done: "init", "accepted", "gated", "reacquired" or "late"."""
+        z = np.asarray(p_cam, float)
+        Rm = np.diag(self.cam_floor ** 2) + (np.zeros((3, 3)) if cov is None else 2.0 * np.asarray(cov, float))
+        if self.x is None:
+            self._init(t_exposure, z, Rm)
+            self.alignment.add_camera(t_exposure, z)
+            return "init"
+        # the saved state at the last IMU sample before the exposure
+        k = None
+        for i in range(len(self.hist) - 1, -1, -1):
+            if self.hist[i][0] <= t_exposure and self.hist[i][2] is not None:
+                k = i
+                break
+        if k is None:
+            self.stats["late"] += 1
+            return "late"
+        x, P = self.hist[k][2].copy(), self.hist[k][3].copy()
+        nu = z - x[:3]
+        S = P[:3, :3] + Rm
+        gate = self.z_th * np.linalg.norm(z) + 3.0 * np.sqrt(np.linalg.eigvalsh(P[:3, :3]).max())
+        if np.linalg.norm(nu) > gate:
+            self.rejected.append((t_exposure, z, Rm))
+            self.rejected = self.rejected[-self.reacquire_after:]
+            if len(self.rejected) == self.reacquire_after and self._consistent(self.rejected):
+                self._reacquire()
+                self.alignment.add_camera(t_exposure, z)
+                return "reacquired"
+            self.stats["gated"] += 1
+            return "gated"
+        self.rejected.clear()
+        K = P[:, :3] @ np.linalg.inv(S)
+        x = x + K @ nu
+        P = (np.eye(9) - K[:, :3] @ np.eye(3, 9)) @ P
+        P = 0.5 * (P + P.T)
+        self.hist[k][2], self.hist[k][3] = x, P
+        self._repropagate(k)
+        self.alignment.add_camera(t_exposure, z)
+        self.stats["accepted"] += 1
+        return "accepted"
+
+    def _repropagate(self, k: int) -> None:
+        self.x, self.P = self.hist[k][2].copy(), self.hist[k][3].copy()
+        for i in range(k + 1, len(self.hist)):
+            self._predict(self.hist[i][0] - self.hist[i - 1][0], self.hist[i][1])
+            self.hist[i][2], self.hist[i][3] = self.x.copy(), self.P.copy()
+
+    def _consistent(self, fixes) -> bool:
+        """Fixes that agree with each other (a track), not scattered outliers."""
+        ts = np.array([f[0] for f in fixes])
+        zs = np.array([f[1] for f in fixes])
+        if ts[-1] - ts[0] > 0.25:
+            return False
+        A = np.c_[np.ones_like(ts), ts - ts[0]]
+        coef, *_ = np.linalg.lstsq(A, zs, rcond=None)
+        res = zs - A @ coef
+        return bool(np.abs(res).max() < self.z_th * np.linalg.norm(zs[-1]) * 0.5)
+
+    def _init(self, t, z, Rm, v=None):
+        self.x = np.zeros(9)
+        self.x[:3] = z
+        if v is not None:
+            self.x[3:6] = v
+        self.P = np.zeros((9, 9))
+        self.P[:3, :3] = Rm
+        self.P[3:6, 3:6] = np.eye(3) * (0.5 ** 2 if v is None else 0.2 ** 2)
+        self.P[6:9, 6:9] = np.eye(3) * 0.3 ** 2
+        # from the exposure to now with the IMU samples since (or held where there are none)
+        later = [h for h in self.hist if h[0] > t]
+        self.t = t
+        for h in later:
+            self._predict(h[0] - self.t, h[1])
+            self.t = h[0]
+            h[2], h[3] = self.x.copy(), self.P.copy()
+        if not later:
+            self.t = t
+
+    def _reacquire(self) -> None:
+        ts = np.array([f[0] for f in self.rejected])
+        zs = np.array([f[1] for f in self.rejected])
+        A = np.c_[np.ones_like(ts), ts - ts[-1]]
+        coef, *_ = np.linalg.lstsq(A, zs, rcond=None)
+        bias = self.x[6:9].copy() if self.x is not None else np.zeros(3)
+        t_last, Rm = self.rejected[-1][0], self.rejected[-1][2]
+        # restart at the last fix's exposure time, then run the IMU samples since
+        keep = [h for h in self.hist if h[0] > t_last]
+        self.hist = [h for h in self.hist if h[0] <= t_last]
+        self.hist = self.hist[-1:] if self.hist else []
+        self.x = None
+        self.hist += keep
+        self._init(t_last, coef[0], Rm, v=coef[1])
+        self.x[6:9] = bias
+        self.rejected.clear()
+        self.stats["reacquired"] += 1
