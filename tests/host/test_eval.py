@@ -104,43 +104,123 @@ def test_report_has_a_mean_table_and_us_column():
     assert np.isfinite(1.0)
 
 
-TUNED_ON = ("02_undisturbed_slow_rotation_B", "03_undisturbed_slow_rotation_C",
-            "05_undisturbed_slow_rotation_with_breaks_B", "07_undisturbed_fast_rotation_B",
-            "09_undisturbed_fast_rotation_with_breaks_B", "10_undisturbed_slow_translation_A",
-            "14_undisturbed_slow_translation_with_breaks_B", "16_undisturbed_fast_translation_B",
-            "24_disturbed_tapping_A", "27_disturbed_phone_vibration_B", "30_disturbed_stationary_magnet_C",
-            "32_disturbed_attached_magnet_1cm")
+# -- one registry, leave-one-trial-out ------------------------------------------------------------------
+
+def test_registry_is_one_table_with_defaults_inside_their_grids():
+    from sphere.fusion import registry
+
+    assert set(registry.ALL) == set(registry.FILTERS) and set(registry.OURS) <= set(registry.FILTERS)
+    for name, spec in registry.FILTERS.items():
+        points = spec.grid_points()
+        assert points and all(set(p) == set(spec.grid) for p in points), name
+        if spec.grid and name != "sphere":  # sphere's defaults live in its module, checked below
+            assert {k: spec.defaults[k] for k in spec.grid} in points, name
+    from sphere.fusion.sphere_filter import DEFAULTS
+
+    assert {k: DEFAULTS[k] for k in registry.FILTERS["sphere"].grid} in registry.FILTERS["sphere"].grid_points()
+    f = registry.make("madgwick", 0.01, beta=0.05)
+    assert f.beta == 0.05 and registry.make("madgwick", 0.01).beta == registry.FILTERS["madgwick"].defaults["beta"]
+    kf = registry.make("dissertation-kf", 0.01).settings
+    assert (kf["R"], kf["P0"], kf["H"]) == ("0.01*I", "I", "I")  # the dissertation's, not tuned
+    with pytest.raises(TypeError):
+        registry.make("sphere", 0.01, no_such_setting=1)
+    with pytest.raises(KeyError, match="unknown filter"):
+        registry.make("nope", 0.01)
 
 
-@pytest.mark.slow
-def test_kf_beats_tuned_madgwick_on_the_mean_of_all_trials():
-    """Issue 5: the dissertation KF beats plain Madgwick on the mean total RMSE over the shipped trials, each
-    with one parameter set for all trials; and Madgwick's β is at its optimum (both neighbours are worse),
-    so the KF does not win against a detuned Madgwick."""
-    # exactly the trials the parameters were tuned on (a full BROAD download holds more)
-    by_name = {p.stem: p for p in _need_broad()}
-    missing = [n for n in TUNED_ON if n not in by_name]
-    if missing:
-        pytest.skip(f"needs the BROAD trials the filters were tuned on; missing: {', '.join(missing)}")
-    paths = [by_name[n] for n in TUNED_ON]
-    from sphere.commands.eval import evaluate, summarise
-    from sphere.fusion import peers, registry
+def test_daemon_builds_its_filter_from_the_registry():
+    from sphere.daemon.motion import host_filter
+    from sphere.fusion import registry
 
-    doc = summarise(evaluate(paths, ["madgwick", "dissertation-kf"], jobs=2), ["madgwick", "dissertation-kf"])
-    mad = doc["filters"]["madgwick"]["mean"]["total"]
-    kf = doc["filters"]["dissertation-kf"]["mean"]["total"]
-    assert kf < mad - 0.1, (kf, mad)
-    assert doc["filters"]["dissertation-kf"]["settings"]["robust"] == "huber-norm"
+    f = host_filter("auto")
+    assert type(f.inner) is type(registry.make("sphere")) and f.inner.settings == registry.make("sphere").settings
+    assert host_filter("madgwick", beta=0.2).beta == 0.2
+    with pytest.raises(ValueError, match="unknown host filter"):
+        host_filter("nope")
 
-    beta = registry.TUNED_MADGWICK_BETA
-    totals = {}
-    for b in (0.9 * beta, 1.1 * beta):
-        errs = []
-        for p in paths:
-            t = broad.load_trial(p)
-            bias = registry.startup_gyro_bias(t.gyr_rad_s, t.dt_s)
-            f = registry.make("madgwick", t.dt_s, t.acc_m_s2[0], t.mag_uT[0], gyro_bias_rad_s=bias, beta=b)
-            q = f.update_batch(t.gyr_rad_s, t.acc_m_s2, t.mag_uT, t.dt_s)
-            errs.append(broad.orientation_error(peers.to_enu(q, f.earth_frame), t).total)
-        totals[b] = float(np.mean(errs))
-    assert all(v > mad for v in totals.values()), (mad, totals)
+
+def test_leave_one_out_chooses_on_the_other_trials():
+    from sphere.fusion.crossval import leave_one_out
+
+    def e(v):
+        return {"total": v, "heading": v / 2, "inclination": v / 3}
+
+    # point 0 is best on trials a and b, point 1 on c (by far, so it also wins in-sample)
+    scores = [[e(1.0), e(2.0)], [e(1.0), e(2.0)], [e(9.0), e(0.0)]]
+    r = leave_one_out(["a", "b", "c"], scores)
+    # leaving a out: b + c → point 0: 10, point 1: 2 → point 1, scored on a: 2.0; same for b;
+    # leaving c out: a + b → point 0 → scored on c: 9.0
+    assert [f.choice for f in r.folds] == [1, 1, 0]
+    assert [f.errors["total"] for f in r.folds] == [2.0, 2.0, 9.0]
+    assert r.mean["total"] == pytest.approx(13.0 / 3) and r.all_trials_choice == 1
+    assert r.in_sample["total"] == pytest.approx(4.0 / 3)  # the optimistic figure the held-out one replaces
+    with pytest.raises(ValueError):
+        leave_one_out(["a"], [[e(1.0)]])
+
+
+def test_eval_cv_scores_each_trial_with_parameters_chosen_without_it(tmp_path, capsys):
+    _need_broad()
+    out = tmp_path / "cv.json"
+    names = ["madgwick"] + (["vqf"] if _installed("vqf") else [])
+    rc = main(["eval", "--cv", "--only", "02,03,05", "--seconds", "55", "--filters", ",".join(names), "--jobs", "1",
+               "--json", str(out), "--cache", str(tmp_path / "cache")])
+    assert rc == 0
+    text = capsys.readouterr().out
+    assert "leave-one-trial-out over 3 trials" in text and "ratio_to_vqf" in text
+    doc = json.loads(out.read_text())
+    m = doc["cv"]["madgwick"]
+    total = np.array(m["scores"]["total"])
+    points = m["scores"]["points"]
+    assert [p["beta"] for p in points] == list(m["grid"]["beta"])
+    for k, fold in enumerate(m["folds"]):
+        others = [t for t in range(3) if t != k]
+        g = int(np.argmin(total[others].mean(axis=0)))
+        assert fold["choice"] == points[g] and fold["errors"]["total"] == total[k, g]
+    assert m["mean"]["total"] == pytest.approx(np.mean([f["errors"]["total"] for f in m["folds"]]))
+    if "vqf" in doc["cv"]:
+        assert doc["cv"]["vqf"]["ratio_to_vqf"] == 1.0
+        assert m["ratio_to_vqf"] == pytest.approx(m["mean"]["total"] / doc["cv"]["vqf"]["mean"]["total"])
+    # a second run takes every result from the cache and prints the same figures
+    assert main(["eval", "--cv", "--only", "02,03,05", "--seconds", "55", "--filters", ",".join(names), "--jobs", "1",
+                 "--cache", str(tmp_path / "cache")]) == 0
+    assert capsys.readouterr().out == text.replace(f"wrote {out}\n", "")
+
+
+def test_eval_cv_needs_two_trials(capsys):
+    _need_broad()
+    assert main(["eval", "--cv", "--only", "02", "--filters", "madgwick"]) == 2
+    assert "at least two trials" in capsys.readouterr().err
+
+
+def test_ahrs_ekf_per_sample_equals_its_batch_with_a_magnetometer():
+    """issue 13: AhrsEkfPeer.update() with a field raised ValueError (shapes (6,) vs (3,))."""
+    paths = _need_broad()
+    from sphere.fusion.peers import AhrsEkfPeer, PeerMissing
+
+    t = broad.load_trial(paths[0]).seconds(40.0, 3.0)
+    for mag in (t.mag_uT, None):
+        try:
+            batch = AhrsEkfPeer(t.dt_s).update_batch(t.gyr_rad_s, t.acc_m_s2, mag, t.dt_s)
+        except PeerMissing as e:
+            pytest.skip(str(e))
+        f = AhrsEkfPeer(t.dt_s)
+        per = np.array([f.update(g, a, None if mag is None else m, t.dt_s)
+                        for g, a, m in zip(t.gyr_rad_s, t.acc_m_s2, t.mag_uT)])
+        assert np.array_equal(per, batch)
+
+
+def test_plot_shows_the_diagnostics_under_the_error(tmp_path):
+    _need_broad()
+    pytest.importorskip("matplotlib", reason="matplotlib (the plot extra) is part of the setup")
+    from sphere.commands.eval import run_filter
+
+    t = broad.load_trial(broad.find_trial("32")).seconds(0.0, 45.0)
+    names = ["sphere"] + (["vqf"] if _installed("vqf") else [])
+    for name in names:
+        d = run_filter(name, t, keep_errors=True, diagnostics=True)["diagnostics"]
+        assert set(d) == {"rest", "bias_rad_s", "mag_disturbed"} and len(d["rest"]) == len(t)
+        assert d["rest"][int(20 * t.rate_hz):int(30 * t.rate_hz)].all()  # trial 32 lies still 2-38 s
+    assert main(["eval", "--only", "32", "--seconds", "45", "--filters", ",".join(names), "--jobs", "1", "--quiet",
+                 "--plot", str(tmp_path)]) == 0
+    png = tmp_path / "error_32_disturbed_attached_magnet_1cm.png"
+    assert png.stat().st_size > 10_000

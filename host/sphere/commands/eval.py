@@ -36,19 +36,29 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--plot", metavar="DIR", help="write PNG plots (error over time per trial, bar chart per filter)")
     p.add_argument("--jobs", type=int, default=2, help="trials run in parallel (default: 2)")
     p.add_argument("--quiet", action="store_true", help="print only the mean table")
+    p.add_argument("--cv", action="store_true", help="leave-one-trial-out: each filter's free parameters chosen "
+                   "from its registry grid on the other trials, scored on the one left out (default filters: "
+                   "ours and vqf)")
+    p.add_argument("--cache", metavar="DIR", help="with --cv: keep each (trial, filter, parameters) result in DIR "
+                   "and reuse it while the fusion code is unchanged")
 
 
-def run_filter(name: str, trial, keep_errors: bool = False) -> dict:
-    """One filter on one trial: RMSEs, µs per sample, settings, and the signed heading offset."""
+def run_filter(name: str, trial, keep_errors: bool = False, diagnostics: bool = False, **params) -> dict:
+    """One filter on one trial: RMSEs, µs per sample, settings, and the signed heading offset.
+
+    ``params`` replace the registry's defaults (``--cv`` grid points). ``diagnostics`` keeps the filter's
+    per-sample diagnostics (rest, bias, magnetic disturbance) where it has them."""
     from sphere import broad
     from sphere.fusion import peers, registry
 
-    bias = (0.0, 0.0, 0.0)
-    if name in ("madgwick", "dissertation-kf"):
-        bias = registry.startup_gyro_bias(trial.gyr_rad_s, trial.dt_s)
-    f = registry.make(name, trial.dt_s, trial.acc_m_s2[0], trial.mag_uT[0], gyro_bias_rad_s=bias)
+    f = registry.make_for_trial(name, trial.gyr_rad_s, trial.acc_m_s2, trial.mag_uT, trial.dt_s, **params)
+    diag = None
     t0 = time.perf_counter()
-    q = f.update_batch(trial.gyr_rad_s, trial.acc_m_s2, trial.mag_uT, trial.dt_s)
+    if diagnostics and getattr(f, "diagnostics", None):
+        diag = f.update_batch(trial.gyr_rad_s, trial.acc_m_s2, trial.mag_uT, trial.dt_s, diagnostics=True)
+        q = diag.pop("quat")
+    else:
+        q = f.update_batch(trial.gyr_rad_s, trial.acc_m_s2, trial.mag_uT, trial.dt_s)
     elapsed = time.perf_counter() - t0
     q_enu = peers.to_enu(q, f.earth_frame)
     err = broad.orientation_error(q_enu, trial)
@@ -59,6 +69,9 @@ def run_filter(name: str, trial, keep_errors: bool = False) -> dict:
         tot = np.full(len(trial), np.nan)
         tot[use] = broad.error_angles_deg(q_enu[use], trial.opt_quat[use])[0]
         out["total_over_time"] = tot
+        out["movement"] = trial.movement
+    if diag is not None:
+        out["diagnostics"] = diag
     return out
 
 
@@ -84,7 +97,7 @@ def _trial_job(args):
     res = {}
     for name in names:
         try:
-            res[name] = run_filter(name, trial, keep)
+            res[name] = run_filter(name, trial, keep, diagnostics=keep)
         except peers.PeerMissing as e:
             res[name] = {"missing": str(e)}
     return trial.name, res, (trial.rate_hz, len(trial))
@@ -220,20 +233,8 @@ def write_plots(directory: Path, doc: dict, results: dict) -> list[Path]:
     directory.mkdir(parents=True, exist_ok=True)
     written = []
     for tname, res in results.items():
-        fig, ax = plt.subplots(figsize=(10, 4))
-        for name, r in res.items():
-            if "total_over_time" in r:
-                y = r["total_over_time"]
-                ax.plot(np.arange(len(y)) / RATE_HZ, y, lw=0.7, label=name)
-        ax.set_xlabel("time (s)")
-        ax.set_ylabel("total error (°)")
-        ax.set_title(f"{tname}: total orientation error (BROAD, CC BY 4.0)")
-        ax.legend(fontsize=7, ncol=4)
-        ax.set_ylim(bottom=0)
         p = directory / f"error_{tname}.png"
-        fig.tight_layout()
-        fig.savefig(p, dpi=100)
-        plt.close(fig)
+        _plot_trial(plt, p, tname, res)
         written.append(p)
     names = list(doc["filters"])
     fig, ax = plt.subplots(figsize=(max(6, 1.2 * len(names)), 4))
@@ -255,6 +256,187 @@ def write_plots(directory: Path, doc: dict, results: dict) -> list[Path]:
 RATE_HZ = 285.714285714
 
 
+def _plot_trial(plt, path: Path, tname: str, res: dict) -> None:
+    """The total error over time and, under it on the same time axis, each diagnosing filter's gyro bias
+    estimate with its rest (green) and magnetic-disturbance (red) phases shaded."""
+    diag = {n: r["diagnostics"] for n, r in res.items() if "diagnostics" in r}
+    fig, axes = plt.subplots(1 + len(diag), 1, figsize=(11, 3.2 + 2.0 * len(diag)), sharex=True,
+                             gridspec_kw={"height_ratios": [2.0] + [1.0] * len(diag)}, squeeze=False)
+    ax = axes[0][0]
+    movement = None
+    for name, r in res.items():
+        if "total_over_time" in r:
+            y = r["total_over_time"]
+            ax.plot(np.arange(len(y)) / RATE_HZ, y, lw=0.7, label=name)
+            movement = r.get("movement", movement)
+    if movement is not None:
+        _shade(ax, ~np.asarray(movement, bool), "0.85", "not scored (no movement)")
+    ax.set_ylabel("total error (°)")
+    ax.set_title(f"{tname}: total orientation error (BROAD, CC BY 4.0)")
+    ax.legend(fontsize=7, ncol=5, loc="upper left")
+    ax.set_ylim(bottom=0)
+    for (name, d), row in zip(diag.items(), axes[1:]):
+        ax = row[0]
+        b = np.degrees(np.asarray(d["bias_rad_s"]))
+        t = np.arange(len(b)) / RATE_HZ
+        for k, axis in enumerate("xyz"):
+            ax.plot(t, b[:, k], lw=0.8, label=f"bias {axis}")
+        _shade(ax, d["rest"], "tab:green", "rest")
+        _shade(ax, d["mag_disturbed"], "tab:red", "mag. disturbed")
+        ax.set_ylabel(f"{name}\nbias (°/s)")
+        ax.legend(fontsize=7, ncol=5, loc="upper left")
+    axes[-1][0].set_xlabel("time (s)")
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+
+
+def _shade(ax, flag, color, label):
+    """Shade the spans where ``flag`` is set (one legend entry)."""
+    flag = np.asarray(flag, bool)
+    if not flag.any():
+        return
+    edges = np.flatnonzero(np.diff(np.r_[0, flag.astype(np.int8), 0]))
+    for i, (a, b) in enumerate(zip(edges[::2], edges[1::2])):
+        ax.axvspan(a / RATE_HZ, b / RATE_HZ, color=color, alpha=0.15, lw=0, label=label if i == 0 else None)
+
+
+CV_NOTE = ("leave-one-trial-out: for each trial, every free parameter is chosen from the registry's grid by the "
+           "lowest mean total RMSE on the other trials, and that choice is scored on the trial left out; the "
+           "table is the mean of those held-out scores")
+
+
+def _code_version() -> str:
+    """A digest of the code whose output --cache keeps (the fusion filters and the metric)."""
+    import hashlib
+
+    from sphere import broad
+    from sphere.fusion import registry
+
+    h = hashlib.sha1()
+    for f in sorted(Path(registry.__file__).parent.glob("*.py")) + [Path(broad.__file__)]:
+        h.update(f.read_bytes())
+    return h.hexdigest()[:16]
+
+
+def _cv_job(args):
+    """Every (filter, grid point) on one trial; results from the cache where present."""
+    path, tasks, seconds, cache, version = args
+    import hashlib
+
+    from sphere import broad
+    from sphere.fusion import peers
+
+    trial = None
+    out = []
+    for name, point in tasks:
+        key = hashlib.sha1(json.dumps([version, Path(path).name, Path(path).stat().st_size, seconds, name,
+                                       sorted(point.items())], default=str).encode()).hexdigest()
+        cached = Path(cache) / f"{key}.json" if cache else None
+        if cached is not None and cached.exists():
+            out.append(json.loads(cached.read_text()))
+            continue
+        if trial is None:
+            trial = broad.load_trial(path)
+            if seconds:
+                trial = trial.seconds(0.0, seconds)
+        try:
+            r = run_filter(name, trial, **point)
+            r = {"errors": r["errors"], "us_per_sample": r["us_per_sample"]}
+        except peers.PeerMissing as e:
+            r = {"missing": str(e)}
+        if cached is not None and "errors" in r:
+            cached.parent.mkdir(parents=True, exist_ok=True)
+            cached.write_text(json.dumps(r))
+        out.append(r)
+    return Path(path).stem, out
+
+
+def cross_validate(paths, names, seconds=None, jobs=1, cache=None, progress=None) -> dict:
+    """The score matrix of every filter's grid on every trial (computed once), then leave-one-trial-out."""
+    from sphere.fusion import crossval, registry
+
+    tasks = [(n, p) for n in names for p in registry.FILTERS[n].grid_points()]
+    jobs_list = [(str(p), tasks, seconds, cache, _code_version()) for p in paths]
+    rows = {}
+    if jobs > 1 and len(paths) > 1:
+        import multiprocessing
+
+        with multiprocessing.get_context("spawn").Pool(min(jobs, len(paths))) as pool:
+            for tname, res in pool.imap(_cv_job, jobs_list):
+                rows[tname] = res
+                if progress:
+                    progress(tname)
+    else:
+        for j in jobs_list:
+            tname, res = _cv_job(j)
+            rows[tname] = res
+            if progress:
+                progress(tname)
+    trials = list(rows)
+    doc = {"cv": {}, "note": CV_NOTE, "trials": trials}
+    for name in names:
+        idx = [i for i, (n, _) in enumerate(tasks) if n == name]
+        points = [tasks[i][1] for i in idx]
+        missing = [rows[t][i]["missing"] for t in trials for i in idx if "missing" in rows[t][i]]
+        if missing:
+            doc.setdefault("missing", {})[name] = missing[0]
+            continue
+        scores = [[rows[t][i]["errors"] for i in idx] for t in trials]
+        us = [[rows[t][i]["us_per_sample"] for i in idx] for t in trials]
+        res = crossval.leave_one_out(trials, scores)
+        defaults = ({k: v for k, v in registry.make(name, 1.0 / RATE_HZ).settings.items() if k in points[0]}
+                    if registry.FILTERS[name].grid else {})
+        doc["cv"][name] = {
+            "mean": res.mean,
+            "us_per_sample": float(np.mean([us[k][f.choice] for k, f in enumerate(res.folds)])),
+            "grid": {k: list(v) for k, v in registry.FILTERS[name].grid.items()},
+            "folds": [{"trial": f.trial, "choice": points[f.choice], "errors": f.errors} for f in res.folds],
+            "all_trials_choice": points[res.all_trials_choice],
+            "in_sample": res.in_sample,
+            "defaults": defaults,
+            "scores": {"points": points, "total": [[e["total"] for e in row] for row in scores]},
+        }
+    if "vqf" in doc["cv"]:
+        ref = doc["cv"]["vqf"]["mean"]["total"]
+        for v in doc["cv"].values():
+            v["ratio_to_vqf"] = v["mean"]["total"] / ref
+    return doc
+
+
+def format_cv(doc: dict) -> str:
+    cv = doc["cv"]
+    out = [f"leave-one-trial-out over {len(doc['trials'])} trials: held-out RMSE (°), ratio to vqf, µs per sample"]
+    cols = ("total", "heading", "inclination", "ratio_to_vqf", "us_per_sample")
+    rows = {n: dict(v["mean"], ratio_to_vqf=v.get("ratio_to_vqf"), us_per_sample=v["us_per_sample"])
+            for n, v in cv.items()}
+    out.append(_fmt_table("", rows, cols).lstrip("\n"))
+    out.append("")
+    out.append("choices per fold (trial left out: parameters chosen on the others):")
+    for n, v in cv.items():
+        if not v["grid"]:
+            out.append(f"  {n}: no free parameters (published defaults)")
+            continue
+        out.append(f"  {n} (grid {', '.join(f'{k}={vals}' for k, vals in v['grid'].items())}):")
+        for f in v["folds"]:
+            c = ", ".join(f"{k}={x}" for k, x in f["choice"].items())
+            out.append(f"    {f['trial'].split('_', 1)[0]}: {c}  → {f['errors']['total']:.2f}")
+    out.append("")
+    out.append("chosen on all trials (what the registry's defaults should be; its in-sample mean is optimistic):")
+    for n, v in cv.items():
+        if not v["grid"]:
+            continue
+        c = ", ".join(f"{k}={x}" for k, x in v["all_trials_choice"].items())
+        same = all(v["defaults"].get(k) == x for k, x in v["all_trials_choice"].items())
+        flag = "= the registry's defaults" if same else f"DIFFERS from the registry's defaults {v['defaults']}"
+        out.append(f"  {n}: {c} (in-sample {v['in_sample']['total']:.2f}°) {flag}")
+    for n, msg in doc.get("missing", {}).items():
+        out.append(f"  {n}: skipped: {msg}")
+    out.append("")
+    out.append(doc["note"])
+    return "\n".join(out)
+
+
 def run(args) -> int:
     from sphere import broad
     from sphere.fusion import registry
@@ -272,12 +454,28 @@ def run(args) -> int:
         if not paths:
             print(f"sphere eval: no trial matches --only {args.only}", file=sys.stderr)
             return 2
-    names = [n.strip() for n in args.filters.split(",")] if args.filters else list(registry.ALL)
+    default_names = list(registry.OURS) + ["vqf"] if args.cv else list(registry.ALL)
+    names = [n.strip() for n in args.filters.split(",")] if args.filters else default_names
     bad = [n for n in names if n not in registry.ALL]
     if bad:
         print(f"sphere eval: unknown filter(s) {', '.join(bad)}; known: {', '.join(registry.ALL)}", file=sys.stderr)
         return 2
     print(f"running {', '.join(names)} on {len(paths)} trial(s) from {directory} ...", file=sys.stderr)
+    if args.cv:
+        if len(paths) < 2:
+            print("sphere eval: --cv needs at least two trials (it leaves one out at a time)", file=sys.stderr)
+            return 2
+        try:
+            doc = cross_validate(paths, names, seconds=args.seconds, jobs=args.jobs, cache=args.cache,
+                                 progress=lambda t: print(f"  done {t}", file=sys.stderr))
+        except ValueError as e:
+            print(f"sphere eval: {e}", file=sys.stderr)
+            return 2
+        print(format_cv(doc))
+        if args.json:
+            Path(args.json).write_text(json.dumps(doc, indent=2, default=_json_default))
+            print(f"wrote {args.json}", file=sys.stderr)
+        return 0
     try:
         results = evaluate(paths, names, seconds=args.seconds, jobs=args.jobs, keep_errors=bool(args.plot),
                            progress=lambda t: print(f"  done {t}", file=sys.stderr))

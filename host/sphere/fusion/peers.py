@@ -110,13 +110,23 @@ class VqfPeer(_Peer):
             self._f.update(g, a, np.ascontiguousarray(mag_uT, dtype=float))
         return self.quat
 
-    def update_batch(self, gyr, acc, mag, dt_s):
+    #: ``update_batch(..., diagnostics=True)`` returns VQF's own per-sample rest flag, bias and disturbance flag
+    diagnostics = ("rest", "bias_rad_s", "mag_disturbed")
+
+    def update_batch(self, gyr, acc, mag, dt_s, diagnostics: bool = False):
         g = np.ascontiguousarray(gyr, dtype=float)
         a = np.ascontiguousarray(acc, dtype=float)
         if mag is None:
             self._has_mag = False
-            return np.asarray(self._f.updateBatch(g, a)["quat6D"])
-        return np.asarray(self._f.updateBatch(g, a, np.ascontiguousarray(mag, dtype=float))["quat9D"])
+            out = self._f.updateBatch(g, a)
+            q = np.asarray(out["quat6D"])
+        else:
+            out = self._f.updateBatch(g, a, np.ascontiguousarray(mag, dtype=float))
+            q = np.asarray(out["quat9D"])
+        if not diagnostics:
+            return q
+        return {"quat": q, "rest": np.asarray(out["restDetected"], bool), "bias_rad_s": np.asarray(out["bias"]),
+                "mag_disturbed": np.asarray(out.get("magDistDetected", np.zeros(len(q))), bool)}
 
 
 def _version(dist: str) -> str:
@@ -251,12 +261,27 @@ class AhrsEkfPeer(AhrsMadgwickPeer):
         return s
 
     def update(self, gyr_rad_s, acc_m_s2, mag_uT, dt_s):
+        """One sample, the way ahrs's own batch run takes it: the first sample only sets the initial
+        orientation (ahrs's ``ecompass``), each later one is ``EKF.update``. ahrs's measurement model picks
+        gravity-only or gravity + field from the ``mag`` attribute it was constructed with, not from the
+        sample (so a per-sample filter built without ``mag`` fails with shapes (6,) vs (3,) on the first
+        field sample); the attribute is set to the stream's kind of input here."""
         g, a = np.asarray(gyr_rad_s, float), self.acc_sign * np.asarray(acc_m_s2, float)
-        if self._q is None:
-            self._q = _first_q(self.acc_sign * a, mag_uT, self.earth_frame)
         m = None if mag_uT is None else np.asarray(mag_uT, float) * 1000.0
+        self._f.mag = None if m is None else m[None, :]
+        if self._q is None:
+            self._q = _ahrs_initial_q(a, m)
+            return self.quat
         self._q = self._f.update(self._q, g, a, m) if m is not None else self._f.update(self._q, g, a)
         return self.quat
+
+
+def _ahrs_initial_q(acc, mag_nT):
+    """ahrs's EKF batch start: ``ecompass(acc, mag, frame="NED")``, or ``acc2q(acc)`` without a field."""
+    from ahrs.common.orientation import acc2q, ecompass
+
+    q = ecompass(acc, mag_nT, frame="NED", representation="quaternion") if mag_nT is not None else acc2q(acc)
+    return np.asarray(q, float) / np.linalg.norm(q)
 
 
 def _first_q(acc, mag, frame):

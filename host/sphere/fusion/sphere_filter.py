@@ -21,12 +21,16 @@ Laidig & Seel 2023), each corrected by a different sensor:
    reference after ``mag_new_time_s`` of consistent readings while rotating (e.g. after moving to
    another room); a field whose norm keeps changing as the sphere turns (a magnet on the sphere) never is.
 
-Gyro bias b: at **rest** (gyro and accelerometer steady for ``rest_min_s``) b follows the low-passed
-gyro (``tau_bias_rest_s``); in **motion** b is nudged against the angular rate of the inclination and
-heading corrections expressed in the sensor frame (``tau_bias_motion_s``), which is what a bias error
-looks like; off by default, since on BROAD's fast translations the lagging low-pass makes those rates
-correlate with the motion and the estimate wandered (mean total RMSE 2.20° off, 4.06° at 60 s).
-b is clipped to ``bias_clip_dps``.
+Gyro bias b: a small Kalman filter (state b, covariance P, 3×3) run every ``bias_step_s``, from the first
+sample on. Its prediction adds process noise (``bias_sigma_init_dps``² per ``bias_forget_s``, so a changing
+bias is followed); its measurement is, at **rest** (gyro and accelerometer steady for ``rest_min_s``), the
+low-passed gyro itself (noise ``bias_sigma_rest_dps``), and in **motion** the inclination correction's rate:
+a bias error e turns frame I at −R·e (R the sensor → E′ rotation), the accelerometer low-pass follows with
+its lag, and q_inc's correction undoes the horizontal part of it. So the measurement model uses the same
+second-order low-pass on R and on R·b as on the accelerometer (the lag-matched model VQF introduced,
+Laidig & Seel 2023, §3.5): correction rate c ≈ LP(R·b) − LP(R)·b_true, horizontal rows only (noise
+``bias_sigma_motion_dps``, the rate's noise over 1 s); the vertical component becomes observable as the
+sensor turns. b is clipped to ``bias_clip_dps``, each diagonal of P to its initial value.
 
 Settings were tuned once for all shipped BROAD trials together (host/docs/fusion.md), never per trial.
 """
@@ -69,7 +73,7 @@ def _wrap(a):
 
 
 DEFAULTS = dict(
-    tau_acc_s=4.5,
+    tau_acc_s=3.0,
     tau_mag_s=15.0,
     mag_norm_th=0.05,
     mag_dip_th_deg=5.0,
@@ -80,8 +84,12 @@ DEFAULTS = dict(
     rest_tau_s=0.5,
     rest_th_gyr_dps=2.0,
     rest_th_acc_m_s2=0.5,
-    tau_bias_rest_s=3.0,
-    tau_bias_motion_s=0.0,  # 0 = off: on BROAD the motion bias estimate hurt more than it helped
+    bias_step_s=0.05,
+    bias_sigma_init_dps=0.5,
+    bias_forget_s=100.0,
+    bias_sigma_rest_dps=0.03,
+    bias_sigma_motion_dps=0.3,
+    bias_lp_s=1.0,
     bias_clip_dps=2.0,
 )
 
@@ -90,6 +98,8 @@ class SphereFilter:
     """Our best orientation filter (ENU). See the module docstring for the method; settings in ``DEFAULTS``."""
 
     earth_frame = EARTH_FRAME
+    #: ``update_batch(..., diagnostics=True)`` returns the per-sample rest flag, bias and disturbance flag
+    diagnostics = ("rest", "bias_rad_s", "mag_disturbed")
 
     def __init__(self, **settings):
         unknown = set(settings) - set(DEFAULTS)
@@ -103,6 +113,8 @@ class SphereFilter:
         self.q_inc = (1.0, 0.0, 0.0, 0.0)
         self.delta = 0.0
         self.bias = [0.0, 0.0, 0.0]
+        p0 = math.radians(self.cfg["bias_sigma_init_dps"]) ** 2
+        self.bias_P = [[p0, 0.0, 0.0], [0.0, p0, 0.0], [0.0, 0.0, p0]]
         self.acc_lp1 = [0.0, 0.0, 0.0]
         self.acc_lp = [0.0, 0.0, 0.0]
         self.n_acc = 0
@@ -117,6 +129,16 @@ class SphereFilter:
         self.at_rest = False
         self._rest_init = False
         self._dt = None
+        # bias estimation (see _bias_step): integrals of R's two horizontal rows, of R·b and of the
+        # correction angles; the first two low-passed as the accelerometer is, all by the third stage
+        self._cx = self._cy = 0.0
+        self._nb = 0
+        self._n_bias = 0
+        self._int = [0.0] * 10
+        self._blp1 = [0.0] * 8
+        self._blp = [0.0] * 8
+        self._blp3 = [0.0] * 10
+        self._blp3_prev = [0.0] * 10
 
     @property
     def settings(self) -> dict:
@@ -139,8 +161,17 @@ class SphereFilter:
         self._k_mag = k(c["tau_mag_s"])
         self._k_ref = k(c["mag_ref_tau_s"])
         self._k_rest = k(c["rest_tau_s"])
-        self._k_brest = k(c["tau_bias_rest_s"])
-        self._k_bmot = dt / c["tau_bias_motion_s"] if c["tau_bias_motion_s"] > 0 else 0.0
+        self._nb_step = max(1, int(round(c["bias_step_s"] / dt)))
+        tb = self._nb_step * dt
+        self._tb = tb
+        self._k_blp = 1.0 - math.exp(-tb / (0.5 * c["tau_acc_s"]))
+        self._k_blp3 = 1.0 - math.exp(-tb / c["bias_lp_s"]) if c["bias_lp_s"] > 0 else 1.0
+        d2 = math.radians(1.0) ** 2
+        self._b_p0 = c["bias_sigma_init_dps"] ** 2 * d2
+        self._b_v = self._b_p0 * tb / c["bias_forget_s"]  # process noise per bias step
+        self._b_wrest = c["bias_sigma_rest_dps"] ** 2 * d2
+        # the sigma is for the rate over 1 s; the mean over tb is noisier by 1/tb
+        self._b_wmot = c["bias_sigma_motion_dps"] ** 2 * d2 / tb if c["bias_sigma_motion_dps"] > 0 else 0.0
         self._bias_clip = math.radians(c["bias_clip_dps"])
         self._rest_gyr2 = math.radians(c["rest_th_gyr_dps"]) ** 2
         self._rest_acc2 = c["rest_th_acc_m_s2"] ** 2
@@ -154,20 +185,36 @@ class SphereFilter:
         self._step(float(gx), float(gy), float(gz), float(ax), float(ay), float(az), m, float(dt_s), acc_valid)
         return self._quat()
 
-    def update_batch(self, gyr, acc, mag, dt_s: float, *, acc_valid=None, mag_valid=None) -> np.ndarray:
-        """Run the per-sample step over (N, 3) arrays; returns (N, 4). ``mag`` may be None."""
+    def update_batch(self, gyr, acc, mag, dt_s: float, *, acc_valid=None, mag_valid=None, diagnostics: bool = False):
+        """Run the per-sample step over (N, 3) arrays; returns (N, 4). ``mag`` may be None.
+
+        With ``diagnostics=True`` returns a dict instead (as VQF's batch API does): ``quat`` (N, 4), ``rest``
+        (N,) bool, ``bias_rad_s`` (N, 3) and ``mag_disturbed`` (N,) bool, each after the sample's step."""
         gyr, acc, magl, av, mv = batch_inputs(gyr, acc, mag, acc_valid, mag_valid)
         n = len(gyr)
         out = np.empty((n, 4))
         dt = float(dt_s)
         step = self._step
         quat = self._quat
+        if not diagnostics:
+            for i in range(n):
+                g = gyr[i]
+                a = acc[i]
+                step(g[0], g[1], g[2], a[0], a[1], a[2], magl[i] if mv[i] else None, dt, av[i])
+                out[i] = quat()
+            return out
+        rest = np.zeros(n, bool)
+        dist = np.zeros(n, bool)
+        bias = np.empty((n, 3))
         for i in range(n):
             g = gyr[i]
             a = acc[i]
             step(g[0], g[1], g[2], a[0], a[1], a[2], magl[i] if mv[i] else None, dt, av[i])
             out[i] = quat()
-        return out
+            rest[i] = self.at_rest
+            dist[i] = self.mag_disturbed
+            bias[i] = self.bias
+        return {"quat": out, "rest": rest, "bias_rad_s": bias, "mag_disturbed": dist}
 
     # -- the filter ---------------------------------------------------------------------------------
     def _step(self, gx, gy, gz, ax, ay, az, m, dt, acc_valid):
@@ -185,7 +232,6 @@ class SphereFilter:
             qg = _qmul(self.q_gyr, (math.cos(ang), wx * s, wy * s, wz * s))
             self.q_gyr = _norm4(qg)
 
-        cx = cy = cz = 0.0  # correction rates (earth frame E′), rad per sample
         # 2. inclination from the accelerometer low-passed in frame I
         if acc_valid and (ax or ay or az):
             ix, iy, iz = _rot(self.q_gyr, ax, ay, az)
@@ -212,27 +258,100 @@ class SphereFilter:
                 else:
                     r = (0.0, 1.0, 0.0, 0.0)
                 self.q_inc = _norm4(_qmul(r, self.q_inc))
-                cx, cy = 2.0 * r[1], 2.0 * r[2]
+                if self.n_acc > 1:  # the first sample's alignment is not a drift
+                    self._cx += 2.0 * r[1]
+                    self._cy += 2.0 * r[2]
 
         # 3. heading from the magnetometer, with disturbance detection
         if m is not None:
             mx, my, mz = m
             mx, my, mz = float(mx), float(my), float(mz)
             if mx or my or mz:
-                cz = self._mag(mx, my, mz, gx, gy, gz, dt)
+                self._mag(mx, my, mz, gx, gy, gz, dt)
 
-        # 4. bias in motion: the corrections' rate in the sensor frame is minus the bias error
-        if self._k_bmot and not self.at_rest and (cx or cy or cz):
-            q6 = _qmul(self.q_inc, self.q_gyr)
-            # earth→sensor: rotate by q6*
-            qc = (q6[0], -q6[1], -q6[2], -q6[3])
-            # heading correction is about earth z, applied after R_z(δ); z is invariant under it
-            sx, sy, sz = _rot(qc, cx, cy, cz)
-            k = self._k_bmot / dt
-            clip = self._bias_clip
-            for i, s_ in enumerate((sx, sy, sz)):
-                v = b[i] - k * s_
-                b[i] = clip if v > clip else (-clip if v < -clip else v)
+        # 4. gyro bias, every bias_step_s
+        self._nb += 1
+        if self._nb >= self._nb_step:
+            self._bias_step()
+
+    def _bias_step(self):
+        """One step of the bias Kalman filter (see the module docstring).
+
+        Small-angle model: a bias error e turns frame I by θ(t) = −∫R_I·e dt; the accelerometer low-pass F
+        sees F[θ], and q_inc's corrections add up to C = F[∫R·e]_h (horizontal rows, E′). So with Φ = ∫R dt
+        and Ψ = ∫R·b dt, each passed through the same F (the same gain schedule, including the averaging
+        start): C = F[Ψ] − F[Φ]·b_true, exactly also while F is still averaging. Per step the differences
+        over the step, divided by its length, are the measurement; a third low-pass stage (``bias_lp_s``)
+        on both sides takes out the hand's oscillations."""
+        tb = self._tb
+        b = self.bias
+        q0, q1, q2, q3 = _qmul(self.q_inc, self.q_gyr)  # sensor → E′
+        r00, r01, r02 = 1.0 - 2.0 * (q2 * q2 + q3 * q3), 2.0 * (q1 * q2 - q0 * q3), 2.0 * (q1 * q3 + q0 * q2)
+        r10, r11, r12 = 2.0 * (q1 * q2 + q0 * q3), 1.0 - 2.0 * (q1 * q1 + q3 * q3), 2.0 * (q2 * q3 - q0 * q1)
+        x = (r00, r01, r02, r10, r11, r12,
+             r00 * b[0] + r01 * b[1] + r02 * b[2], r10 * b[0] + r11 * b[1] + r12 * b[2])
+        it = self._int
+        for i in range(8):
+            it[i] += x[i] * tb
+        it[8] += self._cx
+        it[9] += self._cy
+        self._cx = self._cy = 0.0
+        self._nb = 0
+        self._n_bias += 1
+        k = max(self._k_blp, 1.0 / self._n_bias)
+        l1, lp = self._blp1, self._blp
+        for i in range(8):
+            l1[i] += k * (it[i] - l1[i])
+            lp[i] += k * (l1[i] - lp[i])
+        k3 = self._k_blp3
+        l3, prev = self._blp3, self._blp3_prev
+        prev[:] = l3
+        for i in range(8):
+            l3[i] += k3 * (lp[i] - l3[i])
+        l3[8] += k3 * (it[8] - l3[8])
+        l3[9] += k3 * (it[9] - l3[9])
+        g = 1.0 / tb
+        d = [(l3[i] - prev[i]) * g for i in range(10)]
+        P = self.bias_P
+        v, p0 = self._b_v, self._b_p0
+        for i in range(3):
+            P[i][i] = min(P[i][i] + v, p0)
+        if self.at_rest:
+            # measurement: the low-passed gyro at rest, H = I
+            w = self._b_wrest
+            S = [[P[i][j] + (w if i == j else 0.0) for j in range(3)] for i in range(3)]
+            Si = _inv3(S)
+            K = [[sum(P[i][m] * Si[m][j] for m in range(3)) for j in range(3)] for i in range(3)]
+            rg = self.rest_gyr
+            y = (rg[0] - b[0], rg[1] - b[1], rg[2] - b[2])
+            H = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
+        elif self._b_wmot:
+            # measurement: z = ΔF[Ψ] − ΔC = ΔF[Φ]·b_true + noise (rates over the step), H = ΔF[Φ]
+            H = ((d[0], d[1], d[2]), (d[3], d[4], d[5]))
+            y = (d[6] - d[8] - (d[0] * b[0] + d[1] * b[1] + d[2] * b[2]),
+                 d[7] - d[9] - (d[3] * b[0] + d[4] * b[1] + d[5] * b[2]))
+            PH = [[P[i][0] * h[0] + P[i][1] * h[1] + P[i][2] * h[2] for h in H] for i in range(3)]  # P Hᵀ, 3×2
+            w = self._b_wmot
+            if self.n_acc * self._k_acc < 1.0:
+                # the accelerometer low-pass still averages (gain 1/n > k): c is noisier by about 1/(n·k)
+                w /= max(self.n_acc * self._k_acc, 1e-3) ** 2
+            s00 = H[0][0] * PH[0][0] + H[0][1] * PH[1][0] + H[0][2] * PH[2][0] + w
+            s01 = H[0][0] * PH[0][1] + H[0][1] * PH[1][1] + H[0][2] * PH[2][1]
+            s11 = H[1][0] * PH[0][1] + H[1][1] * PH[1][1] + H[1][2] * PH[2][1] + w
+            det = s00 * s11 - s01 * s01
+            i00, i01, i11 = s11 / det, -s01 / det, s00 / det
+            K = [[PH[i][0] * i00 + PH[i][1] * i01, PH[i][0] * i01 + PH[i][1] * i11] for i in range(3)]
+        else:
+            return
+        nm = len(y)
+        clip = self._bias_clip
+        for i in range(3):
+            v_ = b[i] + sum(K[i][j] * y[j] for j in range(nm))
+            b[i] = clip if v_ > clip else (-clip if v_ < -clip else v_)
+        # P ← (I − K H) P, kept symmetric
+        KH = [[sum(K[i][j] * H[j][m] for j in range(nm)) for m in range(3)] for i in range(3)]
+        Pn = [[P[i][j] - sum(KH[i][m] * P[m][j] for m in range(3)) for j in range(3)] for i in range(3)]
+        self.bias_P = [[0.5 * (Pn[i][j] + Pn[j][i]) for j in range(3)] for i in range(3)]
 
     def _mag(self, mx, my, mz, gx, gy, gz, dt):
         q6 = _qmul(self.q_inc, self.q_gyr)
@@ -298,9 +417,16 @@ class SphereFilter:
         else:
             self.rest_time = 0.0
         self.at_rest = self.rest_time >= self.cfg["rest_min_s"]
-        if self.at_rest:
-            b = self.bias
-            kb = self._k_brest
-            b[0] += kb * (rg[0] - b[0])
-            b[1] += kb * (rg[1] - b[1])
-            b[2] += kb * (rg[2] - b[2])
+
+
+def _inv3(a):
+    """Inverse of a symmetric positive definite 3×3 matrix (adjugate / determinant)."""
+    (a00, a01, a02), (_, a11, a12), (_, _, a22) = a
+    c00 = a11 * a22 - a12 * a12
+    c01 = a02 * a12 - a01 * a22
+    c02 = a01 * a12 - a02 * a11
+    c11 = a00 * a22 - a02 * a02
+    c12 = a01 * a02 - a00 * a12
+    c22 = a00 * a11 - a01 * a01
+    d = 1.0 / (a00 * c00 + a01 * c01 + a02 * c02)
+    return [[c00 * d, c01 * d, c02 * d], [c01 * d, c11 * d, c12 * d], [c02 * d, c12 * d, c22 * d]]
