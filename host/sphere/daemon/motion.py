@@ -132,23 +132,21 @@ class _NwuFilter:
         pass
 
 
-def host_filter(name: str = "auto", beta: float = 0.1):
-    """The host fusion filter: ``sphere`` (sphere.fusion's SphereFilter, our best), ``madgwick``, or
-    ``auto`` = the best one installed. None when sphere.fusion is absent. Returns NWU quaternions."""
+def host_filter(name: str = "auto", beta: float | None = 0.1):
+    """The host fusion filter by its name in ``sphere.fusion.registry`` (the filters it marks live:
+    ``sphere``, our best, and ``madgwick``), or ``auto`` = the first of them. Built by the registry with its
+    defaults, so the daemon runs the same settings as `sphere eval`; ``beta`` (when not None) replaces
+    Madgwick's. None when sphere.fusion is not installed. Returns NWU quaternions."""
     try:
-        if name in ("auto", "sphere"):
-            try:
-                from sphere.fusion.sphere_filter import SphereFilter
-
-                return _NwuFilter(SphereFilter())
-            except ImportError:
-                if name == "sphere":
-                    return None
-        from sphere.fusion.madgwick import Madgwick
-
-        return Madgwick(beta=beta)
-    except Exception:  # the fusion package is another module's work and may be absent or changing
+        from sphere.fusion import registry
+    except ImportError:  # the daemon works without the fusion package (device orientation only)
         return None
+    if name == "auto":
+        name = registry.LIVE[0]
+    if name not in registry.LIVE:
+        raise ValueError(f"unknown host filter {name!r}; known: auto, {', '.join(registry.LIVE)}")
+    f = registry.make(name, **({"beta": beta} if name == "madgwick" and beta is not None else {}))
+    return f if f.earth_frame == "NWU" else _NwuFilter(f)
 
 
 class MotionTracker:
