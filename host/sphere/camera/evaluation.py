@@ -86,10 +86,10 @@ def run(rt: RenderedTrial, hue_deg: float = 120.0) -> Run:
             per_frame.append(1000 * (t2 - t0))
             det_ms.append(1000 * (t1 - t0))
         q, a = rt.q_host_enu[i], tr.acc_m_s2[i]
-        p = hyb.imu(rt.t[i], q, a)
+        p = hyb.imu(rt.t[i], q, a, lead_s=IMU_LATENCY_S)
         if p is not None:
             est["hybrid"][i] = p
-        p = ckf.imu(rt.t[i], q, a)
+        p = ckf.imu(rt.t[i], q, a, lead_s=IMU_LATENCY_S)
         if p is not None:
             est["camera-kf"][i] = p
         if last_cam is not None:
@@ -137,7 +137,6 @@ def _imu_only(rt: RenderedTrial, hyb: CameraImuTracker) -> np.ndarray:
     v = (truth[k0 + 1] - truth[k0 - 1]) / (t[k0 + 1] - t[k0 - 1])
     g = STANDARD_GRAVITY
     f = np.einsum("nij,nj->ni", np.array([_rot(q) for q in rt.q_host_enu]), rt.trial.acc_m_s2)
-    g = float(np.mean(f[: k0 + 1, 2])) if k0 > 10 else g
     for i in range(k0, n):
         if i > k0:
             dt = t[i] - t[i - 1]
@@ -189,7 +188,8 @@ def figures(r: Run, rt: RenderedTrial) -> dict:
         lat = latency_ms(r.t_out[moving], r.est[m][moving], rt.truth_cam)
         fig["latency_ms"] = lat
         fig["coverage"] = float(ok.mean())
-        fig["losses"] = [_loss(r.t_out, e, a, b) for a, b in r.losses]
+        steady = float(np.sqrt(np.mean(np.sum(e[use] ** 2, axis=1)))) if use.sum() >= 10 else 0.0
+        fig["losses"] = [_loss(r.t_out, e, a, b, max(0.01, 2.0 * steady)) for a, b in r.losses]
         out[m] = fig
     out["hybrid"]["output_rate_hz"] = float(1.0 / np.median(np.diff(r.t_out)))
     return out
@@ -217,13 +217,15 @@ def _jitter(t, e, rest, min_s: float = 1.0, trim_s: float = 0.3):
 
 
 def _loss(t, e, t0, t1, recovered_m: float = 0.01, hold_s: float = 0.2):
-    """Error when the ball comes back (at t1), and how long until the error stays under 1 cm for 0.2 s."""
+    """Error when the ball comes back (at t1), and how long until the error stays under ``recovered_m`` (1 cm
+    or twice the method's own RMS error outside the loss, whichever is larger) for 0.2 s."""
     ok = np.all(np.isfinite(e), axis=1)
     norm = np.where(ok, np.linalg.norm(np.where(ok[:, None], e, 0.0), axis=1), np.inf)
     i1 = int(np.searchsorted(t, t1))
     if i1 >= len(t):
         return {"t0": t0, "t1": t1}
-    res = {"t0": t0, "t1": t1, "error_at_return_m": float(norm[i1]) if np.isfinite(norm[i1]) else None}
+    res = {"t0": t0, "t1": t1, "error_at_return_m": float(norm[i1]) if np.isfinite(norm[i1]) else None,
+           "recovered_below_m": recovered_m}
     good = norm < recovered_m
     for j in range(i1, len(t)):
         end = np.searchsorted(t, t[j] + hold_s)

@@ -259,10 +259,12 @@ class CameraAlignment:
     [t₀, t₁] and falling over [t₁, t₂], whatever the motion. The same integral of the IMU's acceleration
     (rotated to the earth frame, gravity removed) gives the same vector in the earth frame. Pairs of
     these vectors give the rotation by the SVD solution of Wahba's problem (Kabsch, on the centred pairs,
-    so an error in the gravity removed drops out); it is used once the pairs span two directions well.
+    so an error in the gravity removed drops out). It is used as soon as the motion has some extent in a
+    second direction (σ₂ ≥ 1 % of σ₁): while a hand shakes along one line, the turn about that line is
+    still unknown, but so is (nearly) any acceleration it would misplace.
     """
 
-    def __init__(self, spacing_s: float = 0.2, min_pairs: int = 15, min_ratio: float = 0.08,
+    def __init__(self, spacing_s: float = 0.2, min_pairs: int = 15, min_ratio: float = 0.01,
                  min_energy: float = 0.5):
         self.spacing_s = spacing_s
         self.min_pairs, self.min_ratio, self.min_energy = min_pairs, min_ratio, min_energy
@@ -342,16 +344,19 @@ class CameraImuTracker:
       constant-velocity with a hand's acceleration as process noise.
     - **Correct** with a camera fix at its exposure time: the filter goes back to the state saved at the
       last IMU sample before the exposure, applies the fix there and re-propagates the IMU samples since
-      (latency compensation), so the output at the IMU's rate never waits for the camera.
+      (latency compensation), so the output at the IMU's rate never waits for the camera. The fix's
+      covariance is the detector's (doubled, with a floor) plus the motion during the uncertainty of its
+      time stamp (σ_t v vᵀ σ_t: the host knows the exposure time only to a few ms).
     - **Gate** (chapter 3, z_TH = 5 %): a fix whose innovation exceeds 5 % of its distance, widened by 3σ of
       the prediction's own uncertainty, is not applied; three such fixes in a row that agree with each
       other (after a loss, when dead reckoning has drifted) re-acquire: the state restarts from them.
     """
 
-    def __init__(self, accel_noise: float = 0.5, free_accel_noise: float = 6.0, bias_walk: float = 0.05,
+    def __init__(self, accel_noise: float = 0.5, free_accel_noise: float = 20.0, bias_walk: float = 0.05,
                  z_th: float = Z_TH, history_s: float = 0.3, reacquire_after: int = 3,
-                 cam_floor_m=(0.0005, 0.0005, 0.002), use_imu: bool = True):
+                 cam_floor_m=(0.0005, 0.0005, 0.002), timing_sigma_s: float = 0.006, use_imu: bool = True):
         self.use_imu = use_imu
+        self.timing_sigma_s = timing_sigma_s
         self.accel_noise, self.free_accel_noise, self.bias_walk = accel_noise, free_accel_noise, bias_walk
         self.z_th = z_th
         self.history_s = history_s
@@ -367,8 +372,9 @@ class CameraImuTracker:
         self.stats = {"accepted": 0, "gated": 0, "reacquired": 0, "late": 0}
 
     # -- IMU ---------------------------------------------------------------------------------------------
-    def imu(self, t: float, q_sensor_to_earth, acc_sensor):
-        """One IMU sample; returns the position estimate (camera frame, m) at t, or None before the first fix."""
+    def imu(self, t: float, q_sensor_to_earth, acc_sensor, lead_s: float = 0.0):
+        """One IMU sample; returns the position estimate (camera frame, m) at t + ``lead_s`` (the link's
+        latency: where the ball is when the output is used), or None before the first fix."""
         # standard gravity removed; the local difference (and the accelerometer's offset) is a constant that
         # the alignment's centring and the filter's bias state take up
         a_earth = _rot(q_sensor_to_earth) @ np.asarray(acc_sensor, float) - np.array([0.0, 0.0, self.g])
@@ -382,7 +388,10 @@ class CameraImuTracker:
         self.t = t
         self.hist.append([t, a_earth, self.x.copy(), self.P.copy()])
         self._trim(t)
-        return self.x[:3].copy()
+        if lead_s <= 0:
+            return self.x[:3].copy()
+        u = self.alignment.R @ a_earth - self.x[6:9] if (self.use_imu and self.alignment.ready) else 0.0
+        return self.x[:3] + self.x[3:6] * lead_s + 0.5 * u * lead_s * lead_s
 
     def _trim(self, t):
         while self.hist and self.hist[0][0] < t - self.history_s:
@@ -433,6 +442,9 @@ class CameraImuTracker:
             self.stats["late"] += 1
             return "late"
         x, P = self.hist[k][2].copy(), self.hist[k][3].copy()
+        # the exposure time is known to a few ms (latency jitter, blur): that much motion is uncertain too
+        v = x[3:6]
+        Rm = Rm + self.timing_sigma_s ** 2 * np.outer(v, v)
         nu = z - x[:3]
         S = P[:3, :3] + Rm
         gate = self.z_th * np.linalg.norm(z) + 3.0 * np.sqrt(np.linalg.eigvalsh(P[:3, :3]).max())
