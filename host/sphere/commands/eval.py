@@ -103,6 +103,23 @@ def _trial_job(args):
     return trial.name, res, (trial.rate_hz, len(trial))
 
 
+def _trial_progress(total: int):
+    """A tqdm bar over the trials on a terminal (sphere.progress); elsewhere one line per finished trial."""
+    from sphere.progress import bar
+
+    trials = bar(total=total, desc="eval", unit="trial")
+
+    def done(name: str) -> None:
+        trials.set_postfix_str(name, refresh=False)
+        trials.update(1)
+        if trials.disable:
+            print(f"  done {name}", file=sys.stderr)
+        if trials.n >= total:
+            trials.close()
+
+    return done
+
+
 def evaluate(paths, names, seconds=None, jobs=1, keep_errors=False, progress=None):
     """Run ``names`` on every trial; returns {trial: {filter: result}} in trial order."""
     jobs_list = [(p, list(names), seconds, keep_errors) for p in paths]
@@ -467,7 +484,7 @@ def run(args) -> int:
             return 2
         try:
             doc = cross_validate(paths, names, seconds=args.seconds, jobs=args.jobs, cache=args.cache,
-                                 progress=lambda t: print(f"  done {t}", file=sys.stderr))
+                                 progress=_trial_progress(len(paths)))
         except ValueError as e:
             print(f"sphere eval: {e}", file=sys.stderr)
             return 2
@@ -478,7 +495,7 @@ def run(args) -> int:
         return 0
     try:
         results = evaluate(paths, names, seconds=args.seconds, jobs=args.jobs, keep_errors=bool(args.plot),
-                           progress=lambda t: print(f"  done {t}", file=sys.stderr))
+                           progress=_trial_progress(len(paths)))
     except ValueError as e:  # e.g. a --seconds slice with no movement phase to score
         hint = " (a longer --seconds, or another trial)" if args.seconds else ""
         print(f"sphere eval: {e}{hint}", file=sys.stderr)
