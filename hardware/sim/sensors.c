@@ -1021,6 +1021,7 @@ void board_power_cycle(board_t *b)
 	b->bus_busy = 0;
 	b->cur_chip = -1;
 	adxl_update_int1(b);
+	board_sda_update(b);
 }
 
 void board_avr_reset(board_t *b)
@@ -1030,6 +1031,7 @@ void board_avr_reset(board_t *b)
 		b->chip[b->cur_chip].holds_sda = 1 + (int)(rng_uniform(&b->itg.rng) * 9); /* clocks still needed: 1..9 */
 		b->sda_held_events++;
 	}
+	board_sda_update(b);
 	if (b->cur_chip >= 0)
 		b->chip[b->cur_chip].selected = 0;
 	b->bus_busy = 0;
@@ -1044,15 +1046,36 @@ int board_sda_held(board_t *b)
 	return 0;
 }
 
+/* SDA (PC4) as the AVR reads it in PINC: low while a chip holds it (the pull-ups make it high otherwise) */
+void board_sda_update(board_t *b)
+{
+	int low = board_sda_held(b);
+	if (low != b->sda_pin_low) {
+		b->sda_pin_low = low;
+		avr_raise_irq(b->sda_pin, low ? 0 : 1);
+	}
+	/* simavr's port raises the same pin IRQ with the PORT value on every PORTC write (the pull-up), which
+	 * would read as SDA high: keep the PIN bit as the bus has it */
+	if (low)
+		b->avr->data[0x26] &= (uint8_t)~0x10;
+	else
+		b->avr->data[0x26] |= 0x10;
+}
+
 static int scl_level = 1;
 static void scl_io_hook(struct avr_t *avr, avr_io_addr_t addr, uint8_t v, void *param);
 void board_scl_level(board_t *b, int level)
 {
 	if (level && !scl_level) /* a rising edge clocks one bit out of the held byte */
 		for (int i = 0; i < CHIP_COUNT; i++)
-			if (b->chip[i].holds_sda && --b->chip[i].holds_sda == 0 && b->verbose)
-				fprintf(b->log, "[%.6f] %s releases SDA\n", board_time_s(b), b->chip[i].name);
+			if (b->chip[i].holds_sda && --b->chip[i].holds_sda == 0) {
+				if (b->verbose)
+					fprintf(b->log, "[%.6f] %s releases SDA\n", board_time_s(b), b->chip[i].name);
+				if (b->on_fault)
+					b->on_fault(b, "sda_released", i);
+			}
 	scl_level = level;
+	board_sda_update(b);
 }
 
 /* SCL as the program drives PC5 while the TWI is off (open drain: low when DDR is output and PORT low).
@@ -1061,9 +1084,12 @@ static void scl_io_hook(struct avr_t *avr, avr_io_addr_t addr, uint8_t v, void *
 {
 	(void)addr; (void)v;
 	board_t *b = param;
+	board_sda_update(b);
 	if (avr->data[0xBC] & 0x04) /* TWEN: the TWI owns the pins */
 		return;
 	int low = (avr->data[0x27] & 0x20) && !(avr->data[0x28] & 0x20);
+	if (b->verbose > 2)
+		fprintf(b->log, "[%.6f] SCL %s (DDRC %02x PORTC %02x)\n", board_time_s(b), low ? "low" : "high", avr->data[0x27], avr->data[0x28]);
 	board_scl_level(b, !low);
 }
 
@@ -1141,6 +1167,7 @@ void board_init(board_t *b, avr_t *avr, trace_t *trace, int verbose, const board
 	avr_register_io_write(avr, 0x27, scl_io_hook, b);     /* DDRC: SCL is PC5 */
 	avr_register_io_write(avr, 0x28, scl_io_hook, b);     /* PORTC */
 
+	b->sda_pin = avr_io_getirq(avr, AVR_IOCTL_IOPORT_GETIRQ('C'), 4);
 	b->int1_pin = avr_io_getirq(avr, AVR_IOCTL_IOPORT_GETIRQ('D'), 2);
 	b->int1_level = -1;
 	adxl_update_int1(b);

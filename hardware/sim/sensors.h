@@ -139,6 +139,8 @@ typedef struct board_t {
 	tap_engine_t tap;
 	avr_irq_t *irq;          /* our TWI irqs: [0] input (to the AVR), [1] output (from the AVR) */
 	avr_irq_t *int1_pin;     /* ATmega pin that ADXL345 INT1 drives (D2 = PD2) */
+	avr_irq_t *sda_pin;      /* PC4: driven low while a chip holds SDA */
+	int sda_pin_low;
 	int int1_level;
 	uint8_t adxl_int_source;
 	uint8_t adxl_act_tap_status;
@@ -186,6 +188,7 @@ void board_avr_reset(board_t *b);
 /* The SCL line as the AVR drives it while the TWI is off (PC5: DDR and PORT): nine clocks release SDA. */
 void board_scl_level(board_t *b, int level);
 int board_sda_held(board_t *b);
+void board_sda_update(board_t *b);
 /* An AVR reset cancels every cycle timer (simavr): start the chips' own again. */
 void board_restart_timers(board_t *b);
 /* The chip's own time for board time t_s (its oscillator's ppm offset). */

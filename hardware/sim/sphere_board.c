@@ -172,7 +172,8 @@ typedef struct {
 	avr_t *avr;
 	int host_reading;
 	uint32_t adapter_buffer, buffered;
-	uint64_t host_dropped;
+	uint64_t host_dropped, captured;
+	FILE *times; /* --capture-times: (u64 capture offset, f64 simulated s) at every frame delimiter */
 } uart_out_t;
 
 static uart_out_t uart_out;
@@ -213,6 +214,13 @@ static void uart_hook(struct avr_irq_t *irq, uint32_t value, void *param)
 	}
 	if (u->capture)
 		fputc(byte, u->capture);
+	u->captured++;
+	if (u->times && byte == 0) {
+		uint64_t off = u->captured;
+		double t = (double)u->avr->cycle / u->avr->frequency;
+		fwrite(&off, 8, 1, u->times);
+		fwrite(&t, 8, 1, u->times);
+	}
 	u->bytes++;
 	if (byte == 0) {
 		if (u->last_nonzero)
@@ -327,6 +335,13 @@ static void hold_twi(avr_t *avr, void *twi)
 static volatile sig_atomic_t stop_requested;
 static void on_signal(int sig) { (void)sig; stop_requested = 1; }
 
+static double cpu_now(void)
+{
+	struct timespec ts;
+	clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
+	return ts.tv_sec + ts.tv_nsec * 1e-9;
+}
+
 static double wall_now(void)
 {
 	struct timespec ts;
@@ -336,12 +351,21 @@ static double wall_now(void)
 
 static uint32_t resets;
 static board_t *the_board;
+static int plain_reset; /* --reset-at: a reset that leaves no chip holding SDA (the soak's reference run) */
 static void on_reset(avr_t *avr)
 {
 	(void)avr;
 	resets++;
-	if (the_board)
+	if (the_board && !plain_reset)
 		board_avr_reset(the_board); /* the chips keep their power: one in the middle of a read holds SDA */
+	else if (the_board) {
+		int held[CHIP_COUNT];
+		for (int i = 0; i < CHIP_COUNT; i++)
+			held[i] = the_board->chip[i].holds_sda;
+		board_avr_reset(the_board);
+		for (int i = 0; i < CHIP_COUNT; i++)
+			the_board->chip[i].holds_sda = held[i];
+	}
 }
 
 static void no_sleep(avr_t *avr, avr_cycle_count_t howLong) { (void)avr; (void)howLong; }
@@ -390,9 +414,11 @@ static void usage(FILE *f)
 		"                       stretching, an AVR reset in the middle of a read (the chip then holds SDA)\n"
 		"  --reset-mid-read T   reset the AVR at the first byte a chip sends after T s (the chip holds SDA)\n"
 		"  --brownout T         the supply dips at T s: the AVR and the chips restart (repeatable)\n"
+		"  --reset-at T         the AVR resets at T s, no chip left holding SDA (repeatable)\n"
 		"  --sda-held           at power-up the magnetometer holds SDA low (left mid-read by a reset)\n"
 		"  --host-stall T0:T1   the host stops reading from T0 to T1 s: the adapter's buffer fills, bytes drop\n"
 		"  --adapter NAME       the USB-serial adapter: ftdi (256-byte buffer, default) or ch340 (32 bytes)\n"
+		"  --capture-times FILE at each frame delimiter in the capture: u64 bytes captured so far, f64 simulated s\n"
 		"  --simavr-i2c-timing  simavr's 1 us per I2C step (default: 9 SCL periods a byte at the TWBR rate)\n"
 		"  --i2c-real-timing    (the default; kept for old scripts)\n"
 		"  --simavr-twi-status  keep simavr 1.6's status 0x28/0x30 after SLA+W (default: the real 0x18/0x20)\n"
@@ -409,9 +435,9 @@ int main(int argc, char **argv)
 	imperfections_t imp;
 	memset(&imp, 0, sizeof imp);
 	imp.seed = 1;
-	int clocks_random = 0, sda_held = 0, n_brownouts = 0, n_stalls = 0, n_resets_mid = 0;
-	double glitch_rate = 0, brownouts[MAX_FAULTS], resets_mid[MAX_FAULTS], host_stalls[MAX_FAULTS][2];
-	const char *adapter = "ftdi";
+	int clocks_random = 0, sda_held = 0, n_brownouts = 0, n_stalls = 0, n_resets_mid = 0, n_resets_at = 0;
+	double glitch_rate = 0, brownouts[MAX_FAULTS], resets_mid[MAX_FAULTS], host_stalls[MAX_FAULTS][2], resets_at[MAX_FAULTS];
+	const char *adapter = "ftdi", *times_path = NULL;
 	char tpin_port = 'B', lpin_port = 0;
 	int tpin_bit = 5, lpin_bit = 0;
 	fault_t faults[MAX_FAULTS];
@@ -430,7 +456,8 @@ int main(int argc, char **argv)
 		{"glitch", required_argument, 0, 'g'}, {"reset-mid-read", required_argument, 0, 'm'},
 		{"brownout", required_argument, 0, 'b'}, {"sda-held", no_argument, 0, 'H'},
 		{"host-stall", required_argument, 0, 'o'}, {"adapter", required_argument, 0, 'a'},
-		{"simavr-i2c-timing", no_argument, 0, 'U'}, {0, 0, 0, 0}};
+		{"simavr-i2c-timing", no_argument, 0, 'U'}, {"capture-times", required_argument, 0, 'X'},
+		{"reset-at", required_argument, 0, 'A'}, {0, 0, 0, 0}};
 	int o;
 	while ((o = getopt_long(argc, argv, "t:s:c:prj:vh", opts, NULL)) != -1) {
 		switch (o) {
@@ -445,6 +472,7 @@ int main(int argc, char **argv)
 		case 'v': verbose++; break;
 		case 'I': real_i2c = 1; break;
 		case 'U': real_i2c = 0; break;
+		case 'X': times_path = optarg; break;
 		case 'B': variant_name = optarg; break;
 		case 'n': imp.noise = 1; break;
 		case 'e': imp.seed = strtoull(optarg, NULL, 0); break;
@@ -467,10 +495,11 @@ int main(int argc, char **argv)
 			imp.ppm[chip] = atof(c + 1);
 			break;
 		}
-		case 'b': case 'm':
-			if ((o == 'b' ? n_brownouts : n_resets_mid) >= MAX_FAULTS) { fprintf(stderr, "too many faults\n"); return 2; }
+		case 'b': case 'm': case 'A':
+			if ((o == 'b' ? n_brownouts : o == 'm' ? n_resets_mid : n_resets_at) >= MAX_FAULTS) { fprintf(stderr, "too many faults\n"); return 2; }
 			if (o == 'b') brownouts[n_brownouts++] = atof(optarg);
-			else resets_mid[n_resets_mid++] = atof(optarg);
+			else if (o == 'm') resets_mid[n_resets_mid++] = atof(optarg);
+			else resets_at[n_resets_at++] = atof(optarg);
 			break;
 		case 'o': {
 			char *c = strchr(optarg, ':');
@@ -572,9 +601,14 @@ int main(int argc, char **argv)
 	if (sda_held) {
 		board.chip[CHIP_HMC5883L].holds_sda = 9;
 		board.sda_held_events++;
+		board_sda_update(&board);
 		log_fault(0, "sda_held_at_power_up", CHIP_HMC5883L);
 	}
 	uart_out.avr = avr;
+	if (times_path && !(uart_out.times = fopen(times_path, "wb"))) {
+		fprintf(stderr, "sphere-board: cannot write %s: %s\n", times_path, strerror(errno));
+		return 1;
+	}
 	uart_out.host_reading = 1;
 	uart_out.adapter_buffer = strcmp(adapter, "ch340") ? 256 : 32;
 
@@ -647,10 +681,10 @@ int main(int argc, char **argv)
 	avr_cycle_count_t end_cycle = (avr_cycle_count_t)(seconds * avr->frequency);
 	avr_cycle_count_t next_check = 0;
 	const avr_cycle_count_t check_every = avr->frequency / 1000; /* 1 ms */
-	double wall0 = wall_now();
+	double wall0 = wall_now(), cpu0 = cpu_now();
 	int stall = 0, state = cpu_Running;
 	double next_glitch = glitch_rate > 0 ? 0.5 : INFINITY;
-	int brown_i = 0, reset_i = 0;
+	int brown_i = 0, reset_i = 0, reset_at_i = 0;
 	uint32_t resets_seen = resets;
 	while (avr->cycle < end_cycle && !stop_requested) {
 		state = avr_run(avr);
@@ -690,6 +724,13 @@ int main(int argc, char **argv)
 				log_fault(t, "brownout", -1);
 				avr_reset(avr);
 				board_power_cycle(&board);
+			}
+			while (reset_at_i < n_resets_at && t >= resets_at[reset_at_i]) {
+				reset_at_i++;
+				log_fault(t, "reset", -1);
+				plain_reset = 1;
+				avr_reset(avr);
+				plain_reset = 0;
 			}
 			while (reset_i < n_resets_mid && t >= resets_mid[reset_i]) {
 				reset_i++;
@@ -745,10 +786,12 @@ int main(int argc, char **argv)
 			}
 		}
 	}
-	double wall = wall_now() - wall0;
+	double wall = wall_now() - wall0, cpu = cpu_now() - cpu0;
 	double sim_s = (double)avr->cycle / avr->frequency;
 	if (uart_out.capture)
 		fclose(uart_out.capture);
+	if (uart_out.times)
+		fclose(uart_out.times);
 	/* no uart_pty_stop(): it signals its thread with SIGINT, which our handler catches, and then waits
 	 * for it forever; leaving main ends the thread with the process */
 
@@ -809,6 +852,8 @@ int main(int argc, char **argv)
 		fprintf(sf, "  \"simulated_seconds\": %.6f,\n", sim_s);
 		fprintf(sf, "  \"wall_seconds\": %.3f,\n", wall);
 		fprintf(sf, "  \"speed\": %.3f,\n", wall > 0 ? sim_s / wall : 0);
+		fprintf(sf, "  \"cpu_seconds\": %.3f,\n", cpu);
+		fprintf(sf, "  \"speed_cpu\": %.3f,\n", cpu > 0 ? sim_s / cpu : 0);
 		fprintf(sf, "  \"resets\": %u,\n", resets);
 		fprintf(sf, "  \"board\": \"%s\",\n  \"magnetometer\": \"%s\",\n  \"noise\": %s,\n  \"seed\": %llu,\n",
 			variant->name, board.chip[CHIP_HMC5883L].name, imp.noise ? "true" : "false", (unsigned long long)imp.seed);

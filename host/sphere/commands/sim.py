@@ -31,7 +31,7 @@ DEFAULT_BETA = 0.041  # the firmware's DEFAULT_BETA_MILLI (firmware/src/core/mar
 
 
 def add_arguments(p) -> None:
-    p.add_argument("--trace", action="append", required=True, metavar="SOURCE",
+    p.add_argument("--trace", action="append", default=[], metavar="SOURCE",
                    help="BROAD trial (.mat, name or number), synthetic:NAME[:ARG], or a prepared .bin trace; "
                         "repeatable with --accuracy ('all' = every shipped trial)")
     p.add_argument("--seconds", type=float, default=None,
@@ -90,7 +90,14 @@ def add_arguments(p) -> None:
                         "following the firmware's flags")
     p.add_argument("--jobs", type=int, default=2, help="boards run at once with several traces (default 2)")
     p.add_argument("--no-build", action="store_true", help="do not run make; fail with the command instead")
-    p.add_argument("--json", action="store_true", help="print the figures as JSON")
+    p.add_argument("--json", nargs="?", const=True, default=None, metavar="OUT",
+                   help="print the figures as JSON (with a file name: write them there; the soak's report)")
+    p.add_argument("--soak", type=float, default=None, metavar="SECONDS",
+                   help="soak run: the firmware on BROAD motion for SECONDS under a seeded schedule of every fault, "
+                        "checked against a fault-free run of the same motion; exit 1 when an invariant fails")
+    p.add_argument("--soak-faults", default=None, metavar="KIND,...",
+                   help="only these fault kinds in the soak (default all: nack, stall, glitch, brownout, "
+                        "reset_mid_read, sda_held, host_stall)")
     p.add_argument("-v", "--verbose", action="count", default=0, help="log the bus (twice: every byte)")
 
 
@@ -202,10 +209,44 @@ def _print_figures(source: str, stats: dict, out=None) -> None:
               f"CRC errors {dec.get('crc_errors')}, seq gaps {dec.get('seq_gaps')}, hellos {s.get('hellos')}", file=out)
 
 
+def _soak(args, elf) -> int:
+    from sphere.sim.soak import FAULT_KINDS, run_soak
+
+    kinds = FAULT_KINDS
+    if args.soak_faults:
+        kinds = tuple(k.strip() for k in args.soak_faults.split(",") if k.strip())
+        bad = [k for k in kinds if k not in FAULT_KINDS]
+        if bad:
+            print(f"sphere sim: unknown fault kind {', '.join(bad)}; choose from {', '.join(FAULT_KINDS)}",
+                  file=sys.stderr)
+            return 2
+    if args.soak < 10:
+        print("sphere sim: --soak needs at least 10 simulated seconds (faults start at 6 s)", file=sys.stderr)
+        return 2
+    try:
+        with tempfile.TemporaryDirectory(prefix="sphere-soak-elf-") as tmpd:
+            snapshot = Path(tmpd) / Path(elf).name  # a rebuild of firmware/build meanwhile must not change it
+            shutil.copyfile(elf, snapshot)
+            res = run_soak(snapshot, args.soak, args.seed if args.seed is not None else 1, board=args.board,
+                           kinds=kinds, build=not args.no_build)
+    except (FileNotFoundError, RuntimeError) as e:
+        print(f"sphere sim: {e}", file=sys.stderr)
+        return 2
+    if isinstance(args.json, str):
+        Path(args.json).write_text(json.dumps(res.report, indent=2) + "\n")
+    elif args.json:
+        print(json.dumps(res.report))
+    print(res.summary_line())
+    return 0 if res.ok else 1
+
+
 def run(args) -> int:
     from sphere.sim.analysis import accuracy_table
     from sphere.sim.board import BoardUnavailable, firmware_elf, testfw_elf
 
+    if not args.trace and args.soak is None:
+        print("sphere sim: give --trace SOURCE (or --soak SECONDS)", file=sys.stderr)
+        return 2
     sources = list(args.trace)
     if "all" in sources:
         from sphere.broad import trial_paths
@@ -228,6 +269,8 @@ def run(args) -> int:
     except BoardUnavailable as e:
         print(f"sphere sim: {e}", file=sys.stderr)
         return 2
+    if args.soak is not None:
+        return _soak(args, elf)
     multi = len(sources) > 1
     with tempfile.TemporaryDirectory(prefix="sphere-sim-") as tmpd:
         tmp = Path(tmpd)
@@ -253,7 +296,10 @@ def run(args) -> int:
         if brun.returncode != 0:
             rc = brun.returncode
             print(f"sphere sim: the board exited with {brun.returncode}: {brun.stderr.strip()[-500:]}", file=sys.stderr)
-        if args.json:
+        if isinstance(args.json, str):
+            Path(args.json).write_text(json.dumps({"source": source, **stats}, indent=2) + "\n")
+            _print_figures(source, stats)
+        elif args.json:
             print(json.dumps({"source": source, **stats}))
         else:
             _print_figures(source, stats)
