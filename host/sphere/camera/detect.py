@@ -31,6 +31,9 @@ N_RAYS = 96
 #: the rest (a ball half hidden, half out of the frame, or a same-coloured thing behind it) waits for the
 #: tracker's hint.
 COLD_START_INLIERS = 0.6
+#: Tracking: an outline counts when this share of the rays that found an edge agree on one circle (a
+#: hand over a third of the ball leaves ~0.65-0.8; a box or a blob of the ball's colour ~0.4-0.5).
+TRACK_INLIERS = 0.6
 COLD_START_RESIDUAL_PX = 0.4
 
 
@@ -44,6 +47,7 @@ class Detection:
     rays: int
     residual_px: float
     candidates: int = 1
+    colour: np.ndarray | None = None  # unit RGB direction of the ball's colour in this frame
 
     @property
     def distance_m(self) -> float:
@@ -78,12 +82,18 @@ def _row_median(x: np.ndarray, valid: np.ndarray) -> np.ndarray:
 
 class BallDetector:
     def __init__(self, camera: Camera, hue_deg: float = 120.0, radius_m: float = 0.04, n_rays: int = N_RAYS,
-                 min_radius_px: float = 3.0, inlier_px: float = 1.0, seed: int = 0):
+                 min_radius_px: float = 3.0, inlier_px: float = 1.0, seed: int = 0, colour_tol_deg: float = 6.0):
         self.camera = camera
         self.hue_deg = hue_deg
         self.radius_m = radius_m
         self.n_rays = n_rays
         self.min_radius_px = min_radius_px
+        #: the ball's own colour (unit RGB direction), learnt from the first clear view (a cold start);
+        #: later outlines must be of that colour within colour_tol_deg (shading and exposure scale it, they
+        #: do not turn it), so a round thing of a similar hue behind is not taken for the ball
+        self.colour = None
+        self.colour_tol_deg = colour_tol_deg
+        self._last_colour = None
         self.inlier_px = inlier_px
         self._rng = np.random.default_rng(seed)
         self._dirs_by_n = {}
@@ -121,7 +131,7 @@ class BallDetector:
         return out
 
     # -- outline -----------------------------------------------------------------------------------------
-    def _edge_points(self, rgb, centre, r0, offset, n_rays=None):
+    def _edge_points(self, rgb, centre, r0, offset, n_rays=None, span=(0.35, 1.9)):
         """Sub-pixel outline points on rays from ``centre`` (image px); ``rgb`` (float32) covers the window
         at ``offset`` (x0, y0).
 
@@ -136,7 +146,7 @@ class BallDetector:
         dirs = self._dirs_by_n[n_rays or self.n_rays]
         nr = len(dirs)
         step = 0.5
-        s = np.arange(0.35 * r0, 1.9 * r0 + 6.0, step, dtype=np.float32)
+        s = np.arange(span[0] * r0, span[1] * r0 + 6.0, step, dtype=np.float32)
         pts = centre[None, None, :] + s[None, :, None] * dirs[:, None, :]  # (rays, samples, 2)
         mx = (pts[..., 0] - offset[0]).astype(np.float32)
         my = (pts[..., 1] - offset[1]).astype(np.float32)
@@ -145,13 +155,19 @@ class BallDetector:
         prof = cv2.remap(rgb, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)  # (rays, n, 3)
         n = len(s)
         rows = np.arange(nr)
-        inner = s <= 0.7 * r0
-        outer = s >= 1.35 * r0 + 2.0
+        inner = s <= max(0.7, span[0] + 0.15) * r0
+        outer = s >= min(1.35, span[1] - 0.15) * r0 + 2.0
         ok = inside[:, inner].all(axis=1) & (inside[:, outer].sum(axis=1) >= 3)
         if not ok.any():
             return np.zeros((0, 2))
         ball = np.median(prof[ok][:, inner].reshape(-1, 3), axis=0)
+        along_b, across_b, bright_b = (v.item() for v in hue_projection(ball[None, None, ::-1], self.hue_deg))
+        if not (along_b > 0.45 * bright_b and abs(across_b) < 0.35 * along_b):
+            return np.zeros((0, 2))  # what the rays start in is not the ball's colour (a hand over it)
         bhat = ball / max(float(np.linalg.norm(ball)), 1e-6)
+        self._last_colour = bhat
+        if self.colour is not None and float(bhat @ self.colour) < np.cos(np.radians(self.colour_tol_deg)):
+            return np.zeros((0, 2))  # a thing of a similar hue, not the ball's own colour
         g = _row_median(prof[:, outer], inside[:, outer])  # (rays, 3)
         gg = np.einsum("ij,ij->i", g, g)
         bg = g @ bhat
@@ -161,27 +177,35 @@ class BallDetector:
         pg = np.einsum("ijk,ik->ij", prof, g)
         with np.errstate(all="ignore"):
             cover = 1.0 - (pg - bg[:, None] * pb) / np.where(unmix, det, 1.0)[:, None]
-        # the fallback: hue projection with local levels
-        hh = np.radians(self.hue_deg)
-        along = (prof[..., 0] - 0.5 * (prof[..., 1] + prof[..., 2])) * np.float32(np.cos(hh)) \
-            + 0.8660254 * (prof[..., 1] - prof[..., 2]) * np.float32(np.sin(hh))
-        lev_in = np.median(along[:, inner], axis=1)
-        lev_out = _row_median(along[:, outer], inside[:, outer])
-        search = s > 0.5 * r0
-        idx = np.zeros(nr, int)
-        okf = ok & ~unmix
-        for _ in range(3):
-            okf &= (lev_in - lev_out) > np.maximum(12.0, 0.3 * lev_in)
-            below = (along < (0.5 * (lev_in + lev_out))[:, None]) & search[None, :]
-            idx = np.argmax(below, axis=1)
-            k_in = np.clip(idx[:, None] - np.arange(4, 13)[None, :], 0, n - 1)
-            k_out = np.clip(idx[:, None] + np.arange(4, 13)[None, :], 0, n - 1)
-            lev_in = np.median(along[rows[:, None], k_in], axis=1)
-            lev_out = np.median(along[rows[:, None], k_out], axis=1)
-        okf &= inside[rows[:, None], np.clip(idx[:, None] + np.arange(4, 13)[None, :], 0, n - 1)].all(axis=1)
+        val = cover
+        use = unmix.copy()
+        fb = np.nonzero(ok & ~unmix)[0]
+        if len(fb):  # the fallback, for those rays: hue projection with local levels
+            hh = np.radians(self.hue_deg)
+            pf = prof[fb]
+            along = (pf[..., 0] - 0.5 * (pf[..., 1] + pf[..., 2])) * np.float32(np.cos(hh)) \
+                + 0.8660254 * (pf[..., 1] - pf[..., 2]) * np.float32(np.sin(hh))
+            ins = inside[fb]
+            lev_in = np.median(along[:, inner], axis=1)
+            lev_out = _row_median(along[:, outer], ins[:, outer])
+            search = s > 0.5 * r0
+            rf = np.arange(len(fb))
+            okf = np.ones(len(fb), bool)
+            win = np.arange(4, 13)[None, :]
+            for _ in range(3):
+                okf &= (lev_in - lev_out) > np.maximum(12.0, 0.3 * lev_in)
+                below = (along < (0.5 * (lev_in + lev_out))[:, None]) & search[None, :]
+                idx = np.argmax(below, axis=1)
+                k_in = np.clip(idx[:, None] - win, 0, n - 1)
+                k_out = np.clip(idx[:, None] + win, 0, n - 1)
+                lev_in = np.median(along[rf[:, None], k_in], axis=1)
+                lev_out = np.median(along[rf[:, None], k_out], axis=1)
+            okf &= ins[rf[:, None], k_out].all(axis=1)
+            val = val.copy()
+            val[fb] = (along - lev_out[:, None]) / np.maximum(lev_in - lev_out, 1e-6)[:, None]
+            use[fb] = okf
         # one profile per ray, ½ crossing
-        val = np.where(unmix[:, None], cover, (along - lev_out[:, None]) / np.maximum(lev_in - lev_out, 1e-6)[:, None])
-        use = unmix | okf
+        search = s > 0.5 * r0
         below = (val < 0.5) & search[None, :]
         idx = np.argmax(below, axis=1)
         use &= below[rows, idx] & (idx > 0) & inside[rows, idx]
@@ -193,24 +217,30 @@ class BallDetector:
         rad = s[i - 1] + np.clip(frac, 0.0, 1.0) * step
         return centre[None, :] + rad[:, None] * dirs[use]
 
-    def _fit(self, rgb, centre, r0, offset, n_rays):
-        pts = self._edge_points(rgb, centre, r0, offset, n_rays)
+    def _fit(self, rgb, centre, r0, offset, n_rays, span=(0.35, 1.9)):
+        pts = self._edge_points(rgb, centre, r0, offset, n_rays, span)
         if len(pts) < 8:
             return None
-        u = self.camera.rays(pts, iterations=12)
+        u = self.camera.rays_interpolated(pts)
         thr = self.inlier_px / self.camera.fx
-        fit = geom.ransac_circle(u, thr, rng=self._rng)
+        fit = geom.ransac_circle(u, thr, iterations=48 if n_rays == self.n_rays else 64, rng=self._rng)
         if fit is None:
             return None
         c, alpha, mask = fit
         return c, alpha, mask, u, pts
 
     def detect(self, bgr: np.ndarray, hint=None) -> Detection | None:
-        """The ball in a BGR frame, or None. ``hint`` = (centre_px, radius_px) from tracking narrows the
-        search; without it (or when nothing is found there) the whole frame is searched."""
+        """The ball in a BGR frame, or None. ``hint`` = (centre_px, radius_px) from tracking (best: the
+        tracker's position at the frame's exposure time, projected): the outline is measured from there
+        first, then looked for by colour in a window around it; without a hint (or when nothing is found
+        there) the whole frame is searched."""
         import cv2
 
         H, W = bgr.shape[:2]
+        if hint is not None:  # tracking: rays straight from where the ball should be
+            det = self._measure(bgr, np.asarray(hint[0], float), float(hint[1]))
+            if det is not None and det.inliers >= TRACK_INLIERS * det.rays:
+                return det
         tries = []
         if hint is not None:
             (hu, hv), hr = hint
@@ -232,7 +262,7 @@ class BallDetector:
                            - c[2] - 0.02 * c[1])
                 for centre, r0, _ in cands[:3]:
                     det = self._measure(bgr, centre, r0)
-                    if det is not None:
+                    if det is not None and det.inliers >= TRACK_INLIERS * det.rays:
                         det.candidates = len(cands)
                         return det
                 continue
@@ -244,20 +274,23 @@ class BallDetector:
             if found:
                 best = max(found, key=lambda d: d.inliers / self.n_rays - 0.1 * d.residual_px)
                 best.candidates = len(cands)
+                if self.colour is None:
+                    self.colour = best.colour
                 return best
         return None
 
     def _measure(self, bgr, centre, r0):
         H, W = bgr.shape[:2]
         out = None
-        for n_rays in (self.n_rays // 2, self.n_rays):  # the second pass: from the fitted centre and radius
-            m = 1.9 * r0 + 8
-            x0, x1 = int(max(0, centre[0] - m)), int(min(W, centre[0] + m + 2))
-            y0, y1 = int(max(0, centre[1] - m)), int(min(H, centre[1] + m + 2))
-            if x1 - x0 < 4 or y1 - y0 < 4:
-                return out
-            rgb = np.ascontiguousarray(bgr[y0:y1, x0:x1, ::-1], dtype=np.float32)
-            fit = self._fit(rgb, centre, r0, (x0, y0), n_rays)
+        m = 1.9 * r0 + 10
+        x0, x1 = int(max(0, centre[0] - m)), int(min(W, centre[0] + m + 2))
+        y0, y1 = int(max(0, centre[1] - m)), int(min(H, centre[1] + m + 2))
+        if x1 - x0 < 4 or y1 - y0 < 4:
+            return None
+        rgb = np.ascontiguousarray(bgr[y0:y1, x0:x1, ::-1], dtype=np.float32)
+        # first 48 rays over a wide range; then 96 from the fitted centre, over the fitted outline ± 40 %
+        for n_rays, span in ((self.n_rays // 2, (0.35, 1.9)), (self.n_rays, (0.6, 1.4))):
+            fit = self._fit(rgb, centre, r0, (x0, y0), n_rays, span)
             if fit is None:
                 return out
             c, alpha, mask, u, pts = fit
@@ -268,7 +301,9 @@ class BallDetector:
             if not (self.min_radius_px <= r_new <= 0.5 * max(W, H)) or not np.all(np.isfinite(centre_new)) \
                     or np.linalg.norm(centre_new - centre) > r0 + 2.0:
                 return out
-            out = self._detection(c, alpha, u[mask], centre_new, r_new, len(u))
+            if n_rays == self.n_rays:
+                out = self._detection(c, alpha, u[mask], centre_new, r_new, len(u))
+                out.colour = self._last_colour
             centre, r0 = centre_new, r_new
         return out
 

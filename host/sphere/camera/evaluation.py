@@ -39,6 +39,16 @@ class Run:
     losses: list = field(default_factory=list)  # (t0, t1) of full occlusions
 
 
+def hint_from(tracker, camera, t_exposure: float, radius_m: float, last=None):
+    """Where to look in a frame: the tracker's position at its exposure time, projected; else the last fix."""
+    p = tracker.position_at(t_exposure) if tracker.x is not None else None
+    if p is not None and p[2] > 0.1:
+        c = camera.project(p[None])[0]
+        if np.all(np.isfinite(c)):
+            return (c, camera.fx * radius_m / p[2])
+    return last
+
+
 def run(rt: RenderedTrial, hue_deg: float = 120.0) -> Run:
     cam = rt.scene.camera
     det = BallDetector(cam, hue_deg=hue_deg, radius_m=rt.scene.radius_m)
@@ -67,9 +77,10 @@ def run(rt: RenderedTrial, hue_deg: float = 120.0) -> Run:
                 pending[f.index] = f
             f = pending.pop(k)
             t0 = time.perf_counter()
+            t_exp = f.t_arrival - NOMINAL_CAMERA_LATENCY_S
+            hint = hint_from(hyb, cam, t_exp, rt.scene.radius_m, hint)
             d = det.detect(f.image, hint)
             t1 = time.perf_counter()
-            t_exp = f.t_arrival - NOMINAL_CAMERA_LATENCY_S
             if d is not None:
                 detected += 1
                 hyb.camera(t_exp, d.center_cam, d.cov)
@@ -78,10 +89,6 @@ def run(rt: RenderedTrial, hue_deg: float = 120.0) -> Run:
                 ckf.camera(t_exp, d.center_cam, d.cov)
             else:
                 hint = None
-                if hyb.x is not None:  # search where the filter says the ball is
-                    p = hyb.x[:3]
-                    if p[2] > 0.1:
-                        hint = (cam.project(p[None])[0], cam.fx * rt.scene.radius_m / p[2])
             t2 = time.perf_counter()
             per_frame.append(1000 * (t2 - t0))
             det_ms.append(1000 * (t1 - t0))

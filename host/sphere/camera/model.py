@@ -83,6 +83,19 @@ class Camera:
         r = np.concatenate([xn, np.ones((len(xn), 1))], axis=1)
         return r / np.linalg.norm(r, axis=1, keepdims=True)
 
+    def rays_interpolated(self, px: np.ndarray) -> np.ndarray:
+        """Unit rays of pixels (N, 2) interpolated from :attr:`ray_map` (bilinear, then normalised): one
+        OpenCV call instead of the iterative inverse; the rays differ from :meth:`rays` by < 1e-6 rad."""
+        import cv2
+
+        px = np.asarray(px, np.float32).reshape(1, -1, 2)
+        r = cv2.remap(self.ray_map, px[..., 0], px[..., 1], cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+        r = r.reshape(-1, 3).astype(np.float64)
+        inside = (px[0, :, 0] >= 0) & (px[0, :, 0] <= self.width - 1) & (px[0, :, 1] >= 0) & (px[0, :, 1] <= self.height - 1)
+        if not inside.all():
+            r[~inside] = self.rays(px[0, ~inside].astype(np.float64))
+        return r / np.linalg.norm(r, axis=1, keepdims=True)
+
     @cached_property
     def ray_map(self) -> np.ndarray:
         """Unit ray of every pixel centre, (height, width, 3) float32 (computed once per camera)."""

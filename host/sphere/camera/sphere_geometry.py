@@ -111,9 +111,9 @@ def ransac_circle(u: np.ndarray, threshold_rad: float, iterations: int = 64, rng
     flip = d < 0
     nrm[flip] *= -1
     d[flip] *= -1
-    alpha = np.arccos(np.clip(d, -1, 1))
-    theta = np.arccos(np.clip(u @ nrm.T, -1, 1))  # (n, hypotheses)
-    inl = np.abs(theta - alpha[None, :]) < threshold_rad
+    # |cos θ − cos α| ≈ sin α · |θ − α|: the angular residual without an arccos per ray and hypothesis
+    sin_a = np.sqrt(np.maximum(1.0 - d * d, 1e-12))
+    inl = np.abs(u @ nrm.T - d[None, :]) < threshold_rad * sin_a[None, :]
     counts = inl.sum(axis=0)
     best = int(np.argmax(counts))
     mask = inl[:, best]

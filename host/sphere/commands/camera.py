@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import sys
 
-HELP = "camera tools: intrinsics from chessboard images (calibrate); the virtual webcam (render)"
+HELP = "camera tools: intrinsics from chessboard images (calibrate); the virtual webcam (render); timing (bench)"
 DESCRIPTION = """\
 calibrate: the camera's focal lengths, principal point and lens distortion from 5 or more images of a
 printed chessboard (OpenCV's calibrateCamera), written as the JSON file that `sphere hybrid-eval
@@ -26,6 +26,11 @@ def add_arguments(p) -> None:
     r.add_argument("--seconds", type=float, default=5.0, help="how long (default 5)")
     r.add_argument("--distance", type=float, default=1.0, help="camera to the mean ball position, m (default 1)")
     r.add_argument("-o", "--output", default="virtual-camera.avi", help="the video to write")
+    b = sub.add_parser("bench", help="ms per frame of detection + fusion at 640x480 on one core")
+    b.add_argument("--trial", default="10", help="BROAD trial name or number (default 10)")
+    b.add_argument("--start", type=float, default=40.0, help="seconds into the trial (default 40)")
+    b.add_argument("--seconds", type=float, default=5.0, help="how long (default 5)")
+    b.add_argument("--distance", type=float, default=1.0, help="camera to the mean ball position, m (default 1)")
 
 
 def _board(text: str):
@@ -50,7 +55,31 @@ def run(args) -> int:
         return 1
     if args.camera_command == "calibrate":
         return _calibrate(args)
+    if args.camera_command == "bench":
+        return _bench(args)
     return _render(args)
+
+
+def _bench(args) -> int:
+    from sphere import broad
+    from sphere.camera import bench
+
+    try:
+        r = bench.run(args.trial, args.start, args.seconds, args.distance)
+    except (broad.BroadMissing, ValueError) as e:
+        print(f"sphere camera bench: {e}", file=sys.stderr)
+        return 1
+    print(f"{r['trial']}: {r['frames']} frames at {r['resolution']}, one OpenCV thread; CPU time of this thread")
+    for k, label in (("detect_ms", "detection"), ("fusion_ms", "fusion (camera update)"),
+                     ("per_frame_ms", "detection + fusion"), ("per_frame_wall_ms", "  wall clock")):
+        v = r[k]
+        print(f"  {label:24} mean {v['mean']:6.2f} ms  median {v['p50']:6.2f} ms  p95 {v['p95']:6.2f} ms")
+    print(f"  IMU step (prediction)    mean {r['imu_step_us']['mean']:6.1f} µs  p95 {r['imu_step_us']['p95']:6.1f} µs "
+          f"at {r['imu_rate_hz']:.0f} Hz")
+    verdict = "met" if r["per_frame_ms"]["mean"] <= 5.0 else "MISSED"
+    print(f"  target ≤ 5 ms per frame (mean CPU time): {verdict}"
+          + (f"; load average {r['load_average_1min']:.1f} while measuring" if r["load_average_1min"] is not None else ""))
+    return 0
 
 
 def _calibrate(args) -> int:

@@ -368,6 +368,7 @@ class CameraImuTracker:
         self.t = None
         self.g = STANDARD_GRAVITY
         self.hist: list = []  # [t, a_earth, x, P] after the prediction to t
+        self._models: dict = {}
         self.rejected: list = []
         self.stats = {"accepted": 0, "gated": 0, "reacquired": 0, "late": 0}
 
@@ -397,30 +398,38 @@ class CameraImuTracker:
         while self.hist and self.hist[0][0] < t - self.history_s:
             self.hist.pop(0)
 
+    def _model(self, dt: float, with_imu: bool):
+        """F and Q for a step of dt (cached: the IMU's steps repeat)."""
+        key = (round(dt, 6), with_imu)
+        m = self._models.get(key)
+        if m is None:
+            F = np.eye(9)
+            F[0:3, 3:6] = np.eye(3) * dt
+            F[0:3, 6:9] = -0.5 * dt * dt * np.eye(3)
+            F[3:6, 6:9] = -dt * np.eye(3)
+            q_a, q_b = (self.accel_noise, self.bias_walk) if with_imu else (self.free_accel_noise, 0.0)
+            G = np.zeros((9, 3))
+            G[0:3] = 0.5 * dt * dt * np.eye(3)
+            G[3:6] = dt * np.eye(3)
+            Q = (q_a * q_a) * (G @ G.T)
+            Q[6:9, 6:9] += (q_b * q_b * dt) * np.eye(3)
+            if len(self._models) > 64:
+                self._models.clear()
+            m = self._models[key] = (F, Q, F.T.copy())
+        return m
+
     def _predict(self, dt: float, a_earth) -> None:
         if dt <= 0:
             return
         R = self.alignment.R if self.use_imu else None
-        F = np.eye(9)
-        F[0:3, 3:6] = np.eye(3) * dt
-        F[0:3, 6:9] = -0.5 * dt * dt * np.eye(3)
-        F[3:6, 6:9] = -dt * np.eye(3)
+        F, Q, Ft = self._model(dt, R is not None)
+        x = F @ self.x
         if R is not None:
             u = R @ a_earth
-            q_a, q_b = self.accel_noise, self.bias_walk
-        else:
-            u = np.zeros(3)
-            q_a, q_b = self.free_accel_noise, 0.0
-        x = F @ self.x
-        x[0:3] += 0.5 * dt * dt * u
-        x[3:6] += dt * u
-        G = np.zeros((9, 3))
-        G[0:3] = 0.5 * dt * dt * np.eye(3)
-        G[3:6] = dt * np.eye(3)
-        Q = (q_a * q_a) * (G @ G.T)
-        Q[6:9, 6:9] += (q_b * q_b * dt) * np.eye(3)
+            x[0:3] += 0.5 * dt * dt * u
+            x[3:6] += dt * u
         self.x = x
-        self.P = F @ self.P @ F.T + Q
+        self.P = F @ self.P @ Ft + Q
 
     # -- camera ------------------------------------------------------------------------------------------
     def camera(self, t_exposure: float, p_cam, cov=None) -> str:
@@ -467,6 +476,14 @@ class CameraImuTracker:
         self.alignment.add_camera(t_exposure, z)
         self.stats["accepted"] += 1
         return "accepted"
+
+    def position_at(self, t: float):
+        """The estimate at a recent time t (the saved state of the last IMU sample before it), e.g. where to
+        look for the ball in a frame exposed at t; None without one."""
+        for h in reversed(self.hist):
+            if h[0] <= t and h[2] is not None:
+                return h[2][:3] + h[2][3:6] * (t - h[0])
+        return None if self.x is None else self.x[:3].copy()
 
     def _repropagate(self, k: int) -> None:
         self.x, self.P = self.hist[k][2].copy(), self.hist[k][3].copy()
