@@ -153,13 +153,15 @@ static void to_chip(board_t *b, int chip, const double body[3], double out[3])
 const board_variant_t board_variants[] = {
 	{"aligned", "all three chips' axes along the body axes (the board the tests were written on)",
 	 {{1, 2, 3}, {1, 2, 3}, {1, 2, 3}}, MAG_HMC5883L},
-	/* chip axes relative to the ADXL345 as the Razor AHRS firmware's axis table gives them for the
-	 * SparkFun 9DoF Sensor Stick: ITG-3200 and HMC5883L read (-y, -x, -z) of the accelerometer's axes */
+	/* SparkFun 9DoF Sensor Stick: the ITG-3200 shares the ADXL345's axes; the HMC5883L is turned 90 deg
+	 * about z, its axes reading (-y, x, z) of the body's (from the Razor AHRS firmware's axis assignments for
+	 * SEN-10724: accelerometer and gyro both (-y, -x, -z), magnetometer (x, -y, -z) into its own frame) */
 	{"sen10724", "SparkFun 9DoF Sensor Stick SEN-10724 (ADXL345, ITG-3200, HMC5883L)",
-	 {{1, 2, 3}, {-2, -1, -3}, {-2, -1, -3}}, MAG_HMC5883L},
-	/* GY-85: ADXL345 and ITG-3205 share their axes; the magnetometer is turned: x and y swapped, z down */
-	{"gy85", "GY-85 (ADXL345, ITG-3205, HMC5883L)", {{1, 2, 3}, {1, 2, 3}, {2, 1, -3}}, MAG_HMC5883L},
-	{"gy85-qmc", "GY-85 carrying a QMC5883L at 0x0D (sold as HMC5883L)", {{1, 2, 3}, {1, 2, 3}, {2, 1, -3}},
+	 {{1, 2, 3}, {1, 2, 3}, {-2, 1, 3}}, MAG_HMC5883L},
+	/* GY-85: the ITG-3205 turned 180 deg about z against the ADXL345, the HMC5883L 90 deg the other way
+	 * (the same profile as the firmware's, firmware/src/core board profiles) */
+	{"gy85", "GY-85 (ADXL345, ITG-3205, HMC5883L)", {{1, 2, 3}, {-1, -2, 3}, {2, -1, 3}}, MAG_HMC5883L},
+	{"gy85-qmc", "GY-85 carrying a QMC5883L at 0x0D (sold as HMC5883L)", {{1, 2, 3}, {-1, -2, 3}, {2, -1, 3}},
 	 MAG_QMC5883L},
 	{NULL, NULL, {{0}}, 0},
 };

@@ -225,25 +225,28 @@ def test_qmc5883l_variant_register_map():
     assert hmc is None and chip_id == [0xFF]
     assert st0[0] & 1 and st0[0] & 4  # new data; and the samples before it were never read (skipped)
     x, y, z = s16le(data[0], data[1]), s16le(data[2], data[3]), s16le(data[4], data[5])
-    # GY-85 mounting: the magnetometer reads (body y, body x, -body z)
-    assert abs(x - 0.20 * 3000) <= 3 and y == 0 and abs(z - 0.45 * 3000) <= 3  # the trace's gain-1 rounding
+    # GY-85 mounting: the magnetometer reads (body y, -body x, body z)
+    assert abs(x - 0.20 * 3000) <= 3 and y == 0 and abs(z + 0.45 * 3000) <= 3  # the trace's gain-1 rounding
     assert not data[6] & 5  # status read in the same burst, after the data: DRDY and DOR cleared
     assert st2[0] & 1 and st2[0] & 4  # 90 ms later: new data, and the samples in between were skipped
 
 
 # ---------------------------------------------------------------- board variants
 
-@pytest.mark.parametrize("board,gyro_z_sign,mag_z_sign", [("aligned", 1, 1), ("sen10724", -1, -1), ("gy85", 1, -1)])
-def test_board_variant_axis_mounting(board, gyro_z_sign, mag_z_sign):
-    """Each chip's axes as mounted on the board: a turn about the body's z axis at 90 deg/s and the field's
-    vertical component show on each chip's own (signed) axis."""
+@pytest.mark.parametrize("board,gyro_x_sign,mag_xy", [("aligned", 1, (0, 218)), ("sen10724", 1, (-218, 0)),
+                                                      ("gy85", -1, (218, 0))])
+def test_board_variant_axis_mounting(board, gyro_x_sign, mag_xy):
+    """Each chip's axes as mounted on the board (README, "Board variants"): a turn about the body's x axis at
+    90 deg/s shows on the gyro's own signed axis, and the field's northward 20 uT (body y) on the
+    magnetometer's; the accelerometer defines the body axes."""
     cmds = [(0.05, "w 68 3e 01"), (0.06, "w 68 16 1b"), (0.07, "w 53 31 0b"), (0.08, "w 53 2d 08"),
-            (0.09, "w 1e 02 01"), (0.5, "r 68 1d 6"), (0.51, "r 53 32 6"), (0.52, "r 1e 03 6")]
-    r = probe(cmds, T.rotation(0.6, rate_dps=90.0, still_s=0.2), 0.6, board=board)
-    g, a, m = (x.data for x in r.tagged("r"))
-    assert s16be(g[4], g[5]) == gyro_z_sign * round(90 * 14.375)
+            (0.09, "w 1e 02 01"), (0.19, "r 1e 03 6"), (0.19, "r 53 32 6"), (0.5, "r 68 1d 6")]
+    r = probe(cmds, T.rotation(0.6, rate_dps=90.0, axis=(1.0, 0.0, 0.0), still_s=0.2), 0.6, board=board)
+    m, a, g = (x.data for x in r.tagged("r"))
+    assert s16be(g[0], g[1]) == gyro_x_sign * round(90 * 14.375)
     assert s16le(a[4], a[5]) == 256
-    assert _hmc_xyz(m)[2] == mag_z_sign * round(-0.45 * 1090) or abs(_hmc_xyz(m)[2] - mag_z_sign * -0.45 * 1090) <= 1
+    mx, my, mz = _hmc_xyz(m)
+    assert (mx, my) == mag_xy and mz == -490
 
 
 # ---------------------------------------------------------------- bus faults and power
