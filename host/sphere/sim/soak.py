@@ -30,6 +30,8 @@ FAULT_KINDS = ("nack", "stall", "glitch", "brownout", "reset_mid_read", "sda_hel
 
 CHIP_BITS = {"adxl345": 0x01, "itg3200": 0x02, "hmc5883l": 0x04, "qmc5883l": 0x04}
 MAG_FRESH = 0x08
+#: RAW_SAMPLE flags of protocol v2: the value is held from the last good read (0 in v1 streams)
+STALE_BITS = {0x01: 0x20, 0x02: 0x40, 0x04: 0x80}
 LEAD_IN_S = 3.0  # still at power-up: the firmware's gyro bias window
 RESET_KINDS = ("brownout", "reset_mid_read")
 LINE_WINDOW_S = 0.05  # a reset cuts the frame on the wire; a host stall drops bytes up to its end
@@ -162,7 +164,8 @@ def fault_ends(faults: list[dict], chips: list[str]) -> list[dict]:
 
 
 def recovery(frames: list[Frame], ends: list[dict]) -> tuple[Invariant, list]:
-    """sensor_recovery_ms: the longest time from a fault's end to its sensor's fresh data in RAW_SAMPLE."""
+    """sensor_recovery_ms: the longest time from a fault's end to its sensor's fresh data in RAW_SAMPLE: its
+    ``_ok`` flag set and its ``_stale`` flag clear (``mag_fresh`` too for the magnetometer)."""
     raw_t = np.array([f.t_s for f in frames if isinstance(f.packet, RawSample)])
     raw_flags = np.array([f.packet.flags for f in frames if isinstance(f.packet, RawSample)], dtype=int)
     worst = Invariant()
@@ -172,7 +175,8 @@ def recovery(frames: list[Frame], ends: list[dict]) -> tuple[Invariant, list]:
             bit = CHIP_BITS[chip]
             need = bit | (MAG_FRESH if bit == 0x04 else 0)
             i0 = np.searchsorted(raw_t, e["t_end"])
-            ok = np.nonzero((raw_flags[i0:] & need) == need)[0]
+            f = raw_flags[i0:]
+            ok = np.nonzero(((f & need) == need) & ((f & STALE_BITS[bit]) == 0))[0]
             ms = (raw_t[i0 + ok[0]] - e["t_end"]) * 1e3 if len(ok) else math.inf
             rows.append({"kind": e["kind"], "chip": chip, "t_end": round(e["t_end"], 4), "recovery_ms": round(ms, 1)})
             limit = LIMITS["recovery_after_reset_ms" if e["kind"] in RESET_KINDS + ("sda_held_at_power_up",)

@@ -1,0 +1,123 @@
+"""The soak run (`sphere sim --soak`): its checks on hand-made byte streams whose faults are known, and one
+short soak of the firmware image end to end (the report's shape and its verdict agreeing with the exit
+status; whether today's firmware passes is the firmware's business, not this test's)."""
+
+from __future__ import annotations
+
+import json
+import struct
+
+import pytest
+
+from sphere.protocol import encode_frame
+from sphere.protocol.packets import Hello, Orientation, RawSample
+from sphere.sim import soak as S
+
+
+def _hello():
+    return Hello(protocol_version=2, firmware_version=(1, 0, 0), sensors_found=7, adxl345_devid=0xE5,
+                 itg3200_whoami=0x68, hmc5883l_id=(72, 52, 51), imu_rate_hz=200, mag_rate_hz=75, stream_mode=3,
+                 raw_rate_hz=200, orientation_rate_hz=100, calibration_state=0)
+
+
+def _raw(t_us, flags=0x0F):
+    return RawSample(t_us=t_us, flags=flags, accel=(0, 0, 256), gyro=(0, 0, 0), mag=(0, 218, -490))
+
+
+def _stream(items):
+    """items: (simulated s, packet, seq) or (simulated s, raw bytes) -> (capture, --capture-times records)."""
+    cap, times = bytearray(), bytearray()
+    for it in items:
+        cap += encode_frame(it[1], it[2]) if len(it) == 3 else it[1]
+        times += struct.pack("<Qd", len(cap), it[0])
+    return bytes(cap), bytes(times)
+
+
+def test_frames_are_placed_in_simulated_time_and_bad_ones_kept():
+    cap, times = _stream([(0.1, _hello(), 0), (0.105, _raw(5000), 1), (0.11, b"\x05\x01\x02\x03\x04\x00"),
+                          (0.115, _raw(15000), 2)])
+    f = S.read_frames(cap, times)
+    assert [x.ok for x in f] == [True, True, False, True]
+    assert [x.t_s for x in f] == [0.1, 0.105, 0.11, 0.115]
+    assert isinstance(f[1].packet, RawSample) and f[1].seq == 1
+
+
+def test_a_resent_frame_and_time_going_back_are_stale_a_gap_is_dropped_frames():
+    items = [(0.0, _hello(), 0)] + [(0.005 * i, _raw(5000 * i), i) for i in range(1, 6)]
+    items += [(0.030, _raw(5000 * 3), 3)]  # the transmit buffer sent again: an old frame
+    items += [(0.035, _raw(5000 * 9), 9)]  # three frames missing
+    s = S.stream_checks(S.read_frames(*_stream(items)), [])
+    assert s["stale_frames"].count == 1 and s["stale_frames"].first_s == 0.03
+    assert s["frames_dropped"].count == 3
+    # the same sequence number with the time moving on (the host missed 256 frames): not stale
+    items = [(0.0, _hello(), 0), (0.005, _raw(5000), 1), (1.3, _raw(5000 + 257 * 5000), 2)]
+    assert S.stream_checks(S.read_frames(*_stream(items)), [])["stale_frames"].count == 0
+    # a HELLO starts the sequence and the clock again: not stale
+    items = [(0.0, _hello(), 0), (0.005, _raw(5000), 1), (0.5, _hello(), 0), (0.505, _raw(5000), 1)]
+    s = S.stream_checks(S.read_frames(*_stream(items)), [])
+    assert s["stale_frames"].count == 0 and s["hellos"] == 2
+
+
+def test_crc_errors_count_only_outside_injected_line_faults():
+    bad = b"\x03\x11\x22\x00"
+    items = [(0.0, _hello(), 0), (0.2, bad), (0.5, bad)]
+    s = S.stream_checks(S.read_frames(*_stream(items)), [(0.15, 0.25)])
+    assert s["crc_errors"].count == 1 and s["crc_errors"].first_s == 0.5
+
+
+def test_recovery_waits_for_ok_and_not_stale_and_fresh_magnetometer_data():
+    items = [(0.0, _hello(), 0), (1.000, _raw(1000000, 0x01), 1), (1.005, _raw(1005000, 0x03 | 0x40), 2),
+             (1.010, _raw(1010000, 0x07), 3), (1.015, _raw(1015000, 0x0F), 4)]
+    frames = S.read_frames(*_stream(items))
+    ends = [{"kind": "nack", "t_start": 0.9, "t_end": 0.999, "chips": ["itg3200", "hmc5883l"]}]
+    worst, rows = S.recovery(frames, ends)
+    got = {r["chip"]: r["recovery_ms"] for r in rows}
+    assert got == {"itg3200": pytest.approx(11.0), "hmc5883l": pytest.approx(16.0)}
+    assert worst.count == pytest.approx(16.0) and worst.first_s is None  # within the 100 ms limit
+
+
+def test_orientation_excess_against_the_reference_two_seconds_after_a_fault():
+    def q(t, quat, seq):
+        return (t, Orientation(t_us=int(t * 1e6), flags=0, quat=quat), seq)
+    one = (16384, 0, 0, 0)
+    turned = (16135, 0, 0, 2845)  # 20 deg about z, Q14
+    dev = [(0.0, _hello(), 0), q(3.0, turned, 1)]
+    ref = [(0.0, _hello(), 0), q(3.0, one, 1)]
+    ends = [{"kind": "nack", "t_start": 0.9, "t_end": 1.0, "chips": ["itg3200"]}]
+    worst, rows = S.orientation_excess(S.read_frames(*_stream(dev)), S.read_frames(*_stream(ref)), ends, [])
+    assert rows[0]["excess_deg"] == pytest.approx(20.0, abs=0.1) and worst.first_s == 3.0
+
+
+def test_schedule_is_seeded_and_has_every_kind():
+    a, b = S.schedule(60, 5), S.schedule(60, 5)
+    assert a == b and a != S.schedule(60, 6)
+    assert {"nack", "stall", "brownout", "reset_mid_read", "host_stall", "glitch", "sda_held"} <= set(a)
+
+
+def test_a_short_soak_of_the_firmware(tmp_path, capsys):
+    """`sphere sim --soak`: one summary line, a JSON report with every invariant's count and first time, and
+    exit 1 exactly when the report lists a failed invariant."""
+    from simscenarios import need_board, need_firmware
+    from sphere.broad import BroadMissing, trial_paths
+    from sphere.cli import main
+
+    need_board()
+    elf = need_firmware()
+    try:
+        if not trial_paths():
+            pytest.fail("no BROAD trials")
+    except BroadMissing as e:
+        pytest.fail(str(e))
+    out = tmp_path / "soak.json"
+    rc = main(["sim", "--soak", "14", "--seed", "2", "--firmware", str(elf), "--json", str(out)])
+    lines = capsys.readouterr().out.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("sphere sim --soak 14 s seed 2 board aligned:"), lines
+    r = json.loads(out.read_text())
+    for k in ("stale_frames", "crc_errors", "sensor_recovery_ms", "orientation_excess_deg", "frames_dropped"):
+        assert {"count", "first_s"} <= set(r["invariants"][k])
+    assert {"resets", "overruns"} <= set(r["invariants"])
+    assert rc == (1 if r["failed"] else 0)
+    kinds = {f["kind"] for f in r["faults"]}
+    assert "sda_held_at_power_up" in kinds and ({"nack_start", "stall_start", "brownout", "reset_mid_read",
+                                                 "host_stall"} & kinds)
+    assert r["recoveries"] and r["speed"] > 0
