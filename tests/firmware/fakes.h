@@ -14,9 +14,12 @@ struct FakeChip {
 };
 
 struct FakeBus : sphere::I2cBus {
-    FakeChip adxl, itg, hmc;
+    FakeChip adxl, itg, hmc, qmc;
     int transactions = 0;
     FakeBus() {
+        qmc.addr = 0x0D;  // QMC5883L: absent unless a test fits one instead of the HMC5883L
+        qmc.present = false;
+        qmc.regs[0x0D] = 0xFF;
         adxl.addr = 0x53;
         adxl.regs[0x00] = 0xE5;
         itg.addr = 0x68;
@@ -27,7 +30,7 @@ struct FakeBus : sphere::I2cBus {
         hmc.regs[0x0C] = '3';
     }
     FakeChip* chip(uint8_t a) {
-        for (FakeChip* c : {&adxl, &itg, &hmc})
+        for (FakeChip* c : {&adxl, &itg, &hmc, &qmc})
             if (c->addr == a && c->present) return c;
         return nullptr;
     }
@@ -50,6 +53,7 @@ struct FakeBus : sphere::I2cBus {
         if (!c) return false;
         for (uint8_t i = 0; i < n; ++i) out[i] = c->regs[(reg + i) & 127];
         if (c == &adxl && reg == 0x30) adxl.regs[0x30] &= 0x83;  // INT_SOURCE read clears the events
+        if (c == &qmc && reg <= 0x05) qmc.regs[0x06] &= ~1;      // QMC5883L: reading data clears DRDY
         return true;
     }
     // sensor values in chip units, written into the registers as each chip lays them out
@@ -74,6 +78,15 @@ struct FakeBus : sphere::I2cBus {
             hmc.regs[0x04 + 2 * i] = (uint8_t)v[i];
         }
         hmc.regs[0x09] |= 1;
+    }
+    // QMC5883L: little-endian X, Y, Z (3000 LSB/G at ±8 G), DRDY set; `overflow` sets OVL
+    void setQmc(int16_t x, int16_t y, int16_t z, bool overflow = false) {
+        int16_t v[3] = {x, y, z};
+        for (int i = 0; i < 3; ++i) {
+            qmc.regs[2 * i] = (uint8_t)v[i];
+            qmc.regs[2 * i + 1] = (uint8_t)((uint16_t)v[i] >> 8);
+        }
+        qmc.regs[0x06] = (uint8_t)(1 | (overflow ? 2 : 0));
     }
 };
 

@@ -1,0 +1,395 @@
+// Issue 12 on the native build: glitches, missing sensors, overruns, command bursts, board profiles,
+// the QMC5883L, the HMC5883L's data-ready and overflow, bias tracking and the input gates.
+#include <cmath>
+
+#include "doctest_include.h"
+
+#include "bytes.h"
+#include "fakes.h"
+
+using namespace sphere;
+
+namespace {
+
+typedef std::vector<std::vector<uint8_t>> Frames;
+
+std::vector<uint8_t> cmd(uint8_t type, uint8_t seq, std::vector<uint8_t> body) {
+    uint8_t out[MAX_FRAME];
+    size_t n = FrameEncoder::encodeWithSeq(type, seq, body.data(), (uint8_t)body.size(), out);
+    return std::vector<uint8_t>(out, out + n);
+}
+
+struct Bench {
+    FakeBus bus;
+    FakeHal hal;
+    SphereDevice dev{bus, hal};
+    int16_t gyro[3] = {0, 0, 0};
+    explicit Bench(bool start = true) {
+        bus.setAccel(0, 0, 256);
+        bus.setGyro(0, 0, 0);
+        bus.setMag(300, 0, -400);
+        if (start) dev.begin();
+    }
+    void tick(uint32_t dt_us = 5000) {
+        hal.now += dt_us;
+        bus.setMag(300, 0, -400);  // a conversion is ready whenever the firmware looks
+        dev.tick();
+    }
+    void run(int n) {
+        for (int i = 0; i < n; ++i) tick();
+    }
+    Frames frames() { return hal.frames(); }
+    // the quaternion the filter holds, as doubles
+    void quat(double q[4]) const {
+        const int32_t* s = dev.filter().quaternionQ30();
+        for (int i = 0; i < 4; ++i) q[i] = s[i] / 1073741824.0;
+    }
+};
+
+double angleDeg(const double a[4], const double b[4]) {
+    double d = std::fabs(a[0] * b[0] + a[1] * b[1] + a[2] * b[2] + a[3] * b[3]);
+    return 2 * std::acos(std::min(1.0, d)) * 180 / M_PI;
+}
+
+const std::vector<uint8_t>* lastOf(const Frames& f, uint8_t type) {
+    const std::vector<uint8_t>* p = nullptr;
+    for (auto& x : f)
+        if (x[0] == type) p = &x;
+    return p;
+}
+
+}  // namespace
+
+TEST_CASE("a failed read holds the last sample (stale); 10 in a row make the sensor missing; re-probed next period") {
+    Bench b;
+    b.run(20);
+    b.bus.setGyro(100, -50, 25);
+    b.run(1);
+    b.frames();
+    b.bus.itg.present = false;  // one glitch
+    b.run(1);
+    auto f = b.frames();
+    const auto* raw = lastOf(f, PKT_RAW_SAMPLE);
+    REQUIRE(raw);
+    uint8_t flags = (*raw)[2 + 4];
+    CHECK((flags & RAW_GYRO_OK));
+    CHECK((flags & RAW_GYRO_STALE));
+    CHECK_FALSE((flags & RAW_ACCEL_STALE));
+    CHECK(getI16(raw->data() + 2 + 11) == 100);  // held
+    CHECK(b.dev.status().i2c_errors[1] == 1);
+    CHECK((b.dev.sensorsOk() & SENSOR_ITG3200));
+    b.bus.itg.present = true;
+    b.run(1);
+    f = b.frames();
+    CHECK_FALSE(((*lastOf(f, PKT_RAW_SAMPLE))[2 + 4] & RAW_GYRO_STALE));
+    // ten failures in a row: missing
+    b.bus.itg.present = false;
+    b.run(SphereDevice::MISSING_AFTER - 1);
+    CHECK((b.dev.sensorsOk() & SENSOR_ITG3200));
+    b.run(1);
+    CHECK_FALSE((b.dev.sensorsOk() & SENSOR_ITG3200));
+    CHECK(b.dev.status().sensor_losses == 1);
+    CHECK(b.dev.status().i2c_errors[1] == 1 + SphereDevice::MISSING_AFTER);
+    f = b.frames();
+    const auto* last = lastOf(f, PKT_RAW_SAMPLE);
+    CHECK_FALSE(((*last)[2 + 4] & RAW_GYRO_OK));
+    CHECK(getI16(last->data() + 2 + 11) == 0);  // a missing sensor's values are 0
+    // probed every period, each failure counted
+    b.run(3);
+    CHECK(b.dev.status().probe_failures == 3);
+    b.bus.itg.present = true;
+    b.run(1);  // found again at the next period's probe
+    CHECK((b.dev.sensorsOk() & SENSOR_ITG3200));
+    b.run(1);
+    f = b.frames();
+    CHECK(((*lastOf(f, PKT_RAW_SAMPLE))[2 + 4] & RAW_GYRO_OK));
+    CHECK(b.dev.status().probe_failures == 3);
+    // STATUS carries the counters
+    b.dev.receive(0);
+    for (uint8_t x : cmd(CMD_GET_STATUS, 1, {})) b.dev.receive(x);
+    f = b.frames();
+    const auto* st = lastOf(f, PKT_STATUS);
+    REQUIRE(st);
+    CHECK(getU16(st->data() + 2 + 25) == 3);  // probe_failures
+    CHECK(getU16(st->data() + 2 + 27) == 1);  // sensor_losses
+}
+
+TEST_CASE("a single gyro glitch while turning costs almost nothing; the gyro's absence holds the orientation") {
+    // 200 °/s about z: 2875 LSB
+    Bench clean, glitch;
+    for (Bench* b : {&clean, &glitch}) {
+        b->run(450);  // start-up bias and convergence
+        b->bus.setGyro(0, 0, 2875);
+    }
+    for (int i = 0; i < 200; ++i) {
+        glitch.bus.itg.present = !(i == 100 || i == 101);  // a 6 ms NACK: two failed reads
+        clean.tick();
+        glitch.tick();
+    }
+    double a[4], g[4];
+    clean.quat(a);
+    glitch.quat(g);
+    CHECK(angleDeg(a, g) < 0.5);  // the held sample is the rate the gyro had
+    // gyro gone: held, flagged, not integrated as still
+    glitch.bus.itg.present = false;
+    glitch.run(SphereDevice::MISSING_AFTER);
+    glitch.frames();
+    int32_t before[4];
+    std::memcpy(before, glitch.dev.filter().quaternionQ30(), sizeof before);
+    glitch.run(50);
+    CHECK(std::memcmp(before, glitch.dev.filter().quaternionQ30(), sizeof before) == 0);  // not one LSB moved
+    auto f = glitch.frames();
+    const auto* o = lastOf(f, PKT_ORIENTATION);
+    REQUIRE(o);
+    CHECK(((*o)[2 + 4] & ORI_GYRO_MISSING));
+}
+
+TEST_CASE("after an overrun the filter integrates the real interval") {
+    Bench steady, stalled;
+    for (Bench* b : {&steady, &stalled}) {
+        b->run(450);
+        b->bus.setGyro(0, 0, 1438);  // 100 °/s
+    }
+    steady.run(3);
+    stalled.tick(15000);  // one period that took three
+    double a[4], b[4];
+    steady.quat(a);
+    stalled.quat(b);
+    CHECK(angleDeg(a, b) < 0.2);
+    // the fixed 5 ms would have lost 3 degrees
+    CHECK(angleDeg(a, b) < 3.0 / 4);
+}
+
+TEST_CASE("ten GET_CALIBRATION back to back get ten replies, in order, none dropped") {
+    Bench b;
+    b.run(5);
+    b.frames();
+    std::vector<uint8_t> burst;
+    for (uint8_t s = 0; s < 10; ++s) {
+        auto c = cmd(CMD_GET_CALIBRATION, s, {});
+        burst.insert(burst.end(), c.begin(), c.end());
+    }
+    CHECK(burst.size() <= 64);  // they all fit the UART's receive buffer
+    // the UART drains about 57 bytes per 5 ms period at 115200 baud into a 128-byte ring
+    int room = 128 - 40;  // a period's stream already queued
+    size_t i = 0;
+    int waits = 0;
+    std::vector<int> seqs;
+    while (i < burst.size()) {
+        size_t before = b.hal.wire.size();
+        b.hal.tx_room = room;
+        if (b.dev.receive(burst[i])) {
+            ++i;
+            room -= (int)(b.hal.wire.size() - before);
+        } else {
+            ++waits;  // the reply would not fit: the byte stays in the receive buffer
+            room = std::min(128, room + 57);
+        }
+    }
+    auto f = b.frames();
+    for (auto& p : f)
+        if (p[0] == PKT_REPLY) {
+            CHECK(p[4] == RESULT_OK);
+            CHECK(p.size() == 4 + 46);
+            seqs.push_back(p[2]);
+        }
+    CHECK(seqs == std::vector<int>({0, 1, 2, 3, 4, 5, 6, 7, 8, 9}));
+    CHECK(waits > 0);
+    CHECK(b.dev.status().frames_dropped == 0);
+}
+
+TEST_CASE("SET_BOARD maps each chip's axes into the body frame and is kept in EEPROM") {
+    Bench b;
+    b.bus.setAccel(1, 2, 256);
+    b.bus.setGyro(10, 20, 30);
+    b.run(3);
+    for (uint8_t x : cmd(CMD_SET_BOARD, 1, {BOARD_GY85})) b.dev.receive(x);
+    auto f = b.frames();
+    REQUIRE(lastOf(f, PKT_REPLY));
+    CHECK((*lastOf(f, PKT_REPLY))[4] == RESULT_OK);
+    b.bus.setAccel(1, 2, 256);
+    b.bus.setGyro(10, 20, 30);
+    b.run(2);
+    f = b.frames();
+    const auto* raw = lastOf(f, PKT_RAW_SAMPLE);
+    REQUIRE(raw);
+    const uint8_t* r = raw->data() + 2 + 5;
+    CHECK(getI16(r + 0) == 1);  // accelerometer: the body frame
+    CHECK(getI16(r + 4) == 256);
+    CHECK(getI16(r + 6) == -10);  // GY-85 gyro: (−x, −y, +z)
+    CHECK(getI16(r + 8) == -20);
+    CHECK(getI16(r + 10) == 30);
+    CHECK(getI16(r + 12) == 0);    // GY-85 mag (−y, +x, +z) of (300, 0, −400)
+    CHECK(getI16(r + 14) == 300);
+    CHECK(getI16(r + 16) == -400);
+    // a new power-up finds the profile, and says so in HELLO
+    Bench b2(false);
+    std::memcpy(b2.hal.eeprom, b.hal.eeprom, sizeof b.hal.eeprom);
+    b2.dev.begin();
+    f = b2.frames();
+    REQUIRE(lastOf(f, PKT_HELLO));
+    CHECK((*lastOf(f, PKT_HELLO))[2 + 21] == BOARD_GY85);
+    // SEN-10724: the magnetometer turned 90° about z
+    for (uint8_t x : cmd(CMD_SET_BOARD, 2, {BOARD_SEN10724})) b2.dev.receive(x);
+    b2.run(2);
+    f = b2.frames();
+    r = lastOf(f, PKT_RAW_SAMPLE)->data() + 2 + 5;
+    CHECK(getI16(r + 12) == 0);     // +y
+    CHECK(getI16(r + 14) == -300);  // −x
+    // out of range: bad_value; a damaged EEPROM byte pair: aligned
+    for (uint8_t x : cmd(CMD_SET_BOARD, 3, {3})) b2.dev.receive(x);
+    f = b2.frames();
+    CHECK((*lastOf(f, PKT_REPLY))[4] == RESULT_BAD_VALUE);
+    CHECK(b2.dev.boardProfile() == BOARD_SEN10724);
+    Bench b3(false);
+    std::memcpy(b3.hal.eeprom, b2.hal.eeprom, sizeof b.hal.eeprom);
+    b3.hal.eeprom[SphereDevice::BOARD_EEPROM_ADDR + 1] ^= 0x40;
+    b3.dev.begin();
+    CHECK(b3.dev.boardProfile() == BOARD_ALIGNED);
+    // a failing EEPROM: storage_error, profile unchanged
+    b3.hal.eeprom_fails = true;
+    for (uint8_t x : cmd(CMD_SET_BOARD, 4, {BOARD_GY85})) b3.dev.receive(x);
+    f = b3.frames();
+    CHECK((*lastOf(f, PKT_REPLY))[4] == RESULT_STORAGE_ERROR);
+    CHECK(b3.dev.boardProfile() == BOARD_ALIGNED);
+}
+
+TEST_CASE("axis maps: signed permutations, the overflow mark kept") {
+    int16_t v[3] = {-4096, 5, -32768};
+    mapAxes(BOARD_GY85, CHIP_GYRO, v);  // (−x, −y, +z)
+    CHECK(v[0] == -4096);
+    CHECK(v[1] == -5);
+    CHECK(v[2] == -32768);
+    int16_t w[3] = {7, -32768, 9};
+    mapAxes(BOARD_SEN10724, CHIP_MAG, w);  // (+y, −x, +z)
+    CHECK(w[0] == -32768);
+    CHECK(w[1] == -7);
+    CHECK(w[2] == 9);
+    // every profile maps every chip by a proper rotation (no mirror): determinant +1
+    for (uint8_t p = 0; p < BOARD_PROFILE_COUNT; ++p)
+        for (uint8_t c = 0; c < 3; ++c) {
+            int m[3][3] = {};
+            uint8_t a[3];
+            axisMap(p, c, a);
+            for (int i = 0; i < 3; ++i) m[i][a[i] & 3] = (a[i] & AXIS_NEG) ? -1 : 1;
+            int det = m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1]) - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0]) +
+                      m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0]);
+            CHECK(det == 1);
+        }
+}
+
+TEST_CASE("QMC5883L at 0x0D: found when no HMC5883L answers, converted to the HMC5883L's units") {
+    Bench b(false);
+    b.bus.hmc.present = false;
+    b.bus.qmc.present = true;
+    b.bus.setQmc(3000, -1500, 0);  // 1 G, −0.5 G, 0 at 3000 LSB/G
+    b.dev.begin();
+    auto f = b.frames();
+    const auto* h = lastOf(f, PKT_HELLO);
+    REQUIRE(h);
+    CHECK(((*h)[2 + 4] & SENSOR_HMC5883L));
+    CHECK((*h)[2 + 20] == MAG_CHIP_QMC5883L);
+    CHECK(b.bus.qmc.regs[0x09] == 0x19);  // continuous, 100 Hz, 8 G, OSR 512
+    CHECK(b.bus.qmc.regs[0x0B] == 0x01);
+    b.dev.tick();
+    f = b.frames();
+    const auto* raw = lastOf(f, PKT_RAW_SAMPLE);
+    REQUIRE(raw);
+    CHECK(((*raw)[2 + 4] & RAW_MAG_FRESH));
+    CHECK(getI16(raw->data() + 2 + 17) == 1090);
+    CHECK(getI16(raw->data() + 2 + 19) == -545);
+    CHECK((b.bus.qmc.regs[0x06] & 1) == 0);  // DRDY cleared by the data read
+    b.dev.tick();  // no new sample: not fresh, value held
+    f = b.frames();
+    CHECK_FALSE(((*lastOf(f, PKT_RAW_SAMPLE))[2 + 4] & RAW_MAG_FRESH));
+    CHECK(getI16(lastOf(f, PKT_RAW_SAMPLE)->data() + 2 + 17) == 1090);
+    b.bus.setQmc(32767, 0, 0, true);  // OVL
+    b.dev.tick();
+    f = b.frames();
+    CHECK(getI16(lastOf(f, PKT_RAW_SAMPLE)->data() + 2 + 17) == -4096);
+}
+
+TEST_CASE("HMC5883L: mag_fresh only for a new conversion; overflow checked on the chip's reading") {
+    Bench b;
+    b.run(10);
+    b.frames();
+    // no conversion ends (RDY stays clear after the trigger): never fresh
+    for (int i = 0; i < 5; ++i) {
+        b.hal.now += 5000;
+        b.dev.tick();
+    }
+    auto f = b.frames();
+    for (auto& p : f)
+        if (p[0] == PKT_RAW_SAMPLE) CHECK_FALSE((p[2 + 4] & RAW_MAG_FRESH));
+    b.run(20);  // a conversion ready at every look: fresh every second period (100 Hz)
+    f = b.frames();
+    int fresh = 0, raws = 0;
+    for (auto& p : f)
+        if (p[0] == PKT_RAW_SAMPLE) {
+            ++raws;
+            fresh += (p[2 + 4] & RAW_MAG_FRESH) != 0;
+        }
+    CHECK(raws == 20);
+    CHECK(fresh == 10);
+    // −4096 on the chip's x: RAW carries it, the filter leaves the magnetometer out
+    b.bus.setMag(-4096, 0, -400);
+    b.hal.now += 5000;
+    b.dev.tick();
+    b.hal.now += 5000;
+    b.dev.tick();
+    f = b.frames();
+    CHECK(getI16(lastOf(f, PKT_RAW_SAMPLE)->data() + 2 + 17) == -4096);
+    CHECK(((*lastOf(f, PKT_ORIENTATION))[2 + 4] & ORI_MAG_REJECTED));
+}
+
+TEST_CASE("reset cause in HELLO") {
+    Bench b(false);
+    b.hal.reset_cause = RESET_WATCHDOG;
+    b.dev.begin();
+    auto f = b.frames();
+    CHECK((*lastOf(f, PKT_HELLO))[2 + 19] == RESET_WATCHDOG);
+}
+
+TEST_CASE("gyro bias is tracked whenever the sphere is still, a few LSB per window") {
+    Bench b(false);
+    b.bus.setGyro(5, -7, 1);
+    b.dev.begin();
+    b.run(210);
+    CHECK((int)b.dev.calibration().gyro_bias[0] == 5);
+    b.bus.setGyro(11, -7, 1);  // warmed up: the bias moved
+    b.run(SphereDevice::TRACK_SAMPLES + 5);
+    CHECK((int)b.dev.calibration().gyro_bias[0] == 5 + SphereDevice::TRACK_STEP_LSB);
+    b.run(3 * (SphereDevice::TRACK_SAMPLES + 5));
+    CHECK((int)b.dev.calibration().gyro_bias[0] == 11);
+    CHECK((int)b.dev.calibration().gyro_bias[1] == -7);
+    // moving: no window completes, the bias stays
+    for (int i = 0; i < 2 * SphereDevice::TRACK_SAMPLES; ++i) {
+        b.bus.setGyro((int16_t)(11 + 40 * (i % 2)), -7, 1);
+        b.tick();
+    }
+    CHECK((int)b.dev.calibration().gyro_bias[0] == 11);
+}
+
+TEST_CASE("input gates: accelerometer norm; magnetometer norm and dip against a learned reference") {
+    InputGates g;
+    const int16_t level[3] = {0, 0, 256}, swing[3] = {0, 100, 300}, up[3] = {0, 0, 16384};
+    CHECK(g.accel(level));
+    CHECK_FALSE(g.accel(swing));  // 1.22 g
+    const int16_t field[3] = {300, 0, -400};  // 0.46 gauss, dipping 53° down
+    CHECK(g.mag(field, up, false));
+    CHECK(g.hasReference());
+    CHECK(std::abs(g.refNorm() - 500) <= 1);
+    for (int i = 0; i < 50; ++i) CHECK(g.mag(field, up, false));
+    const int16_t stronger[3] = {360, 0, -480};  // +20 %: a magnet near
+    CHECK_FALSE(g.mag(stronger, up, false));
+    const int16_t tilted[3] = {400, 0, -300};  // same norm, dip 37°: a magnet's field added
+    CHECK_FALSE(g.mag(tilted, up, false));
+    const int16_t turned[3] = {0, 300, -400};  // the sphere turned about the vertical: same field
+    CHECK(g.mag(turned, up, false));
+    const int16_t overflow[3] = {-4096, 0, 0};
+    CHECK_FALSE(g.mag(overflow, up, false));
+    // rejected for relearn_after samples in a row: somewhere else now, learned anew
+    for (int i = 0; i < GateSettings::DEFAULTS.relearn_after; ++i) g.mag(stronger, up, false);
+    CHECK(g.mag(stronger, up, false));
+    CHECK(std::abs(g.refNorm() - 600) <= 1);
+}
