@@ -37,6 +37,7 @@ class Run:
     alignment_error_deg: float | None
     rest: np.ndarray  # (N,) bool: BROAD's movement flag off
     losses: list = field(default_factory=list)  # (t0, t1) of full occlusions
+    alignment_ready_s: float | None = None  # when the hybrid's camera-to-earth rotation formed
 
 
 def hint_from(tracker, camera, t_exposure: float, radius_m: float, last=None):
@@ -65,6 +66,7 @@ def run(rt: RenderedTrial, hue_deg: float = 120.0) -> Run:
     last_cam = None
     hint = None
     per_frame, det_ms, detected = [], [], 0
+    t_ready = None
     frame_iter = {k: None for k in range(len(start))}
     pending = {}
     for i in range(n):
@@ -93,6 +95,8 @@ def run(rt: RenderedTrial, hue_deg: float = 120.0) -> Run:
             per_frame.append(1000 * (t2 - t0))
             det_ms.append(1000 * (t1 - t0))
         q, a = rt.q_host_enu[i], tr.acc_m_s2[i]
+        if t_ready is None and hyb.alignment.ready:
+            t_ready = float(t_imu_host[i])
         p = hyb.imu(rt.t[i], q, a, lead_s=IMU_LATENCY_S)
         if p is not None:
             est["hybrid"][i] = p
@@ -111,7 +115,7 @@ def run(rt: RenderedTrial, hue_deg: float = 120.0) -> Run:
         align_err = float(np.degrees(np.arccos(np.clip((np.trace(dR) - 1) / 2, -1, 1))))
     losses = [(o.t0, o.t1) for o in rt.scene.occlusions if o.cover >= 1.0]
     return Run(t_imu_host, truth, est, len(start), detected, np.array(per_frame), np.array(det_ms),
-               dict(hyb.stats), align_err, ~tr.movement.astype(bool), losses)
+               dict(hyb.stats), align_err, ~tr.movement.astype(bool), losses, t_ready)
 
 
 def _true_alignment(rt: RenderedTrial):
@@ -161,13 +165,13 @@ def _lat_depth(err):
     return float(lat), float(np.sqrt(np.mean(err[:, 2] ** 2)))
 
 
-def latency_ms(t, est, truth_fn, max_ms: int = 200) -> float | None:
-    """The lag that best lines the output up with the truth (ms)."""
+def latency_ms(t, est, truth_fn, max_ms: int = 200, min_ms: int = -50) -> float | None:
+    """The lag that best lines the output up with the truth (ms; negative: the output runs ahead)."""
     ok = np.all(np.isfinite(est), axis=1)
     if ok.sum() < 50:
         return None
     best = None
-    for lag in range(0, max_ms + 1):
+    for lag in range(min_ms, max_ms + 1):
         e = est[ok] - truth_fn(t[ok] - lag / 1000.0)
         r = float(np.mean(np.sum(e * e, axis=1)))
         if best is None or r < best[1]:
@@ -181,24 +185,30 @@ def figures(r: Run, rt: RenderedTrial) -> dict:
     for a, b in r.losses:
         in_loss |= (r.t_out >= a) & (r.t_out < b + 0.5)
     moving = ~r.rest
+    # the warm-up: until the hybrid has learnt how the camera stands (the same samples left out for every
+    # method); the figures with it are kept as *_with_warmup
+    warm = r.t_out < (r.alignment_ready_s if r.alignment_ready_s is not None else np.inf)
     for m in METHODS:
         e = r.est[m] - r.truth
         ok = np.all(np.isfinite(e), axis=1)
-        use = ok & ~in_loss
+        use = ok & ~in_loss & ~warm
         fig = {}
         if use.sum() >= 10:
             fig["rmse_lateral_m"], fig["rmse_depth_m"] = _lat_depth(e[use])
             fig["max_error_m"] = float(np.linalg.norm(e[use], axis=1).max())
+        if (ok & ~in_loss).sum() >= 10:
+            fig["rmse_lateral_with_warmup_m"], fig["rmse_depth_with_warmup_m"] = _lat_depth(e[ok & ~in_loss])
         jit = _jitter(r.t_out, e, ok & r.rest)
         if jit:
             fig["jitter_lateral_m"], fig["jitter_depth_m"] = jit
-        lat = latency_ms(r.t_out[moving], r.est[m][moving], rt.truth_cam)
+        lat = latency_ms(r.t_out[moving & ~warm], r.est[m][moving & ~warm], rt.truth_cam)
         fig["latency_ms"] = lat
         fig["coverage"] = float(ok.mean())
         steady = float(np.sqrt(np.mean(np.sum(e[use] ** 2, axis=1)))) if use.sum() >= 10 else 0.0
         fig["losses"] = [_loss(r.t_out, e, a, b, max(0.01, 2.0 * steady)) for a, b in r.losses]
         out[m] = fig
     out["hybrid"]["output_rate_hz"] = float(1.0 / np.median(np.diff(r.t_out)))
+    out["hybrid"]["alignment_ready_s"] = r.alignment_ready_s
     return out
 
 
