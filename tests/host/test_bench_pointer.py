@@ -1,4 +1,5 @@
-"""`sphere bench pointer` on a short slice of the real trials: figures exist, make sense, JSON as specified."""
+"""`sphere bench pointer`: its figures on constructed motion (so they mean what they say), and the command
+on the shipped trials and synthetic:hold seeds through the daemon's path."""
 
 import json
 import subprocess
@@ -8,34 +9,81 @@ import numpy as np
 import pytest
 
 from sphere.bench import pointer as bench
+from sphere.sim.hold import Phase
+
+R = bench.RATE_HZ
 
 
-def test_metrics_on_constructed_paths():
-    movement = np.r_[np.zeros(600, bool), np.ones(600, bool), np.zeros(600, bool)]
-    t = np.arange(1800) / bench.RATE_HZ
-    raw = np.stack([np.where(movement, 200 * np.sin(2 * np.pi * 0.7 * t), 0.0), np.zeros(1800)], axis=1)
-    raw[:, 0] = np.cumsum(np.r_[0, np.diff(raw[:, 0])])
-    delayed = np.roll(raw, 4, axis=0)  # 4 samples = 20 ms late
-    delayed[:4] = raw[0]
-    assert bench.lag_ms(delayed, raw, movement) == pytest.approx(20.0, abs=0.5)
-    assert bench.lag_ms(raw, raw, movement) == pytest.approx(0.0, abs=0.5)
+def _turn_recording(delay_s=0.0, overshoot_px=0.0, drift_px_s=0.0, scale=1.0):
+    """A clean 1-s yaw turn at 10 °/s (480 px to the left) from 1 s, and a pointer path made from it."""
+    n = int(4.0 * R)
+    t = np.arange(n) / R
+    ideal = np.zeros((n, 2))
+    ideal[:, 0] = -np.clip(t - 1.0, 0.0, 1.0) * 480.0
+    rec = bench.Recording("t", "clean", [None] * n, phases=[Phase("held", 0.0, 1.0), Phase("turn", 1.0, 2.0, "slow", 10.0, "yaw"),
+                                                         Phase("held", 2.0, 4.0)])
+    rec.ideal_px = rec.intent_px = ideal
+    rec.wander_px = np.zeros_like(ideal)
+    path = np.zeros_like(ideal)
+    path[:, 0] = -np.clip(t - 1.0 - delay_s, 0.0, 1.0) * 480.0 * scale
+    after = t >= 2.0 + delay_s
+    path[after, 0] -= overshoot_px * np.sin(np.pi * np.clip((t[after] - 2.0 - delay_s) / 0.2, 0, 1))
+    path[:, 1] = np.where(t > 2.0, (t - 2.0) * drift_px_s, 0.0)
+    return rec, path
+
+
+def test_lag_is_the_time_to_half_travel():
+    rec, path = _turn_recording(delay_s=0.030)
+    (f,) = bench.turn_figures(path, rec)
+    assert f["lag_ms"] == pytest.approx(30.0, abs=0.5)
+    rec, path = _turn_recording()
+    assert bench.turn_figures(path, rec)[0]["lag_ms"] == pytest.approx(0.0, abs=0.5)
+
+
+def test_overshoot_drift_and_travel_are_seen():
+    rec, path = _turn_recording(overshoot_px=5.0)
+    assert bench.turn_figures(path, rec)[0]["overshoot_px"] == pytest.approx(5.0, abs=0.05)
+    rec, path = _turn_recording(drift_px_s=3.0)
+    assert bench.turn_figures(path, rec)[0]["drift_px_s"] == pytest.approx(3.0, abs=0.01)
+    rec, path = _turn_recording(scale=1.04)
+    assert bench.turn_figures(path, rec)[0]["travel_err"] == pytest.approx(0.04, abs=0.002)
+
+
+def test_window_jitter_is_the_shake_about_a_line():
     rng = np.random.default_rng(0)
-    shaky = raw + rng.normal(0, 0.2, raw.shape)
-    j, n = bench.jitter_px(shaky, movement)
-    assert n > 0 and 0.2 < j < 0.3  # RMS distance of 2-D noise of 0.2 per axis, minus the line fit
-    assert bench.jitter_px(raw, movement)[0] == pytest.approx(0.0, abs=1e-9)
+    line = np.stack([np.arange(1000) * 0.3, np.zeros(1000)], axis=1)
+    sq, n = bench.window_jitter(line + rng.normal(0, 0.2, line.shape), [(0, 1000)])
+    assert n == 1000 and 0.25 < np.sqrt(sq / n) < 0.3  # 2-D noise of 0.2 per axis, less the fit
+    assert bench.window_jitter(line, [(0, 1000)])[0] == pytest.approx(0.0, abs=1e-12)
 
 
-def test_overshoot_is_seen_past_a_stop():
-    movement = np.r_[np.ones(400, bool), np.zeros(400, bool)]
-    raw = np.stack([np.r_[np.arange(400) * 1.0, np.full(400, 399.0)], np.zeros(800)], axis=1)
-    past = raw.copy()
-    past[400:460, 0] += 5.0 * np.sin(np.linspace(0, np.pi, 60))  # 5 px beyond, then back
-    assert bench.overshoot_px(past, raw, movement) == pytest.approx(5.0, abs=0.05)
-    assert bench.overshoot_px(raw, raw, movement) == 0.0
+def test_hold_trace_is_what_its_parameters_say():
+    """The generator, measured against its own definition: tremor size and band, bias, turn rates."""
+    from sphere.sim.hold import hold_script
+
+    h = hold_script(42.0, seed=5)
+    rate = h.motion.rate_hz
+    held = [p for p in h.phases if p.kind == "held"]
+    a, b = int(held[1].start_s * rate) + 200, int(held[1].end_s * rate) - 200
+    # tremor: the rotation about each axis in 8-12 Hz is ~0.1° RMS (integrated body rate, detrended)
+    g = h.true_gyro_dps[a:b]
+    angle = np.cumsum(g, axis=0) / rate
+    spec = np.fft.rfft(angle - angle.mean(axis=0), axis=0)
+    f = np.fft.rfftfreq(len(angle), 1 / rate)
+    band = (f >= 8) & (f <= 12)
+    rms = np.sqrt(2 * np.sum(np.abs(spec[band]) ** 2, axis=0)) / len(angle)
+    assert np.all((rms > 0.05) & (rms < 0.15)), rms
+    # the sensor's gyro = truth + bias + noise
+    err = np.degrees(h.motion.gyr_rad_s) - h.true_gyro_dps
+    assert np.allclose(err[:2000].mean(axis=0), h.bias_dps, atol=0.05)
+    assert err.std(axis=0) == pytest.approx([0.38] * 3, rel=0.1)
+    for p in h.phases:
+        if p.kind == "turn":
+            lo, hi = {"fine": (1, 5), "slow": (5, 30), "medium": (30, 90), "fast": (90, 200)}[p.band]
+            assert lo <= abs(p.rate_dps) <= hi
 
 
-def test_bench_pointer_command_on_real_trials(tmp_path):
+def test_bench_pointer_command(tmp_path):
     from sphere.broad import BroadMissing
 
     try:
@@ -44,16 +92,22 @@ def test_bench_pointer_command_on_real_trials(tmp_path):
         pytest.skip(str(e))
     out = tmp_path / "pointer.json"
     r = subprocess.run(
-        [sys.executable, "-m", "sphere.cli", "bench", "pointer", "--seconds", "50", "--filters", "none,one-euro", "--json", str(out)],
+        [sys.executable, "-m", "sphere.cli", "bench", "pointer", "--seconds", "20", "--seeds", "1", "--no-tune",
+         "--filters", "none,tremor,tiered", "--json", str(out)],
         capture_output=True, text=True, timeout=600,
     )
     assert r.returncode == 0, r.stderr
     data = json.loads(out.read_text())
-    assert set(data["filters"]) == {"none", "one-euro", "jsm-mapper"}
-    for figures in data["filters"].values():
-        assert set(figures) >= {"jitter_px", "lag_ms", "overshoot_px", "us_per_sample", "params"}
-    assert data["default"] in data["filters"] and data["default"] != "none"
-    none, euro = data["filters"]["none"], data["filters"]["one-euro"]
-    assert none["lag_ms"] == pytest.approx(0.0, abs=0.5)
-    assert euro["jitter_px"] < none["jitter_px"]  # smoothing does something on real data
-    assert "jitter" in r.stdout and "one-euro" in r.stdout
+    assert set(data["filters"]) == {"none", "tremor", "tiered"}
+    none = data["filters"]["none"]["defaults"]["figures"]
+    tremor = data["filters"]["tremor"]["defaults"]["figures"]
+    assert 5.0 < none["held_jitter_px"] < 9.0  # 0.1° RMS per axis at 48 px/° through nothing
+    assert tremor["held_jitter_px"] < 1.5 < none["held_jitter_px"]
+    assert abs(none["lag_fast_ms"]) < 10.0 and tremor["lag_fine_ms"] - tremor["lag_fast_ms"] <= 40.0
+    assert "held px" in r.stdout and "* the daemon's default (pointer.smoothing = tremor)" in r.stdout
+
+
+def test_bench_pointer_bad_filter_name_is_one_line():
+    r = subprocess.run([sys.executable, "-m", "sphere.cli", "bench", "pointer", "--filters", "tremor,kalmann"],
+                       capture_output=True, text=True, timeout=120)
+    assert r.returncode == 2 and "unknown filter kalmann" in r.stderr and "Traceback" not in r.stderr

@@ -21,7 +21,7 @@ def run(mapper, rate, seconds, up=None):
 
 
 def plain(**kw):
-    base = dict(tightening_dps=0.0, smoothing_dps=0.0)
+    base = dict(tightening_dps=0.0, smoothing="none")
     base.update(kw)
     return PointerSettings(**base)
 
@@ -73,7 +73,7 @@ def test_tightening_is_soft_not_a_dead_zone():
 
 
 def test_smoothing_only_slow_motion():
-    s = plain(smoothing_dps=8.0, smoothing_time_s=0.05)
+    s = plain(smoothing="tiered", smoothing_params={"smoothing_dps": 8.0, "smoothing_time_s": 0.05})
     m = PointerMapper(s, 1920)
     # alternating tremor at 2 °/s is averaged away
     out = [m.rate_px_s((0, 0, 2.0 if i % 2 else -2.0), None, DT)[0] for i in range(40)]

@@ -108,7 +108,7 @@ def test_particle_filter_tracks_a_ramp_and_is_reproducible():
 
 
 def test_motion_state_switches_with_hysteresis_and_never_jumps():
-    f = MotionStateFilter(rest_speed=20.0, fast_speed=300.0, hysteresis=0.3)
+    f = MotionStateFilter(rest_speed=20.0, fast_speed=300.0, hysteresis=0.3, rest_q_per_s=5.0, rest_r=1.0, settle=0.05)
     rng = np.random.default_rng(6)
     speed = np.r_[np.zeros(400), np.full(400, 100.0), np.full(400, 2000.0), np.zeros(400)]  # px/s
     x = np.cumsum(speed * DT)[:, None] * np.array([[1.0, 0.5]]) + rng.normal(0, 0.05, (1600, 2))
@@ -136,5 +136,70 @@ def test_every_registered_filter_runs_on_every_grid_point(name):
 
 
 def test_unknown_filter_name_is_a_clear_error():
-    with pytest.raises(ValueError, match="unknown filter 'kalmann'"):
+    with pytest.raises(ValueError, match="unknown smoothing filter 'kalmann'; choose from none, tremor"):
         make_filter("kalmann")
+
+
+def test_bad_parameters_are_clear_errors():
+    with pytest.raises(ValueError, match=r"notch_q = 0: must be between 0.1 and 20"):
+        make_filter("tremor", notch_q=0)
+    with pytest.raises(ValueError, match=r"unknown parameter 'betta'; parameters are min_cutoff_hz, beta"):
+        make_filter("one-euro", betta=1)
+    with pytest.raises(ValueError, match=r"m = 2.5: must be an integer"):
+        make_filter("curve", m=2.5)
+
+
+@pytest.mark.parametrize("name", list(FILTERS))
+def test_every_filter_has_its_parameters_defined_once(name):
+    """Defaults, units and ranges live in PARAMS; a filter built with no arguments uses exactly them, and
+    every grid value is inside its parameter's range."""
+    from sphere.smoothing.registry import filter_class, params
+
+    for key, p in params(name).items():
+        assert p.doc and (p.choices or p.lo <= p.default <= p.hi), key
+    for key, values in filter_class(name).GRID.items():
+        for v in values:
+            params(name)[key].check(key, v)
+
+
+@pytest.mark.parametrize("name", list(FILTERS))
+def test_every_filter_holds_a_constant_and_follows_a_step(name):
+    """Unit gain at DC: a held value comes out as it went in, and after a step the output settles on it."""
+    f = make_filter(name)
+    tol = 0.02 if name.endswith("particle") else 1e-6  # particles: a random cloud around the value
+    held = run(f, np.full((200, 2), 3.0))
+    assert np.allclose(held[-1], 3.0, atol=tol)
+    step = run(f, np.full((600, 2), 4.0))
+    assert np.allclose(step[-1], 4.0, atol=max(tol, 0.02)), step[-1]
+
+
+def _tremor_and_ramp(seconds=6.0, tremor_deg=0.1, rate_dps=3.0):
+    """A 10 Hz tremor (0.1° RMS) on a slow 3 °/s ramp that starts at 2 s, sampled at 200 Hz."""
+    t = np.arange(int(seconds / DT)) * DT
+    ramp = np.clip(t - 2.0, 0.0, None) * rate_dps
+    trem = tremor_deg * math.sqrt(2) * np.sin(2 * np.pi * 10.0 * t)
+    return t, ramp, np.stack([ramp + trem, np.zeros_like(t)], axis=1)
+
+
+def test_tremor_filter_removes_10hz_tremor_and_keeps_slow_aiming():
+    from sphere.smoothing import TremorFilter
+
+    t, ramp, x = _tremor_and_ramp()
+    out = run(TremorFilter(), x)
+    rest = (t > 1.0) & (t < 2.0)
+    residual = out[rest, 0] - out[rest, 0].mean()
+    assert residual.std() < 0.1 * 0.1  # at least 20 dB off the tremor
+    # on the 3 °/s ramp: no more than 40 ms behind, and the travel kept
+    moving = t > 3.0
+    behind_s = (ramp[moving] - out[moving, 0]).mean() / 3.0
+    assert 0.0 < behind_s < 0.040
+    assert abs(out[-1, 0] - ramp[-1]) < 0.15
+
+
+def test_tremor_filter_passes_fast_moves_without_lag():
+    from sphere.smoothing import TremorFilter
+
+    t = np.arange(400) * DT
+    x = np.stack([np.where(t > 0.5, (t - 0.5) * 150.0, 0.0), np.zeros_like(t)], axis=1)
+    out = run(TremorFilter(), x)
+    assert np.abs(out[t > 0.8, 0] - x[t > 0.8, 0]).max() < 0.02  # 150 °/s: < 1 px at 48 px/°

@@ -103,6 +103,7 @@ class SphereMouse:
         ux, uy = action.undo
         if (ux or uy) and self.mode != "3d":
             self.backend.move(ux, uy)
+            self.mapper.reset()  # the smoothing forgets the motion just undone (a knock's jolt)
         k = action.kind
         if self.mode == "3d" and k in ("left_click", "right_click", "middle_click", "double_click",
                                         "double_click_full", "second_click"):

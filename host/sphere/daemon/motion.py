@@ -14,18 +14,104 @@ from sphere import chips
 
 G_M_S2 = chips.STANDARD_GRAVITY_M_S2
 DEG = math.pi / 180.0
-MAG_STILL_UT = 1.0  # the compass moves less than this while the sphere lies still (HMC5883L noise ≈ 0.2 µT)
+MAG_STILL_UT = 0.2  # µT per still window: the compass trend test's floor (HMC5883L noise ≈ 0.2 µT, 1 LSB 0.09 µT)
+
+
+class _Trend:
+    """Running sums for the least-squares slope of a 3-vector against time over one window."""
+
+    __slots__ = ("n", "fresh", "st", "stt", "sx", "stx", "sxx", "last", "t0")
+
+    def __init__(self):
+        self.t0 = None
+        self.n = self.fresh = 0
+        self.st = self.stt = 0.0
+        self.sx = [0.0] * 3
+        self.stx = [0.0] * 3
+        self.sxx = [0.0] * 3
+        self.last = None
+
+    def add(self, t: float, v) -> None:
+        if self.t0 is None:
+            self.t0 = t
+        t -= self.t0
+        self.n += 1
+        if v != self.last:
+            self.fresh += 1
+            self.last = v
+        self.st += t
+        self.stt += t * t
+        for i in range(3):
+            x = v[i]
+            self.sx[i] += x
+            self.stx[i] += t * x
+            self.sxx[i] += x * x
+
+    def moved(self, floor: float, k_sigma: float = 4.0) -> bool:
+        """Whether the vector changed over the window by more than ``k_sigma`` standard errors of the fitted
+        slope (from the window's own scatter about the line; repeated readings count once) and ``floor``."""
+        n = self.n
+        if n < 4:
+            return False
+        stt = self.stt - self.st * self.st / n
+        if stt <= 0:
+            return False
+        span = math.sqrt(12.0 * stt / n)  # the window's length in time
+        n_eff = max(3, min(self.fresh, n))
+        for i in range(3):
+            stx = self.stx[i] - self.st * self.sx[i] / n
+            sxx = self.sxx[i] - self.sx[i] * self.sx[i] / n
+            b = stx / stt
+            var = max(0.0, (sxx - b * stx) / (n - 2))
+            se = math.sqrt(var / stt * n / n_eff)
+            if abs(b) * span > max(k_sigma * se * span, floor):
+                return True
+        return False
 
 
 class GyroBias:
-    """Gyro bias in °/s, updated at the end of each window of ``still_time_s`` in which the sphere was still."""
+    """Gyro bias in °/s, learnt from windows of ``still_time_s`` in which the sphere lies still.
 
-    def __init__(self, still_dps: float = 3.0, still_time_s: float = 1.0, enabled: bool = True):
+    A window counts as still only when all of these hold — a slow steady turn fails at least one:
+
+    - the gyro stays within ±``still_dps`` of its range's middle on every axis (hand tremor fails this);
+    - the accelerometer's magnitude stays near 1 g, and its direction shows no trend: the fitted change over
+      the window is below 4 standard errors of the slope (estimated from the window's own scatter, so the
+      threshold scales with the window and its noise) and below one LSB (3.9 mg ≈ a 0.2 °/s turn about a
+      horizontal axis). A turn about any axis but the vertical tips gravity in the sensor frame;
+    - the magnetometer, when it answers, confirms the same way (a turn about the vertical swings the field's
+      horizontal part: 3 °/s turns 20 µT by 1 µT a second, ~12 standard errors of a 1-s window of HMC5883L
+      noise); ``MAG_STILL_UT`` is its floor per window.
+
+    Then the window's mean must be plausible for the chip (``|bias| ≤ MAX_BIAS_DPS``) and, once a bias is
+    known, close to it: within ``base_dps`` plus ``drift_dps_per_s`` for every second since the last update
+    (a bias moves slowly, with temperature). A window that is not is held back; a second still window in a
+    row that agrees with it replaces the bias if the two together pass the trend tests again (twice the
+    time: 2.8 times as sensitive, so a turn too slow for one window's test is caught) — recovery from a
+    wrong estimate, e.g. one learnt during a steady turn at start-up while the compass was not answering.
+    A window the compass confirmed replaces one it did not confirm at once.
+    """
+
+    MAX_BIAS_DPS = 40.0  # ITG-3200 datasheet (PS-ITG-3200A-00-01.4) §2.1: initial ZRO tolerance ±40 °/s
+    ACCEL_FLOOR_G = 1.0 / 256  # one ADXL345 LSB at full resolution
+    AVERAGE_WINDOWS = 8
+
+    def __init__(self, still_dps: float = 3.0, still_time_s: float = 1.0, enabled: bool = True,
+                 base_dps: float = 0.15, drift_dps_per_s: float = 0.02):
         self.still_dps = still_dps
         self.still_time_s = still_time_s
         self.enabled = enabled
+        self.base_dps = base_dps
+        self.drift_dps_per_s = drift_dps_per_s
         self.bias = [0.0, 0.0, 0.0]
         self.updates = 0
+        self.confirmed = False  # the current bias came from a window the compass confirmed
+        self.rejected = 0  # still windows held back as too far from the current bias
+        self._clock = 0.0
+        self._last_update_s = 0.0
+        self._pending = None  # (mean, confirmed) of the last window held back
+        self._long = None  # its accelerometer and compass trends, carried on over the next window
+        self._windows = 0
         self._start()
 
     def _start(self):
@@ -35,23 +121,13 @@ class GyroBias:
         self._lo = [math.inf] * 3
         self._hi = [-math.inf] * 3
         self._accel_ok = True
-        self._mlo = [math.inf] * 3
-        self._mhi = [-math.inf] * 3
+        self._acc = _Trend()
+        self._mag = _Trend()
 
-    def add(self, gyro_dps, accel_g_norm: float, dt_s: float, mag_uT=None) -> None:
+    def add(self, gyro_dps, accel_g_norm: float, dt_s: float, mag_uT=None, accel_g=None) -> None:
         if not self.enabled:
             return
-        if mag_uT is not None:
-            # a turn at a constant rate looks like bias to the gyro alone; the compass sees it
-            for i in range(3):
-                v = mag_uT[i]
-                if v < self._mlo[i]:
-                    self._mlo[i] = v
-                if v > self._mhi[i]:
-                    self._mhi[i] = v
-            if max(self._mhi[i] - self._mlo[i] for i in range(3)) > MAG_STILL_UT:
-                self._start()
-                return
+        self._clock += dt_s
         for i in range(3):
             v = gyro_dps[i]
             self._sum[i] += v
@@ -66,15 +142,52 @@ class GyroBias:
         spread = max(self._hi[i] - self._lo[i] for i in range(3))
         if spread > 2.0 * self.still_dps or not self._accel_ok:
             self._start()
+            self._pending = self._long = None
             return
+        trends = ((self._acc, self._mag), self._long) if self._long is not None else ((self._acc, self._mag),)
+        for acc, mag in trends:
+            if accel_g is not None:
+                acc.add(self._clock, tuple(accel_g))
+            if mag_uT is not None:
+                mag.add(self._clock, tuple(mag_uT))
         if self._t >= self.still_time_s:
-            mean = [s / self._n for s in self._sum]
-            self._start()
-            if self.updates and max(abs(m - b) for m, b in zip(mean, self.bias)) > self.still_dps:
-                return  # bias drifts slowly: a jump this big is a slow steady turn, not bias
-            k = 1.0 if self.updates == 0 else 0.5
-            self.bias = [b + k * (m - b) for b, m in zip(self.bias, mean)]
-            self.updates += 1
+            self._end_window()
+
+    def _end_window(self) -> None:
+        mean = [s / self._n for s in self._sum]
+        acc, mag = self._acc, self._mag
+        still = not acc.moved(self.ACCEL_FLOOR_G) and not mag.moved(MAG_STILL_UT)
+        confirmed = mag.n >= 0.5 * self._n
+        self._start()
+        if not still or max(abs(m) for m in mean) > self.MAX_BIAS_DPS:
+            self._pending = self._long = None
+            return
+        if self.updates == 0 or (confirmed and not self.confirmed):
+            self._accept(mean, confirmed, replace=True)
+            return
+        tol = self.base_dps + self.drift_dps_per_s * (self._clock - self._last_update_s)
+        if max(abs(m - b) for m, b in zip(mean, self.bias)) <= tol:
+            self._accept(mean, confirmed, replace=False)
+            return
+        pending, long = self._pending, self._long
+        if (pending is not None and max(abs(m - p) for m, p in zip(mean, pending[0])) <= self.base_dps
+                and not long[0].moved(self.ACCEL_FLOOR_G) and not long[1].moved(MAG_STILL_UT)):
+            self._accept([0.5 * (m + p) for m, p in zip(mean, pending[0])], confirmed and pending[1], replace=True)
+            return
+        self.rejected += 1
+        self._pending = (mean, confirmed)
+        self._long = (acc, mag)  # the trends go on over the next window
+
+    def _accept(self, mean, confirmed: bool, replace: bool) -> None:
+        # agreeing windows are averaged (the last AVERAGE_WINDOWS weigh most: the noise of the mean shrinks,
+        # a drifting bias is still followed); a replacement starts the average again
+        self._windows = 1 if replace else min(self._windows + 1, self.AVERAGE_WINDOWS)
+        k = 1.0 / self._windows
+        self.bias = [b + k * (m - b) for b, m in zip(self.bias, mean)]
+        self.updates += 1
+        self.confirmed = confirmed or (self.confirmed and not replace)
+        self._last_update_s = self._clock
+        self._pending = self._long = None
 
 
 def up_from_quat(q):
@@ -207,7 +320,7 @@ class MotionTracker:
         mag_ok = bool(flags & 0x04) and -4096 not in m
         mag = (m[0] * km, m[1] * km, m[2] * km) if mag_ok else None
         if accel_ok and not tap_active:
-            self.bias.add(gyro, anorm, dt, mag)
+            self.bias.add(gyro, anorm, dt, mag, (ax, ay, az))
         b = self.bias.bias
         self.gyro_dps = (gyro[0] - b[0], gyro[1] - b[1], gyro[2] - b[2])
         if accel_ok and not tap_active and 0.5 < anorm < 1.5:

@@ -7,11 +7,14 @@
    axis across the pointing direction, so the pointer moves the same way however the sphere is rolled
    in the hand; ``local`` axes take the sensor's own z (yaw) and y (pitch). Sensor frame: x forward
    (towards the screen), y left, z up when the sphere sits in its nominal pose.
-2. **Soft tiered smoothing.** Rotations slower than ``smoothing_dps`` are averaged over
-   ``smoothing_time_s`` (fully below half of it, blended up to it); faster ones pass untouched, so
-   smoothing steadies a hand at rest without adding lag to a real move.
-3. **Tightening.** Below ``tightening_dps`` the rate is scaled by ``rate/tightening_dps``: tiny tremor
-   shrinks quadratically but slow deliberate motion still moves the pointer (no hard dead zone).
+2. **Smoothing** from the registry of :mod:`sphere.smoothing` (``smoothing``, default ``tremor``: a
+   band-stop for the hand's 8–12 Hz tremor that lets fast moves through untouched; ``tiered`` is
+   JoyShockMapper's soft tiered smoothing). The filter runs on the pointer's angles in degrees (the
+   integral of the screen rates) and the rate is taken back from its output, so every filter of the
+   registry fits here and the pointer shows exactly what the filter outputs.
+3. **Tightening** of the smoothed rate. Below ``tightening_dps`` the rate is scaled by
+   ``rate/tightening_dps``: what is left of noise and tremor at rest shrinks quadratically but slow
+   deliberate motion still moves the pointer (no hard dead zone).
 4. **Sensitivity in real-world terms** (degrees of rotation per screen width) with optional
    **acceleration**: the slow sensitivity up to ``accel_low_dps``, the fast one from ``accel_high_dps``,
    blended linearly between them.
@@ -23,8 +26,9 @@
 from __future__ import annotations
 
 import math
-from collections import deque
 from dataclasses import dataclass
+
+from sphere.smoothing.registry import make_filter
 
 
 @dataclass
@@ -33,11 +37,9 @@ class PointerSettings:
     fast_deg_per_width: float = 40.0  # ° per screen width above accel_high_dps
     accel_low_dps: float = 20.0  # °/s
     accel_high_dps: float = 120.0  # °/s
-    # Smoothing and tightening as tuned by `sphere bench pointer` (least lag with jitter < 0.3 px at rest,
-    # keeping ≥ 90 % of slow turns) on BROAD's with-breaks trials: 0.10 px jitter, no measurable lag.
     tightening_dps: float = 1.0  # °/s; 0 = off
-    smoothing_dps: float = 8.0  # °/s; 0 = off
-    smoothing_time_s: float = 0.06  # s
+    smoothing: str = "tremor"  # a name from sphere.smoothing.registry.FILTERS
+    smoothing_params: dict | None = None  # the filter's parameters (None = its defaults)
     axes: str = "world"  # "world" or "local"
     invert_x: bool = False
     invert_y: bool = False
@@ -91,30 +93,16 @@ class PointerMapper:
     def __init__(self, settings: PointerSettings | None = None, screen_width_px: int = 1920):
         self.settings = settings or PointerSettings()
         self.screen_width_px = int(screen_width_px)
-        self._smooth = deque()
-        self._smooth_sum = [0.0, 0.0]
+        self.filter = make_filter(self.settings.smoothing, **(self.settings.smoothing_params or {}))
         self._forward = None
-        self.remainder = [0.0, 0.0]
+        self.reset()
 
     def reset(self) -> None:
         """Forget smoothing history and sub-pixel remainders (after a pause, a freeze, a mode switch)."""
-        self._smooth.clear()
-        self._smooth_sum = [0.0, 0.0]
+        self.filter.reset()
+        self._angle = [0.0, 0.0]  # the pointer's angles (°, right and down) fed to the filter
+        self._filtered = None
         self.remainder = [0.0, 0.0]
-
-    def _smoothed(self, x: float, y: float, dt_s: float):
-        s = self.settings
-        buf = self._smooth
-        n = max(1, int(round(s.smoothing_time_s / dt_s))) if dt_s > 0 else 1
-        buf.append((x, y))
-        self._smooth_sum[0] += x
-        self._smooth_sum[1] += y
-        while len(buf) > n:
-            ox, oy = buf.popleft()
-            self._smooth_sum[0] -= ox
-            self._smooth_sum[1] -= oy
-        k = len(buf)
-        return self._smooth_sum[0] / k, self._smooth_sum[1] / k
 
     def rate_px_s(self, gyro_dps, up_body=None, dt_s: float = 0.005):
         """The pointer velocity (px/s, screen x right, y down) for one gyro sample, updating smoothing state."""
@@ -123,15 +111,19 @@ class PointerMapper:
         # screen degrees/s: right and down positive
         x, y = -yaw, pitch
         mag = math.hypot(x, y)
-        # 2. soft tiered smoothing of slow motion
-        if s.smoothing_dps > 0:
-            hi = s.smoothing_dps
-            lo = hi * 0.5
-            direct = 0.0 if mag <= lo else 1.0 if mag >= hi else (mag - lo) / (hi - lo)
-            sx, sy = self._smoothed(x * (1.0 - direct), y * (1.0 - direct), dt_s)
-            x, y = x * direct + sx, y * direct + sy
+        # 2. smoothing: the filter runs on the pointer's angles; the rate comes back from its output
+        if dt_s > 0:
+            a = self._angle
+            a[0] += x * dt_s
+            a[1] += y * dt_s
+            out = self.filter.update(a, dt_s)
+            last = self._filtered
+            self._filtered = (float(out[0]), float(out[1]))
+            if last is None:
+                last = (a[0] - x * dt_s, a[1] - y * dt_s)
+            x, y = (self._filtered[0] - last[0]) / dt_s, (self._filtered[1] - last[1]) / dt_s
             mag = math.hypot(x, y)
-        # 3. tightening
+        # 3. tightening of the smoothed rate (what is left of noise and tremor at rest)
         if s.tightening_dps > 0 and mag < s.tightening_dps:
             k = mag / s.tightening_dps
             x, y = x * k, y * k
@@ -162,8 +154,10 @@ class PointerMapper:
         r = self.remainder
         r[0] += fx
         r[1] += fy
-        ix = int(r[0])  # towards zero: symmetric for left and right
-        iy = int(r[1])
+        # towards zero: symmetric for left and right (a hair's allowance so 19.999999999 after many small
+        # steps of a float sum still gives its 20th pixel)
+        ix = int(r[0] + math.copysign(1e-9, r[0]))
+        iy = int(r[1] + math.copysign(1e-9, r[1]))
         r[0] -= ix
         r[1] -= iy
         return ix, iy

@@ -95,9 +95,15 @@ def _script(seconds: float, rng, p: HoldParams):
             turns.append((band, rate * (1 if rng.random() < 0.5 else -1), "yaw" if k % 2 == 0 else "pitch"))
     order = rng.permutation(len(turns))
     out = [("rest", 3.0, "", 0.0, "")]
+    pitch = 0.0
     for i in order:
         band, rate, axis = turns[i]
         dur = p.turn_s if band != "fast" else p.turn_s * 0.5
+        if axis == "pitch":  # keep the nose within ±45° of level (pointing, not at the ceiling)
+            dur = min(dur, 45.0 / abs(rate))
+            if abs(pitch + rate * dur) > 45.0:
+                rate = -rate
+            pitch += rate * dur
         out.append(("held", float(rng.uniform(1.5, 2.5)), "", 0.0, ""))
         out.append(("turn", dur, band, rate, axis))
     out += [("held", 2.0, "", 0.0, ""), ("rest", 3.0, "", 0.0, "")]

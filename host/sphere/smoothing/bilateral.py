@@ -8,16 +8,23 @@ from __future__ import annotations
 import math
 from collections import deque
 
+from sphere.smoothing.params import Param, resolve
+
 
 def _wrap_deg(a: float) -> float:
     return (a + 180.0) % 360.0 - 180.0
 
 
 class BilateralAngleFilter:
-    def __init__(self, sigma_c: float = 1.0, sigma_s_deg: float = 2.0):
-        if sigma_c <= 0 or sigma_s_deg <= 0:
-            raise ValueError("sigma_c and sigma_s_deg must be > 0")
-        self.sigma_c, self.sigma_s_deg = sigma_c, sigma_s_deg
+    PARAMS = {
+        "sigma_c": Param(1.0, "samples", 1e-3, 1e3, "σ_c of the spatial Gaussian (sample distance without positions)"),
+        "sigma_s_deg": Param(0.1, "°", 1e-4, 180.0, "σ_s of the Gaussian of the angle difference"),
+    }
+    GRID = {"sigma_c": [1.0, 3.0], "sigma_s_deg": [0.02, 0.05, 0.1, 0.3]}
+
+    def __init__(self, *args, **kwargs):
+        p = resolve(self.PARAMS, args, kwargs)
+        self.sigma_c, self.sigma_s_deg = p["sigma_c"], p["sigma_s_deg"]
         self.reset()
 
     def reset(self) -> None:

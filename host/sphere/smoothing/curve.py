@@ -10,20 +10,29 @@ from collections import deque
 
 import numpy as np
 
+from sphere.smoothing.params import Param, resolve
+
 
 class WindowedCurveSmoother:
-    def __init__(self, m: int = 2, point_weight: float = 0.2, passes: int = 2):
-        if m < 2:
-            raise ValueError("the window needs m ≥ 2 (n = 2 + m points)")
+    PARAMS = {
+        "m": Param(2, "samples", 2, 50, "the output is m samples late; the window holds n = 2 + m points", integer=True),
+        "point_weight": Param(0.2, "", 1e-6, 1e6, "weight of the measured points against the smoothed edges"),
+        "passes": Param(2, "", 0, 20, "smoothing passes over the edge directions", integer=True),
+    }
+    GRID = {"m": [2, 4], "point_weight": [0.05, 0.2, 1.0], "passes": [2]}
+
+    def __init__(self, *args, **kwargs):
+        p = resolve(self.PARAMS, args, kwargs)
+        m = p["m"]
         self.m, self.n = m, 2 + m
-        self.point_weight, self.passes = point_weight, passes
+        self.point_weight, self.passes = p["point_weight"], p["passes"]
         # least-squares system: w·|p_i − x_i|² + Σ |(p_{i+1} − p_i) − ê_i|²  →  (wI + DᵀD) p = w·x + Dᵀê
         n = self.n
         d = np.zeros((n - 1, n))
         d[np.arange(n - 1), np.arange(n - 1)] = -1.0
         d[np.arange(n - 1), np.arange(1, n)] = 1.0
         self._d = d
-        self._solve = np.linalg.inv(point_weight * np.eye(n) + d.T @ d)
+        self._solve = np.linalg.inv(self.point_weight * np.eye(n) + d.T @ d)
         self.reset()
 
     def reset(self) -> None:

@@ -4,12 +4,19 @@ the behaviour does not depend on the sample rate)."""
 
 from __future__ import annotations
 
+from sphere.smoothing.params import Param, resolve
+
 
 class ConstantKalman:
-    def __init__(self, q_per_s: float = 1.0, r: float = 1.0):
-        if q_per_s < 0 or r <= 0:
-            raise ValueError("q_per_s must be ≥ 0 and r > 0")
-        self.q_per_s, self.r = q_per_s, r
+    PARAMS = {
+        "q_per_s": Param(0.01, "unit²/s", 0.0, 1e6, "process variance per second: how fast the held value may move"),
+        "r": Param(0.0001, "unit²", 1e-12, 1e6, "measurement variance (the jitter's)"),
+    }
+    GRID = {"q_per_s": [0.001, 0.01, 0.1], "r": [1e-5, 1e-4, 1e-3]}
+
+    def __init__(self, *args, **kwargs):
+        p = resolve(self.PARAMS, args, kwargs)
+        self.q_per_s, self.r = p["q_per_s"], p["r"]
         self.reset()
 
     def reset(self, x=None) -> None:

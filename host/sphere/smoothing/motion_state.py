@@ -18,6 +18,7 @@ import math
 
 from sphere.smoothing.curve import WindowedCurveSmoother
 from sphere.smoothing.kalman_rest import ConstantKalman
+from sphere.smoothing.params import Param, resolve
 from sphere.smoothing.particle import ParticleFilterAR2
 from sphere.smoothing.spring import CriticallyDampedSpring
 
@@ -25,31 +26,34 @@ REST, SLOW, FAST = "rest", "slow", "fast"
 
 
 class MotionStateFilter:
-    def __init__(
-        self,
-        rest_speed: float = 20.0,
-        fast_speed: float = 300.0,
-        hysteresis: float = 0.3,
-        speed_tau_s: float = 0.02,
-        rest_q_per_s: float = 5.0,
-        rest_r: float = 1.0,
-        slow_m: int = 2,
-        fast: str = "pass",
-        particle_process_sigma: float = 1.0,
-        particle_obs_sigma: float = 1.0,
-        t_smooth_s: float = 0.03,
-        settle: float = 0.05,
-    ):
-        if not 0 < rest_speed < fast_speed or not 0 <= hysteresis < 1:
-            raise ValueError("need 0 < rest_speed < fast_speed and 0 ≤ hysteresis < 1")
-        if fast not in ("pass", "particle"):
-            raise ValueError("fast is 'pass' or 'particle'")
+    PARAMS = {
+        "rest_speed": Param(1.0, "unit/s", 1e-6, 1e6, "below this speed the signal is at rest (constant Kalman)"),
+        "fast_speed": Param(20.0, "unit/s", 1e-6, 1e6, "from this speed the motion is fast (pass or particle)"),
+        "hysteresis": Param(0.3, "", 0.0, 0.99, "a state is entered above threshold·(1+h), left below threshold·(1−h)"),
+        "speed_tau_s": Param(0.02, "s", 0.0, 10.0, "time constant of the speed estimate"),
+        "rest_q_per_s": Param(0.01, "unit²/s", 0.0, 1e6, "the rest Kalman filter's process variance per second"),
+        "rest_r": Param(0.0001, "unit²", 1e-12, 1e6, "the rest Kalman filter's measurement variance"),
+        "slow_m": Param(2, "samples", 2, 50, "the curve smoother's delay m when slow", integer=True),
+        "fast": Param("pass", "", 0, 0, "`pass` or `particle` (the SIR particle filter) when fast", choices=("pass", "particle")),
+        "particle_process_sigma": Param(0.1, "unit", 1e-9, 1e6, "the particle filter's model noise per sample"),
+        "particle_obs_sigma": Param(0.05, "unit", 1e-9, 1e6, "the particle filter's observation σ"),
+        "t_smooth_s": Param(0.03, "s", 0.001, 10.0, "the handover spring's smoothing time"),
+        "settle": Param(0.001, "unit", 0.0, 1e6, "the spring lets go once the offset is below this"),
+    }
+    GRID = {"rest_speed": [0.5, 1.0, 2.0], "fast_speed": [5.0, 20.0], "rest_q_per_s": [0.001, 0.01, 0.1], "t_smooth_s": [0.02, 0.05]}
+
+    def __init__(self, *args, **kwargs):
+        p = resolve(MotionStateFilter.PARAMS, args, kwargs)
+        rest_speed, fast_speed, hysteresis = p["rest_speed"], p["fast_speed"], p["hysteresis"]
+        if not 0 < rest_speed < fast_speed:
+            raise ValueError("need 0 < rest_speed < fast_speed")
         self.rest_speed, self.fast_speed, self.hysteresis = rest_speed, fast_speed, hysteresis
-        self.speed_tau_s, self.settle = speed_tau_s, settle
-        self._rest = ConstantKalman(rest_q_per_s, rest_r)
-        self._slow = WindowedCurveSmoother(slow_m)
-        self._fast = ParticleFilterAR2(process_sigma=particle_process_sigma, obs_sigma=particle_obs_sigma) if fast == "particle" else None
-        self._spring = CriticallyDampedSpring(t_smooth_s)
+        self.speed_tau_s, self.settle = p["speed_tau_s"], p["settle"]
+        self._rest = ConstantKalman(q_per_s=p["rest_q_per_s"], r=p["rest_r"])
+        self._slow = WindowedCurveSmoother(m=p["slow_m"])
+        self._fast = (ParticleFilterAR2(process_sigma=p["particle_process_sigma"], obs_sigma=p["particle_obs_sigma"])
+                      if p["fast"] == "particle" else None)
+        self._spring = CriticallyDampedSpring(t_smooth_s=p["t_smooth_s"])
         self.reset()
 
     def reset(self) -> None:

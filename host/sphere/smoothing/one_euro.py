@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import math
 
+from sphere.smoothing.params import Param, resolve
+
 
 def _alpha(cutoff_hz: float, dt_s: float) -> float:
     tau = 1.0 / (2.0 * math.pi * cutoff_hz)
@@ -16,10 +18,18 @@ def _alpha(cutoff_hz: float, dt_s: float) -> float:
 
 
 class OneEuroFilter:
-    def __init__(self, min_cutoff_hz: float = 1.0, beta: float = 0.007, d_cutoff_hz: float = 1.0):
-        if min_cutoff_hz <= 0 or d_cutoff_hz <= 0 or beta < 0:
-            raise ValueError("min_cutoff_hz and d_cutoff_hz must be > 0, beta ≥ 0")
-        self.min_cutoff_hz, self.beta, self.d_cutoff_hz = min_cutoff_hz, beta, d_cutoff_hz
+    PARAMS = {
+        "min_cutoff_hz": Param(1.0, "Hz", 0.01, 100.0, "cutoff of the low-pass when the signal is still"),
+        "beta": Param(0.3, "1/unit", 0.0, 1000.0, "how fast the cutoff rises with speed (Hz per unit/s; °/s for angles)"),
+        "d_cutoff_hz": Param(1.0, "Hz", 0.01, 100.0, "cutoff of the speed estimate"),
+    }
+    GRID = {"min_cutoff_hz": [0.5, 1.0, 2.0, 4.0], "beta": [0.1, 0.3, 1.0, 3.0], "d_cutoff_hz": [1.0]}
+
+    def __init__(self, *args, **kwargs):
+        p = resolve(self.PARAMS, args, kwargs)
+        if p["min_cutoff_hz"] <= 0 or p["d_cutoff_hz"] <= 0:
+            raise ValueError("min_cutoff_hz and d_cutoff_hz must be > 0")
+        self.min_cutoff_hz, self.beta, self.d_cutoff_hz = p["min_cutoff_hz"], p["beta"], p["d_cutoff_hz"]
         self.reset()
 
     def reset(self) -> None:

@@ -7,15 +7,25 @@ from __future__ import annotations
 
 import numpy as np
 
+from sphere.smoothing.params import Param, resolve
+
 
 class ParticleFilterAR2:
-    def __init__(self, particles: int = 100, a1: float = 2.0, a2: float = -1.0, process_sigma: float = 1.0,
-                 obs_sigma: float = 1.0, seed: int = 0):
-        if particles < 2 or process_sigma <= 0 or obs_sigma <= 0:
-            raise ValueError("need ≥ 2 particles and positive sigmas")
-        self.particles, self.a1, self.a2 = particles, a1, a2
-        self.process_sigma, self.obs_sigma = process_sigma, obs_sigma
-        self._seed = seed
+    PARAMS = {
+        "particles": Param(100, "", 2, 10000, "number of particles (the paper: 100)", integer=True),
+        "a1": Param(2.0, "", -10.0, 10.0, "A1 of the AR(2) motion model (2 with A2 = −1: constant velocity)"),
+        "a2": Param(-1.0, "", -10.0, 10.0, "A2 of the AR(2) motion model"),
+        "process_sigma": Param(0.05, "unit", 1e-9, 1e6, "σ of the model's noise B_t per sample"),
+        "obs_sigma": Param(0.05, "unit", 1e-9, 1e6, "σ of the observation (the jitter)"),
+        "seed": Param(0, "", 0, 2**31 - 1, "random seed (runs repeat exactly)", integer=True),
+    }
+    GRID = {"process_sigma": [0.02, 0.1, 0.5], "obs_sigma": [0.02, 0.1]}
+
+    def __init__(self, *args, **kwargs):
+        p = resolve(self.PARAMS, args, kwargs)
+        self.particles, self.a1, self.a2 = p["particles"], p["a1"], p["a2"]
+        self.process_sigma, self.obs_sigma = p["process_sigma"], p["obs_sigma"]
+        self._seed = p["seed"]
         self.reset()
 
     def reset(self) -> None:

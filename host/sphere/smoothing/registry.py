@@ -1,52 +1,56 @@
-"""Filters by name, with their default parameters and the grid `sphere bench pointer` tunes over."""
+"""Every smoothing filter by name: the one list the daemon's pointer, the 3-D stream and
+`sphere bench pointer` choose from. A new filter = its module (a class with ``PARAMS``, ``GRID``,
+``reset()`` and ``update(x, dt_s) -> y``) + one line here."""
 
 from __future__ import annotations
 
+import importlib
 import itertools
 
-from sphere.smoothing.motion_state import MotionStateFilter
-from sphere.smoothing.one_euro import OneEuroFilter
-from sphere.smoothing.particle import ParticleFilterAR2
-
-
-class PassThrough:
-    def reset(self) -> None:
-        pass
-
-    def update(self, x, dt_s: float):
-        return tuple(x)
-
-
-#: name → (factory, tuning grid: parameter → candidate values)
+#: name → "module:Class" (imported when first used)
 FILTERS = {
-    "none": (PassThrough, {}),
-    "one-euro": (
-        OneEuroFilter,
-        {"min_cutoff_hz": [0.3, 0.6, 1.0, 2.0, 4.0], "beta": [0.0005, 0.002, 0.005, 0.01, 0.03], "d_cutoff_hz": [1.0]},
-    ),
-    "motion-state": (
-        MotionStateFilter,
-        {"rest_speed": [40.0, 80.0], "fast_speed": [150.0, 400.0], "rest_q_per_s": [0.1, 0.5, 2.0], "t_smooth_s": [0.02, 0.05]},
-    ),
-    "motion-state-particle": (
-        lambda **kw: MotionStateFilter(fast="particle", **kw),
-        {"rest_speed": [40.0, 80.0], "fast_speed": [150.0, 400.0], "rest_q_per_s": [0.5], "particle_process_sigma": [5.0, 20.0], "particle_obs_sigma": [1.0]},
-    ),
-    "particle": (ParticleFilterAR2, {"process_sigma": [2.0, 10.0, 30.0], "obs_sigma": [1.0, 3.0]}),
+    "none": "sphere.smoothing.passthrough:PassThrough",
+    "tremor": "sphere.smoothing.tremor:TremorFilter",
+    "tiered": "sphere.smoothing.tiered:TieredSmoothing",
+    "one-euro": "sphere.smoothing.one_euro:OneEuroFilter",
+    "constant-kalman": "sphere.smoothing.kalman_rest:ConstantKalman",
+    "curve": "sphere.smoothing.curve:WindowedCurveSmoother",
+    "bilateral": "sphere.smoothing.bilateral:BilateralAngleFilter",
+    "spring": "sphere.smoothing.spring:CriticallyDampedSpring",
+    "particle": "sphere.smoothing.particle:ParticleFilterAR2",
+    "motion-state": "sphere.smoothing.motion_state:MotionStateFilter",
+    "motion-state-particle": "sphere.smoothing.motion_state_particle:MotionStateParticle",
 }
 
+DEFAULT = "tremor"
 
-def make_filter(name: str, **params):
+
+class UnknownFilter(ValueError):
+    pass
+
+
+def filter_class(name: str):
     try:
-        factory, _ = FILTERS[name]
+        spec = FILTERS[name]
     except KeyError:
-        raise ValueError(f"unknown filter {name!r}; choose from {', '.join(FILTERS)}") from None
-    return factory(**params)
+        raise UnknownFilter(f"unknown smoothing filter {name!r}; choose from {', '.join(FILTERS)}") from None
+    module, _, attr = spec.partition(":")
+    return getattr(importlib.import_module(module), attr)
+
+
+def params(name: str) -> dict:
+    """The filter's parameters: name → sphere.smoothing.params.Param (default, unit, range, meaning)."""
+    return dict(filter_class(name).PARAMS)
+
+
+def make_filter(name: str, **values):
+    """A new filter by name; ``values`` override the defaults (ValueError says what is wrong)."""
+    return filter_class(name)(**values)
 
 
 def grid(name: str):
-    """Every parameter combination of a filter's tuning grid."""
-    _, space = FILTERS[name]
+    """Every parameter combination of a filter's tuning grid (one empty setting when it has none)."""
+    space = filter_class(name).GRID
     keys = list(space)
     for values in itertools.product(*(space[k] for k in keys)):
         yield dict(zip(keys, values))

@@ -8,12 +8,15 @@ from __future__ import annotations
 
 import math
 
+from sphere.smoothing.params import Param, resolve
+
 
 class CriticallyDampedSpring:
-    def __init__(self, t_smooth_s: float = 0.05):
-        if t_smooth_s <= 0:
-            raise ValueError("t_smooth_s must be > 0")
-        self.t_smooth_s = t_smooth_s
+    PARAMS = {"t_smooth_s": Param(0.05, "s", 0.001, 10.0, "smoothing time; the spring's rate f = 2 / t_smooth")}
+    GRID = {"t_smooth_s": [0.01, 0.02, 0.05]}
+
+    def __init__(self, *args, **kwargs):
+        self.t_smooth_s = resolve(self.PARAMS, args, kwargs)["t_smooth_s"]
         self.reset()
 
     @property
