@@ -174,6 +174,11 @@ typedef struct {
 	uint32_t adapter_buffer, buffered;
 	uint64_t host_dropped, captured;
 	FILE *times; /* --capture-times: (u64 capture offset, f64 simulated s) at every frame delimiter */
+	/* --adapter: USB packets and latency (0 packet: bytes reach the host as they leave the UART) */
+	uint32_t packet, pending;
+	uint8_t pend[64];
+	avr_cycle_count_t latency_cycles, last_packet;
+	avr_irq_t *pty_in;
 } uart_out_t;
 
 static uart_out_t uart_out;
@@ -199,19 +204,9 @@ static void log_fault(double t_s, const char *kind, int chip)
 
 static void board_fault(board_t *b, const char *kind, int chip) { log_fault(board_time_s(b), kind, chip); }
 
-static void uart_hook(struct avr_irq_t *irq, uint32_t value, void *param)
+/* A byte reaches the host: into the capture (and its time), and the pty when there is one. */
+static void host_receives(uart_out_t *u, uint8_t byte)
 {
-	(void)irq;
-	uart_out_t *u = param;
-	uint8_t byte = (uint8_t)value;
-	if (!u->host_reading) { /* the adapter keeps what fits in its buffer and drops the rest */
-		if (u->buffered >= u->adapter_buffer) {
-			u->host_dropped++;
-			u->bytes++;
-			return;
-		}
-		u->buffered++;
-	}
 	if (u->capture)
 		fputc(byte, u->capture);
 	u->captured++;
@@ -221,6 +216,35 @@ static void uart_hook(struct avr_irq_t *irq, uint32_t value, void *param)
 		fwrite(&off, 8, 1, u->times);
 		fwrite(&t, 8, 1, u->times);
 	}
+	if (u->pty_in)
+		avr_raise_irq(u->pty_in, byte);
+}
+
+/* The adapter sends what it holds as one USB packet. */
+static void adapter_flush(uart_out_t *u)
+{
+	for (uint32_t i = 0; i < u->pending; i++)
+		host_receives(u, u->pend[i]);
+	u->pending = 0;
+	u->last_packet = u->avr->cycle;
+}
+
+/* FTDI FT232R (AN232B-04): a packet when 62 data bytes are waiting, or when the latency timer (16 ms) runs
+ * out with data waiting. CH340: no latency timer in its datasheet; the model sends a 32-byte packet when
+ * full, or what is waiting at each 1 ms USB frame. */
+static avr_cycle_count_t adapter_timer(avr_t *avr, avr_cycle_count_t when, void *param)
+{
+	uart_out_t *u = param;
+	if (u->pending && when - u->last_packet >= u->latency_cycles)
+		adapter_flush(u);
+	return when + avr->frequency / 1000;
+}
+
+static void uart_hook(struct avr_irq_t *irq, uint32_t value, void *param)
+{
+	(void)irq;
+	uart_out_t *u = param;
+	uint8_t byte = (uint8_t)value;
 	u->bytes++;
 	if (byte == 0) {
 		if (u->last_nonzero)
@@ -228,6 +252,20 @@ static void uart_hook(struct avr_irq_t *irq, uint32_t value, void *param)
 		u->last_nonzero = 0;
 	} else
 		u->last_nonzero = 1;
+	if (!u->host_reading) { /* the adapter keeps what fits in its buffer and drops the rest */
+		if (u->buffered >= u->adapter_buffer) {
+			u->host_dropped++;
+			return;
+		}
+		u->buffered++;
+	}
+	if (!u->packet) {
+		host_receives(u, byte);
+		return;
+	}
+	u->pend[u->pending++] = byte;
+	if (u->pending >= u->packet)
+		adapter_flush(u);
 }
 
 /* Bytes for the device's UART from a file of lines "SECONDS HEX HEX ...". */
@@ -417,7 +455,9 @@ static void usage(FILE *f)
 		"  --reset-at T         the AVR resets at T s, no chip left holding SDA (repeatable)\n"
 		"  --sda-held           at power-up the magnetometer holds SDA low (left mid-read by a reset)\n"
 		"  --host-stall T0:T1   the host stops reading from T0 to T1 s: the adapter's buffer fills, bytes drop\n"
-		"  --adapter NAME       the USB-serial adapter: ftdi (256-byte buffer, default) or ch340 (32 bytes)\n"
+		"  --adapter NAME       the USB-serial adapter between the UART and the host (capture, pty): ftdi (62-byte\n"
+		"                       packets, 16 ms latency timer, 256-byte buffer) or ch340 (32-byte packets each 1 ms\n"
+		"                       frame, 32-byte buffer); default none: bytes reach the host as they are sent\n"
 		"  --capture-times FILE at each frame delimiter in the capture: u64 bytes captured so far, f64 simulated s\n"
 		"  --simavr-i2c-timing  simavr's 1 us per I2C step (default: 9 SCL periods a byte at the TWBR rate)\n"
 		"  --i2c-real-timing    (the default; kept for old scripts)\n"
@@ -437,7 +477,7 @@ int main(int argc, char **argv)
 	imp.seed = 1;
 	int clocks_random = 0, sda_held = 0, n_brownouts = 0, n_stalls = 0, n_resets_mid = 0, n_resets_at = 0;
 	double glitch_rate = 0, brownouts[MAX_FAULTS], resets_mid[MAX_FAULTS], host_stalls[MAX_FAULTS][2], resets_at[MAX_FAULTS];
-	const char *adapter = "ftdi", *times_path = NULL;
+	const char *adapter = NULL, *times_path = NULL;
 	char tpin_port = 'B', lpin_port = 0;
 	int tpin_bit = 5, lpin_bit = 0;
 	fault_t faults[MAX_FAULTS];
@@ -610,7 +650,13 @@ int main(int argc, char **argv)
 		return 1;
 	}
 	uart_out.host_reading = 1;
-	uart_out.adapter_buffer = strcmp(adapter, "ch340") ? 256 : 32;
+	uart_out.adapter_buffer = adapter && !strcmp(adapter, "ch340") ? 32 : 256;
+	if (adapter) {
+		int ftdi = !strcmp(adapter, "ftdi");
+		uart_out.packet = ftdi ? 62 : 32;
+		uart_out.latency_cycles = ftdi ? avr->frequency / 1000 * 16 : 0; /* CH340: every 1 ms frame */
+		avr_cycle_timer_register(avr, avr->frequency / 1000, adapter_timer, &uart_out);
+	}
 
 	/* UART 0 */
 	uint32_t flags = 0;
@@ -637,6 +683,10 @@ int main(int argc, char **argv)
 	if (use_pty) {
 		uart_pty_init(avr, &pty);
 		uart_pty_connect(&pty, '0');
+		if (adapter) { /* the adapter's packets reach the pty, not the UART's bytes one by one */
+			avr_unconnect_irq(avr_io_getirq(avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_OUTPUT), pty.irq + IRQ_UART_PTY_BYTE_IN);
+			uart_out.pty_in = pty.irq + IRQ_UART_PTY_BYTE_IN;
+		}
 		printf("sphere-board: UART on %s\n", pty.port[0].slavename);
 		fflush(stdout);
 	}
@@ -693,6 +743,10 @@ int main(int argc, char **argv)
 		if (resets != resets_seen) { /* simavr's reset cancelled every cycle timer: ours start again */
 			resets_seen = resets;
 			board_restart_timers(&board);
+			if (adapter) { /* the adapter is not reset with the AVR, but simavr cancelled its timer */
+				avr_cycle_timer_cancel(avr, adapter_timer, &uart_out);
+				avr_cycle_timer_register(avr, avr->frequency / 1000, adapter_timer, &uart_out);
+			}
 			if (send_path) {
 				avr_cycle_timer_cancel(avr, uart_send_timer, NULL);
 				avr_cycle_timer_register(avr, avr->frequency / 10000, uart_send_timer, NULL);
@@ -788,6 +842,8 @@ int main(int argc, char **argv)
 	}
 	double wall = wall_now() - wall0, cpu = cpu_now() - cpu0;
 	double sim_s = (double)avr->cycle / avr->frequency;
+	if (uart_out.pending)
+		adapter_flush(&uart_out); /* what the adapter still held */
 	if (uart_out.capture)
 		fclose(uart_out.capture);
 	if (uart_out.times)
@@ -865,6 +921,7 @@ int main(int argc, char **argv)
 		fprintf(sf, "  \"hmc5883l_measurements\": %u,\n  \"hmc5883l_held_by_lock\": %u,\n",
 			board.hmc.measurements, board.hmc.dropped_locked);
 		fprintf(sf, "  \"host_dropped_bytes\": %llu,\n", (unsigned long long)uart_out.host_dropped);
+		fprintf(sf, "  \"adapter\": %s%s%s,\n", adapter ? "\"" : "", adapter ? adapter : "null", adapter ? "\"" : "");
 		fprintf(sf, "  \"faults\": [");
 		for (size_t i = 0; i < n_fault_log; i++)
 			fprintf(sf, "%s{\"t\": %.6f, \"kind\": \"%s\", \"chip\": %s%s%s}", i ? ", " : "", fault_log[i].t_s,

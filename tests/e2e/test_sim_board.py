@@ -196,3 +196,32 @@ def test_the_board_stops_when_sphere_sim_is_killed():
     finally:
         if proc.poll() is None:
             proc.kill()
+
+
+def test_usb_serial_adapters_deliver_in_packets(tmp_path):
+    """--adapter: the host gets the same bytes, later and in packets: an FTDI FT232R sends 62 data bytes
+    at once or what it holds when its 16 ms latency timer runs out (FTDI AN232B-04); the CH340 model sends
+    at each 1 ms USB frame. --capture-times gives the time each frame's delimiter reached the host."""
+    import numpy as np
+
+    from sphere.sim import trace as T
+    from sphere.sim.board import run_board
+    from simscenarios import need_board, need_testfw
+
+    need_board()
+    elf = need_testfw()
+    trace = T.to_chips(T.still(2.0)).write(tmp_path / "still.bin")
+    got = {}
+    for adapter in (None, "ftdi", "ch340"):
+        cap, times = tmp_path / f"{adapter}.cap", tmp_path / f"{adapter}.times"
+        r = run_board(elf, trace, 2.0, cap, capture_times=times, **({"adapter": adapter} if adapter else {}))
+        assert r.returncode == 0, r.stderr
+        rec = np.frombuffer(times.read_bytes(), dtype=[("off", "<u8"), ("t", "<f8")])
+        got[adapter] = (cap.read_bytes(), rec["t"])
+    wire = got[None][1]
+    for adapter, (most, least) in (("ftdi", (0.017, 0.002)), ("ch340", (0.0011, 0.0))):
+        data, t = got[adapter]
+        assert data == got[None][0]
+        delay = t - wire
+        assert delay.min() >= 0 and delay.max() <= most and delay.mean() >= least, (adapter, delay.max(), delay.mean())
+    assert len(np.unique(got["ftdi"][1])) < 0.6 * len(wire)  # frames share packets

@@ -81,7 +81,8 @@ def add_arguments(p) -> None:
     p.add_argument("--host-stall", action="append", default=[], metavar="T0:T1",
                    help="the host stops reading from T0 to T1 s (the adapter's buffer overflows)")
     p.add_argument("--adapter", choices=["ftdi", "ch340"], default=None,
-                   help="the USB-serial adapter (its buffer size for --host-stall)")
+                   help="a USB-serial adapter between the UART and the host: FTDI (62-byte packets, 16 ms latency "
+                        "timer) or CH340 (each 1 ms USB frame); default none")
     p.add_argument("--accuracy", action="store_true",
                    help="compare the firmware's quaternions with BROAD's optical reference and the host Madgwick")
     p.add_argument("--beta", type=float, default=DEFAULT_BETA, help="β of the host Madgwick (default the firmware's)")
