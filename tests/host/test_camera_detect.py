@@ -89,3 +89,27 @@ def test_no_ball_in_view_and_a_ball_half_out_of_the_frame(scene):
     edge = np.array([CAM.undistort([[639.0, 240.0]])[0][0] * 1.0, 0.0, 1.0])  # centre on the right border
     d = det.detect(_still(scene, edge))
     assert d is None or np.linalg.norm(d.center_cam - edge) < 0.02
+
+
+@pytest.mark.parametrize("twist,tilt", [(45.0, 10.0), (0.0, 0.0)])
+def test_a_printed_marker_gives_the_orientation(twist, tilt):
+    """An ArUco marker wrapped onto the shell, 0.4 m away: the ball is still found by its outline and the
+    marker's corners, met with that sphere, give its orientation to within 2°."""
+    from scipy.spatial.transform import Rotation
+
+    from sphere.camera.marker import MarkerDetector, MarkerSpec
+
+    R_wc = render.look_at([0, 0, 0], [1, 0, 0])
+    face = np.array([[0, 0, -1], [-1, 0, 0], [0, 1, 0]], float)  # body +z towards the camera
+    R_wb = face @ Rotation.from_euler("z", twist, degrees=True).as_matrix() \
+        @ Rotation.from_euler("x", tilt, degrees=True).as_matrix()
+    sc = render.Scene(CAM, R_wc, np.zeros(3), marker=MarkerSpec(), body_rotation=lambda t: R_wb)
+    p = np.array([0.4, 0.0, 0.0])
+    img = sc.render(0.2, 0.008, lambda t: p, 0)
+    d = BallDetector(CAM).detect(img)
+    assert d is not None and np.linalg.norm(d.center_cam - sc.to_camera(p)) < 0.002
+    pose = MarkerDetector(CAM).detect(img, d.center_px, d.radius_px, d.center_cam)
+    assert pose is not None
+    R_true = R_wc.T @ R_wb
+    err = np.degrees(np.arccos(np.clip((np.trace(pose.R_cam_body @ R_true.T) - 1) / 2, -1, 1)))
+    assert err < 2.0

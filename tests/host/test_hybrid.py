@@ -148,3 +148,27 @@ def test_output_at_the_imu_rate_between_frames():
     assert ok[t > 0.1].all()  # one output per IMU sample (200 Hz), not per frame (30 Hz)
     steps = np.linalg.norm(np.diff(est[t > 3.0], axis=0), axis=1)
     assert steps.max() < 0.01  # no jumps at the frames
+
+
+def test_a_marker_corrects_the_heading_the_host_filter_lost():
+    """After the alignment formed, the host filter's heading drifts by 20° (a magnet nearby); marker fixes
+    of the true orientation bring the output back, and a wild marker fix is gated."""
+    from scipy.spatial.transform import Rotation
+
+    *_, trk = _run_tracker(seconds=4.0)
+    R = trk.alignment.R  # earth → camera as learnt; the body's true orientation is the identity
+    drifted = Rotation.from_euler("z", 20, degrees=True).as_quat()[[3, 0, 1, 2]]  # w, x, y, z
+    t = trk.t
+    for k in range(15):
+        trk.imu(t + 0.005 * (k + 1), drifted, [0.0, 0.0, hybrid.STANDARD_GRAVITY])
+    before = trk.orientation(drifted)
+    assert np.degrees(np.arccos((np.trace(before @ R.T) - 1) / 2)) > 19
+    seen = R  # the marker sees the body at its true orientation: camera ← body = R · I
+    states = [trk.marker(trk.t - 0.04 + 0.001 * k, seen) for k in range(3)]
+    assert states[0] == "gated" and states[-1] == "reacquired"  # 20° off: three agreeing fixes re-acquire
+    for _ in range(10):
+        assert trk.marker(trk.t - 0.04, seen) == "accepted"
+    after = trk.orientation(drifted)
+    assert np.degrees(np.arccos(np.clip((np.trace(after @ R.T) - 1) / 2, -1, 1))) < 0.5
+    wild = Rotation.from_euler("z", 60, degrees=True).as_matrix() @ R
+    assert trk.marker(trk.t - 0.04, wild) == "gated"

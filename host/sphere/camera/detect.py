@@ -109,6 +109,9 @@ class BallDetector:
         along, across, bright = hue_projection(bgr, self.hue_deg)
         mask = ((along > 0.45 * bright) & (np.abs(across) < 0.35 * along) & (bright > 30)).astype(np.uint8)
         mask = cv2.morphologyEx(mask, cv2.MORPH_OPEN, np.ones((3, 3), np.uint8))
+        # holes filled (a marker, a highlight on the ball): each region's outer contour, filled
+        contours, _ = cv2.findContours(mask, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
+        cv2.drawContours(mask, contours, -1, 1, -1)
         n, labels, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)
         if n <= 1:
             return []
@@ -160,10 +163,13 @@ class BallDetector:
         ok = inside[:, inner].all(axis=1) & (inside[:, outer].sum(axis=1) >= 3)
         if not ok.any():
             return np.zeros((0, 2))
-        ball = np.median(prof[ok][:, inner].reshape(-1, 3), axis=0)
-        along_b, across_b, bright_b = (v.item() for v in hue_projection(ball[None, None, ::-1], self.hue_deg))
-        if not (along_b > 0.45 * bright_b and abs(across_b) < 0.35 * along_b):
-            return np.zeros((0, 2))  # what the rays start in is not the ball's colour (a hand over it)
+        # the ball's colour: the inner samples of its hue (not a marker, a highlight or a hand over it)
+        inner_rgb = prof[ok][:, inner].reshape(-1, 3)
+        a_i, c_i, b_i = hue_projection(inner_rgb[None, :, ::-1], self.hue_deg)
+        hue_ok = ((a_i > 0.45 * b_i) & (np.abs(c_i) < 0.35 * a_i) & (b_i > 30))[0]
+        if hue_ok.sum() < max(8, 0.3 * len(inner_rgb)):
+            return np.zeros((0, 2))  # what the rays start in is mostly not the ball's colour
+        ball = np.median(inner_rgb[hue_ok], axis=0)
         bhat = ball / max(float(np.linalg.norm(ball)), 1e-6)
         self._last_colour = bhat
         if self.colour is not None and float(bhat @ self.colour) < np.cos(np.radians(self.colour_tol_deg)):
@@ -205,10 +211,12 @@ class BallDetector:
             val[fb] = (along - lev_out[:, None]) / np.maximum(lev_in - lev_out, 1e-6)[:, None]
             use[fb] = okf
         # one profile per ray, ½ crossing
+        # the outermost crossing: a marker, a highlight or a seam inside the ball does not stop the ray
         search = s > 0.5 * r0
-        below = (val < 0.5) & search[None, :]
-        idx = np.argmax(below, axis=1)
-        use &= below[rows, idx] & (idx > 0) & inside[rows, idx]
+        above = (val >= 0.5) & search[None, :] & inside
+        last = n - 1 - np.argmax(above[:, ::-1], axis=1)
+        idx = np.minimum(last + 1, n - 1)
+        use &= above.any(axis=1) & (last + 1 < n) & inside[rows, idx]
         if not use.any():
             return np.zeros((0, 2))
         i, r = idx[use], rows[use]

@@ -38,6 +38,7 @@ class Run:
     rest: np.ndarray  # (N,) bool: BROAD's movement flag off
     losses: list = field(default_factory=list)  # (t0, t1) of full occlusions
     alignment_ready_s: float | None = None  # when the hybrid's camera-to-earth rotation formed
+    orientation: dict | None = None  # with a marker on the shell: orientation errors (°)
 
 
 def hint_from(tracker, camera, t_exposure: float, radius_m: float, last=None):
@@ -53,6 +54,15 @@ def hint_from(tracker, camera, t_exposure: float, radius_m: float, last=None):
 def run(rt: RenderedTrial, hue_deg: float = 120.0) -> Run:
     cam = rt.scene.camera
     det = BallDetector(cam, hue_deg=hue_deg, radius_m=rt.scene.radius_m)
+    mdet = None
+    if rt.scene.marker is not None:
+        from sphere.camera.marker import MarkerDetector
+
+        mdet = MarkerDetector(cam, rt.scene.marker, rt.scene.radius_m)
+    markers = 0
+    n_imu = len(rt.t)
+    R_host = np.full((n_imu, 3, 3), np.nan)  # the host filter's orientation through the alignment
+    R_hyb = np.full((n_imu, 3, 3), np.nan)  # the same with the marker's heading correction
     hyb = CameraImuTracker()
     ckf = CameraImuTracker(use_imu=False)
     tr = rt.trial
@@ -86,6 +96,11 @@ def run(rt: RenderedTrial, hue_deg: float = 120.0) -> Run:
             if d is not None:
                 detected += 1
                 hyb.camera(t_exp, d.center_cam, d.cov)
+                if mdet is not None:
+                    pose = mdet.detect(f.image, d.center_px, d.radius_px, d.center_cam)
+                    if pose is not None:
+                        markers += 1
+                        hyb.marker(t_exp, pose.R_cam_body)
                 last_cam = d.center_cam
                 hint = (d.center_px, d.radius_px)
                 ckf.camera(t_exp, d.center_cam, d.cov)
@@ -100,6 +115,9 @@ def run(rt: RenderedTrial, hue_deg: float = 120.0) -> Run:
         p = hyb.imu(rt.t[i], q, a, lead_s=IMU_LATENCY_S)
         if p is not None:
             est["hybrid"][i] = p
+        if mdet is not None and hyb.alignment.ready:
+            R_host[i] = hyb.alignment.R @ _rot(q)
+            R_hyb[i] = hyb.orientation(q)
         p = ckf.imu(rt.t[i], q, a, lead_s=IMU_LATENCY_S)
         if p is not None:
             est["camera-kf"][i] = p
@@ -114,8 +132,28 @@ def run(rt: RenderedTrial, hue_deg: float = 120.0) -> Run:
         dR = hyb.alignment.R @ R_true.T
         align_err = float(np.degrees(np.arccos(np.clip((np.trace(dR) - 1) / 2, -1, 1))))
     losses = [(o.t0, o.t1) for o in rt.scene.occlusions if o.cover >= 1.0]
-    return Run(t_imu_host, truth, est, len(start), detected, np.array(per_frame), np.array(det_ms),
+    run_ = Run(t_imu_host, truth, est, len(start), detected, np.array(per_frame), np.array(det_ms),
                dict(hyb.stats), align_err, ~tr.movement.astype(bool), losses, t_ready)
+    if mdet is not None:
+        run_.orientation = _orientation_errors(rt, R_host, R_hyb, markers)
+    return run_
+
+
+def _orientation_errors(rt: RenderedTrial, R_host, R_hyb, markers: int) -> dict:
+    """RMS angle (°) between the ball's true orientation in the camera frame and the host filter's (through
+    the estimated alignment), without and with the marker's heading correction."""
+    R_true = np.einsum("ij,njk->nik", rt.scene.R_wc.T, np.array([_rot(q) if np.all(np.isfinite(q)) else
+                                                                  np.full((3, 3), np.nan) for q in rt.trial.opt_quat]))
+    out = {"frames_with_marker": markers}
+    for name, R in (("host_filter", R_host), ("with_marker", R_hyb)):
+        ok = np.all(np.isfinite(R), axis=(1, 2)) & np.all(np.isfinite(R_true), axis=(1, 2))
+        if ok.sum() < 10:
+            out[name + "_rms_deg"] = None
+            continue
+        tr = np.einsum("nij,nij->n", R[ok], R_true[ok])
+        ang = np.degrees(np.arccos(np.clip((tr - 1) / 2, -1, 1)))
+        out[name + "_rms_deg"] = float(np.sqrt(np.mean(ang * ang)))
+    return out
 
 
 def _true_alignment(rt: RenderedTrial):

@@ -73,6 +73,8 @@ class Scene:
     seed: int = 1
     read_noise: float = 2.0
     shot_noise: float = 0.6
+    marker: object = None  # a MarkerSpec printed on the shell (sphere.camera.marker), or None
+    body_rotation: object = None  # t ↦ 3×3 body → world rotation (needed with a marker)
 
     def __post_init__(self):
         self.R_wc = np.asarray(self.R_wc, float)
@@ -85,6 +87,7 @@ class Scene:
         self._rng = rng
         self._albedo = hue_rgb(self.hue_deg).astype(np.float32)
         self._light = np.array([0.3, -0.8, -0.5]) / np.linalg.norm([0.3, -0.8, -0.5])  # towards the light, camera frame
+        self._bitmap = self.marker.bitmap() if self.marker is not None else None
 
     def to_camera(self, p_world) -> np.ndarray:
         return (np.asarray(p_world, float) - self.cam_pos) @ self.R_wc
@@ -119,8 +122,11 @@ class Scene:
             y0, y1, x0, x1 = roi
             rays = cam.ray_map[y0:y1, x0:x1]
             acc = np.zeros(rays.shape, np.float32)
-            for C in centres:
-                acc += self._ball_layer(rays, C, img[y0:y1, x0:x1])
+            for t, C in zip(subs, centres):
+                R_cb = None
+                if self.marker is not None and self.body_rotation is not None:
+                    R_cb = self.R_wc.T @ self.body_rotation(t)
+                acc += self._ball_layer(rays, C, img[y0:y1, x0:x1], R_cb)
             img[y0:y1, x0:x1] = acc / len(centres)
         for occ in self.occlusions:
             if occ.t0 <= t_start < occ.t1:
@@ -161,7 +167,7 @@ class Scene:
             return None
         return y0, y1, x0, x1
 
-    def _ball_layer(self, rays, C, under):
+    def _ball_layer(self, rays, C, under, R_cb=None):
         D = float(np.linalg.norm(C))
         R = self.radius_m
         c = C / D
@@ -179,7 +185,14 @@ class Scene:
         half = self._light + np.array([0.0, 0.0, -1.0])
         half /= np.linalg.norm(half)
         spec = np.clip(nrm @ half.astype(np.float32), 0.0, 1.0) ** 40
-        col = (0.3 + 0.7 * lam)[..., None] * self._albedo * 255.0 + (60.0 * spec)[..., None]
+        albedo = np.broadcast_to(self._albedo, nrm.shape)
+        if R_cb is not None:
+            from sphere.camera.marker import texture_lookup
+
+            R_cm = (R_cb @ self.marker.mount).astype(np.float32)  # marker → camera
+            on, grey = texture_lookup(self.marker, self._bitmap, nrm @ R_cm, R)
+            albedo = np.where(on[..., None], (0.06 + 0.84 * grey)[..., None] * np.ones(3, np.float32), albedo)
+        col = (0.3 + 0.7 * lam)[..., None] * albedo * 255.0 + (60.0 * spec)[..., None]
         return under * (1 - cov) + col * cov
 
     def _hand(self, img, occ: Occlusion, C, t):

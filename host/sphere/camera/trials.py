@@ -85,7 +85,8 @@ def placement(pos: np.ndarray, distance_m: float, azimuth_off_deg: float = 45.0,
 
 
 def rendered_trial(name: str, start_s: float, seconds: float, distance_m: float = 1.0, camera: Camera | None = None,
-                   occlusions=(), hue_deg: float = 120.0, seed: int = 1, directory=None) -> RenderedTrial:
+                   occlusions=(), hue_deg: float = 120.0, seed: int = 1, directory=None,
+                   marker=None) -> RenderedTrial:
     """A slice of a BROAD trial, with the host filter's orientation (run from the trial's start, as the
     device would have been running) and the virtual camera placed beside it."""
     from sphere.fusion import registry
@@ -110,6 +111,32 @@ def rendered_trial(name: str, start_s: float, seconds: float, distance_m: float 
     t = np.arange(len(p)) / full.rate_hz
     pf = np.stack([np.interp(t, t[valid], p[valid, i]) for i in range(3)], axis=1)
     cam_pos, R_wc = placement(pf, distance_m)
+    body = None
+    if marker is not None:  # the marker turns with the sensor: BROAD's optical orientation, gaps held
+        from sphere.fusion.hybrid import _rot
+
+        qo = sl.opt_quat.copy()
+        good = np.all(np.isfinite(qo), axis=1)
+        if not good.any():
+            raise ValueError(f"trial {full.name} has no optical orientation in this stretch for the marker")
+        idx = np.maximum.accumulate(np.where(good, np.arange(len(qo)), 0))
+        idx[: np.argmax(good)] = np.argmax(good)
+        qo = qo[idx]
+
+        def body(tt, _q=qo, _rate=full.rate_hz):
+            return _rot(_q[int(np.clip(round(tt * _rate), 0, len(_q) - 1))])
+
+        if marker.face == "auto":  # on the face of the sensor that is turned to the camera most of the time
+            from dataclasses import replace
+
+            view = R_wc[:, 2]  # the camera's optical axis in the world
+            faces = {f"{sg}{ax}": 0.0 for sg in "+-" for ax in "xyz"}
+            for k in range(0, len(qo), 10):
+                Rb = _rot(qo[k])
+                for f in faces:
+                    v = Rb[:, "xyz".index(f[1])] * (1 if f[0] == "+" else -1)
+                    faces[f] += float(-v @ view > 0.5)
+            marker = replace(marker, face=max(faces, key=faces.get))
     scene = render.Scene(camera or Camera.webcam(), R_wc, cam_pos, hue_deg=hue_deg, seed=seed,
-                         occlusions=list(occlusions))
+                         occlusions=list(occlusions), marker=marker, body_rotation=body)
     return RenderedTrial(full.name, sl, t, pf, valid, scene, q)

@@ -36,6 +36,9 @@ def add_arguments(p) -> None:
     p.add_argument("--seconds", type=float, default=12.0, help="length of each stretch (default 12, at least 9)")
     p.add_argument("--distance", type=float, default=1.0, help="camera to the mean ball position, m (default 1.0)")
     p.add_argument("--hue", type=float, default=120.0, help="the ball's hue in degrees (default 120, green)")
+    p.add_argument("--marker", action="store_true",
+                   help="print an ArUco marker (DICT_4X4_50 id 7, 35 mm) on the shell (on the face of the sensor "
+                        "turned to the camera most of the time): the camera corrects the host filter's heading")
     p.add_argument("--json", metavar="OUT", help="write the results as JSON")
     p.add_argument("--plot", metavar="DIR", help="write PNG plots (error over time per trial, summary bars)")
 
@@ -76,8 +79,13 @@ def run(args) -> int:
     runs = {}
     for name, start in _parse(args.trials):
         try:
+            marker = None
+            if args.marker:
+                from sphere.camera.marker import MarkerSpec
+
+                marker = MarkerSpec(face="auto")
             rt = trials.rendered_trial(name, start, args.seconds, distance_m=args.distance, occlusions=occl,
-                                       hue_deg=args.hue)
+                                       hue_deg=args.hue, marker=marker)
         except (broad.BroadMissing, ValueError) as e:
             print(f"sphere hybrid-eval: {e}", file=sys.stderr)
             return 1
@@ -91,6 +99,8 @@ def run(args) -> int:
             "ms_per_frame": {"mean": float(r.per_frame_ms.mean()), "p95": float(np.percentile(r.per_frame_ms, 95))},
             "detect_ms_per_frame": {"mean": float(r.detect_ms.mean()), "p95": float(np.percentile(r.detect_ms, 95))},
             "methods": figs}
+        if r.orientation is not None:
+            doc["trials"][rt.name]["orientation"] = r.orientation
         runs[rt.name] = (r, rt)
         _print_trial(rt.name, doc["trials"][rt.name])
     doc["mean"] = _means(doc["trials"])
@@ -134,6 +144,11 @@ def _print_trial(name, t):
     if h.get("rmse_lateral_with_warmup_m") is not None:
         print(f"  alignment formed at {h['alignment_ready_s']:.2f} s; hybrid RMSE with the warm-up: lateral "
               f"{1000 * h['rmse_lateral_with_warmup_m']:.1f} mm, depth {1000 * h['rmse_depth_with_warmup_m']:.1f} mm")
+    o = t.get("orientation")
+    if o:
+        f = lambda v: "–" if v is None else f"{v:.2f}°"  # noqa: E731
+        print(f"  marker seen in {o['frames_with_marker']} frames; orientation error (RMS) host filter "
+              f"{f(o['host_filter_rms_deg'])}, with the marker's heading correction {f(o['with_marker_rms_deg'])}")
     print(f"  detection + fusion {t['ms_per_frame']['mean']:.2f} ms per frame (p95 {t['ms_per_frame']['p95']:.2f}), "
           f"hybrid output {t['methods']['hybrid']['output_rate_hz']:.0f} Hz; tracker {t['tracker']}")
     print()

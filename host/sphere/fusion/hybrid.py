@@ -250,6 +250,15 @@ def _rot(q) -> np.ndarray:
                      [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
 
 
+def _rz(a: float) -> np.ndarray:
+    c, s = np.cos(a), np.sin(a)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def _wrap(a: float) -> float:
+    return float((a + np.pi) % (2 * np.pi) - np.pi)
+
+
 class CameraAlignment:
     """The rotation from the earth frame of the orientation filter to the camera's frame, estimated from
     the motion itself (not assumed).
@@ -350,11 +359,14 @@ class CameraImuTracker:
     - **Gate** (chapter 3, z_TH = 5 %): a fix whose innovation exceeds 5 % of its distance, widened by 3σ of
       the prediction's own uncertainty, is not applied; three such fixes in a row that agree with each
       other (after a loss, when dead reckoning has drifted) re-acquire: the state restarts from them.
+    - **Coast** on the IMU alone through a loss of the ball for up to ``max_coast_s`` (2 s); after that the
+      position is reported unknown (None) until the camera finds the ball again.
     """
 
     def __init__(self, accel_noise: float = 0.5, free_accel_noise: float = 20.0, bias_walk: float = 0.05,
                  z_th: float = Z_TH, history_s: float = 0.3, reacquire_after: int = 3,
-                 cam_floor_m=(0.0005, 0.0005, 0.002), timing_sigma_s: float = 0.006, use_imu: bool = True):
+                 cam_floor_m=(0.0005, 0.0005, 0.002), timing_sigma_s: float = 0.006, use_imu: bool = True,
+                 max_coast_s: float = 2.0):
         self.use_imu = use_imu
         self.timing_sigma_s = timing_sigma_s
         self.accel_noise, self.free_accel_noise, self.bias_walk = accel_noise, free_accel_noise, bias_walk
@@ -367,7 +379,13 @@ class CameraImuTracker:
         self.P = None
         self.t = None
         self.g = STANDARD_GRAVITY
-        self.hist: list = []  # [t, a_earth, x, P] after the prediction to t
+        self.max_coast_s = max_coast_s
+        self.t_fix = -np.inf  # exposure time of the last fix applied
+        self.hist: list = []  # [t, a_earth, x, P, q] after the prediction to t
+        self.heading_offset = 0.0  # rad, about the earth's vertical, kept by the marker
+        self.marker_gate_rad = np.radians(10.0)
+        self.marker_gain = 0.3
+        self._marker_rejected: list = []
         self._models: dict = {}
         self.rejected: list = []
         self.stats = {"accepted": 0, "gated": 0, "reacquired": 0, "late": 0}
@@ -381,14 +399,16 @@ class CameraImuTracker:
         a_earth = _rot(q_sensor_to_earth) @ np.asarray(acc_sensor, float) - np.array([0.0, 0.0, self.g])
         self.alignment.add_imu(t, a_earth)
         if self.x is None:
-            self.hist.append([t, a_earth, None, None])
+            self.hist.append([t, a_earth, None, None, q_sensor_to_earth])
             self._trim(t)
             self.t = t
             return None
         self._predict(t - self.t, a_earth)
         self.t = t
-        self.hist.append([t, a_earth, self.x.copy(), self.P.copy()])
+        self.hist.append([t, a_earth, self.x.copy(), self.P.copy(), q_sensor_to_earth])
         self._trim(t)
+        if t - self.t_fix > self.max_coast_s:
+            return None  # too long on the IMU alone: the position is not known any more
         if lead_s <= 0:
             return self.x[:3].copy()
         u = self.alignment.R @ a_earth - self.x[6:9] if (self.use_imu and self.alignment.ready) else 0.0
@@ -440,6 +460,7 @@ class CameraImuTracker:
         if self.x is None:
             self._init(t_exposure, z, Rm)
             self.alignment.add_camera(t_exposure, z)
+            self.t_fix = t_exposure
             return "init"
         # the saved state at the last IMU sample before the exposure
         k = None
@@ -463,6 +484,7 @@ class CameraImuTracker:
             if len(self.rejected) == self.reacquire_after and self._consistent(self.rejected):
                 self._reacquire()
                 self.alignment.add_camera(t_exposure, z)
+                self.t_fix = t_exposure
                 return "reacquired"
             self.stats["gated"] += 1
             return "gated"
@@ -474,7 +496,46 @@ class CameraImuTracker:
         self.hist[k][2], self.hist[k][3] = x, P
         self._repropagate(k)
         self.alignment.add_camera(t_exposure, z)
+        self.t_fix = max(self.t_fix, t_exposure)
         self.stats["accepted"] += 1
+        return "accepted"
+
+    # -- orientation (with a marker on the shell) ---------------------------------------------------------
+    def orientation(self, q_sensor_to_earth):
+        """The ball's orientation in the camera frame (body → camera, 3×3): the host filter's, with the
+        heading the marker corrected, turned by the estimated alignment; None before the alignment."""
+        if not self.alignment.ready:
+            return None
+        return self.alignment.R @ _rz(self.heading_offset) @ _rot(q_sensor_to_earth)
+
+    def marker(self, t_exposure: float, R_cam_body) -> str:
+        """A marker's orientation (body → camera) seen at ``t_exposure``. The host filter's inclination
+        (from gravity) is good and its heading is what a magnetometer gets wrong, so the marker corrects
+        the heading: the turn about the earth's vertical between what the host filter and the alignment
+        predict and what the camera sees, blended in with a gain of 0.3 per fix. A fix more than 10° off
+        is gated, as the position fixes are, unless three in a row agree."""
+        if not self.alignment.ready:
+            return "no-alignment"
+        q = None
+        for h in reversed(self.hist):
+            if h[0] <= t_exposure:
+                q = h[4]
+                break
+        if q is None:
+            return "late"
+        E = self.alignment.R.T @ np.asarray(R_cam_body, float) @ _rot(q).T  # earth → earth; I when all agree
+        yaw = float(np.arctan2(E[1, 0] - E[0, 1], E[0, 0] + E[1, 1]))
+        nu = _wrap(yaw - self.heading_offset)
+        if abs(nu) > self.marker_gate_rad:
+            self._marker_rejected = (self._marker_rejected + [yaw])[-3:]
+            spread = max(abs(_wrap(a - self._marker_rejected[-1])) for a in self._marker_rejected)
+            if len(self._marker_rejected) == 3 and spread < self.marker_gate_rad:
+                self.heading_offset = yaw
+                self._marker_rejected = []
+                return "reacquired"
+            return "gated"
+        self._marker_rejected = []
+        self.heading_offset = _wrap(self.heading_offset + self.marker_gain * nu)
         return "accepted"
 
     def position_at(self, t: float):
