@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import sys
 
-HELP = "camera tools: intrinsics from chessboard images (calibrate); the virtual webcam (render); timing (bench)"
+HELP = "camera tools: intrinsics from chessboard images (calibrate); the virtual webcam (render); the ball in a webcam or video (track); timing (bench)"
 DESCRIPTION = """\
 calibrate: the camera's focal lengths, principal point and lens distortion from 5 or more images of a
 printed chessboard (OpenCV's calibrateCamera), written as the JSON file that `sphere hybrid-eval
@@ -26,6 +26,11 @@ def add_arguments(p) -> None:
     r.add_argument("--seconds", type=float, default=5.0, help="how long (default 5)")
     r.add_argument("--distance", type=float, default=1.0, help="camera to the mean ball position, m (default 1)")
     r.add_argument("-o", "--output", default="virtual-camera.avi", help="the video to write")
+    k = sub.add_parser("track", help="the ball's position in a webcam's or a video's frames (camera only)")
+    k.add_argument("source", help="webcam index (0, 1 ...) or a video file")
+    k.add_argument("--camera-file", help="intrinsics from `sphere camera calibrate` (default: a typical 60° webcam)")
+    k.add_argument("--hue", type=float, default=120.0, help="the ball's hue in degrees (default 120, green)")
+    k.add_argument("--seconds", type=float, default=0.0, help="stop after this long (default: until the end)")
     b = sub.add_parser("bench", help="ms per frame of detection + fusion at 640x480 on one core")
     b.add_argument("--trial", default="10", help="BROAD trial name or number (default 10)")
     b.add_argument("--start", type=float, default=40.0, help="seconds into the trial (default 40)")
@@ -57,7 +62,42 @@ def run(args) -> int:
         return _calibrate(args)
     if args.camera_command == "bench":
         return _bench(args)
+    if args.camera_command == "track":
+        return _track(args)
     return _render(args)
+
+
+def _track(args) -> int:
+    import time
+
+    from sphere.camera.live import CameraError, CameraSource
+    from sphere.camera.model import Camera, CameraFileError
+
+    try:
+        cam = Camera.load(args.camera_file) if args.camera_file else None
+        src = CameraSource(args.source, cam, hue_deg=args.hue).start()
+    except (CameraError, CameraFileError) as e:
+        print(f"sphere camera track: {e}", file=sys.stderr)
+        return 1
+    print("frame,t_exposure_s,x_m,y_m,z_m,radius_px")
+    t_end = time.monotonic() + args.seconds if args.seconds > 0 else None
+    t0 = None
+    try:
+        while src.running or not src.fixes.empty():
+            for f in src.poll():
+                t0 = f.t_exposure if t0 is None else t0
+                x, y, z = f.center_cam
+                print(f"{f.index},{f.t_exposure - t0:.4f},{x:.4f},{y:.4f},{z:.4f},{f.radius_px:.2f}", flush=True)
+            if t_end is not None and time.monotonic() > t_end:
+                break
+            time.sleep(0.005)
+    finally:
+        src.stop()
+    print(f"{src.frames} frames, ball in {src.found}", file=sys.stderr)
+    if src.error:
+        print(f"sphere camera track: the camera stopped: {src.error}", file=sys.stderr)
+        return 1
+    return 0
 
 
 def _bench(args) -> int:
