@@ -20,7 +20,8 @@ def run(trial: str = "10", start_s: float = 40.0, seconds: float = 5.0, distance
 
     from sphere.camera import trials
     from sphere.camera.detect import BallDetector
-    from sphere.camera.evaluation import NOMINAL_CAMERA_LATENCY_S, hint_from
+    from sphere.camera.evaluation import NOMINAL_CAMERA_LATENCY_S
+    from sphere.camera.live import hint_from
     from sphere.fusion.hybrid import CameraImuTracker
 
     cv2.setNumThreads(1)

@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from sphere.camera.detect import BallDetector
+from sphere.camera.live import hint_from
 from sphere.camera.trials import RenderedTrial
 from sphere.fusion.hybrid import STANDARD_GRAVITY, CameraImuTracker, _rot
 
@@ -39,16 +40,6 @@ class Run:
     losses: list = field(default_factory=list)  # (t0, t1) of full occlusions
     alignment_ready_s: float | None = None  # when the hybrid's camera-to-earth rotation formed
     orientation: dict | None = None  # with a marker on the shell: orientation errors (°)
-
-
-def hint_from(tracker, camera, t_exposure: float, radius_m: float, last=None):
-    """Where to look in a frame: the tracker's position at its exposure time, projected; else the last fix."""
-    p = tracker.position_at(t_exposure) if tracker.x is not None else None
-    if p is not None and p[2] > 0.1:
-        c = camera.project(p[None])[0]
-        if np.all(np.isfinite(c)):
-            return (c, camera.fx * radius_m / p[2])
-    return last
 
 
 def run(rt: RenderedTrial, hue_deg: float = 120.0) -> Run:

@@ -37,6 +37,16 @@ class Fix:
     radius_px: float
 
 
+def hint_from(tracker, camera, t_exposure: float, radius_m: float, last=None):
+    """Where to look in a frame: the tracker's position at its exposure time, projected; else the last fix."""
+    p = tracker.position_at(t_exposure) if tracker.x is not None else None
+    if p is not None and p[2] > 0.1:
+        c = camera.project(p[None])[0]
+        if np.all(np.isfinite(c)):
+            return (c, camera.fx * radius_m / p[2])
+    return last
+
+
 class CameraSource:
     def __init__(self, spec, camera: Camera | None = None, hue_deg: float = 120.0, radius_m: float = 0.04,
                  latency_s: float = 0.040, realtime: bool | None = None, clock=time.monotonic,
@@ -148,11 +158,7 @@ class LiveTracker:
         source.hint_fn = self._hint
 
     def _hint(self, t_exposure):
-        cam = self.source.camera
-        p = self.tracker.position_at(t_exposure) if self.tracker.x is not None else None
-        if p is None or p[2] <= 0.1:
-            return None
-        return cam.project(p[None])[0], cam.fx * self.source.radius_m / p[2]
+        return hint_from(self.tracker, self.source.camera, t_exposure, self.source.radius_m)
 
     def sensor(self, t: float, q_sensor_to_earth, acc_sensor):
         """One sensor sample (host clock): the position (camera frame, m) or None while unknown."""
