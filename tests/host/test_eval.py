@@ -186,6 +186,26 @@ def test_eval_cv_scores_each_trial_with_parameters_chosen_without_it(tmp_path, c
     assert capsys.readouterr().out == text.replace(f"wrote {out}\n", "")
 
 
+def test_the_recorded_cv_run_matches_the_registry():
+    """tests/host/eval_cv.json is the `sphere eval --cv --json` run quoted in host/docs/fusion.md; other tests take
+    their held-out parameters from it. It must still describe the registry: every choice a point of today's grid,
+    and the choice on all trials = today's defaults (else re-run `sphere eval --cv --json tests/host/eval_cv.json`)."""
+    from pathlib import Path
+
+    from sphere.fusion import registry
+
+    doc = json.loads(Path(__file__).with_name("eval_cv.json").read_text())
+    assert set(registry.OURS) <= set(doc["cv"])
+    for name in registry.OURS:
+        rec, spec = doc["cv"][name], registry.FILTERS[name]
+        points = spec.grid_points()
+        assert rec["grid"] == {k: list(v) for k, v in spec.grid.items()}, name
+        assert all(f["choice"] in points for f in rec["folds"]), name
+        settings = registry.make(name, 0.01).settings
+        assert {k: settings[k] for k in spec.grid} == rec["all_trials_choice"], name
+        assert len(rec["folds"]) == len(doc["trials"]) >= 12
+
+
 def test_eval_cv_needs_two_trials(capsys):
     _need_broad()
     assert main(["eval", "--cv", "--only", "02", "--filters", "madgwick"]) == 2

@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import json
 import math
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -154,7 +156,17 @@ def test_kf_norm_modes_gate_and_scale_the_whole_innovation():
         DissertationKF(0.05, robust="norm")
 
 
-# -- real data ------------------------------------------------------------------------------------------
+# -- real data, with parameters chosen without the trial scored -------------------------------------------
+
+CV_RECORD = Path(__file__).with_name("eval_cv.json")  # `sphere eval --cv --json` of the run in host/docs/fusion.md
+
+
+def held_out(name: str, trial: str) -> dict:
+    """The parameters `sphere eval --cv` chose for ``name`` on the other shipped trials when ``trial`` was left out
+    (recorded in tests/host/eval_cv.json; tests/host/test_eval.py checks the record against the registry)."""
+    folds = json.loads(CV_RECORD.read_text())["cv"][name]["folds"]
+    return next(f["choice"] for f in folds if f["trial"].split("_", 1)[0] == trial)
+
 
 def _err(f, t, q0=True):
     q = f.update_batch(t.gyr_rad_s, t.acc_m_s2, t.mag_uT, t.dt_s)
@@ -162,29 +174,29 @@ def _err(f, t, q0=True):
     return broad.orientation_error(q, t)
 
 
-def test_kf_beats_madgwick_on_a_disturbed_slice():
-    """With the settings `sphere eval` uses (tuned once on all trials), the KF's robust measurement update
-    beats Madgwick while a magnet rides on the sensor (trial 32); host/docs/fusion.md has all twelve."""
+def _run(name, t, trial):
     from sphere.fusion import registry
 
+    return _err(registry.make_for_trial(name, t.gyr_rad_s, t.acc_m_s2, t.mag_uT, t.dt_s, **held_out(name, trial)), t)
+
+
+def test_kf_beats_madgwick_on_a_disturbed_slice():
+    """While a magnet rides on the sensor (trial 32), the KF's robust measurement update beats Madgwick, each
+    with the parameters chosen with trial 32 left out; host/docs/fusion.md has all twelve."""
     t = _trial("32", 0.0, 90.0)
-    bias = registry.startup_gyro_bias(t.gyr_rad_s, t.dt_s)
-    e0 = (t.acc_m_s2[0], t.mag_uT[0])
-    mad = _err(registry.make("madgwick", t.dt_s, *e0, gyro_bias_rad_s=bias), t)
-    kf = _err(registry.make("dissertation-kf", t.dt_s, *e0, gyro_bias_rad_s=bias), t)
+    mad, kf = _run("madgwick", t, "32"), _run("dissertation-kf", t, "32")
     assert kf.total < 0.9 * mad.total, (kf, mad)
 
 
 def test_sphere_filter_accuracy_on_a_real_slice():
     t = _trial("02", 0.0, 90.0)
-    e = _err(SphereFilter(), t)
+    e = _run("sphere", t, "02")
     assert e.total < 2.5 and e.inclination < 1.0, e
 
 
 def test_sphere_filter_holds_heading_through_a_magnet():
     t = _trial("32", 0.0, 90.0)
-    f = SphereFilter()
-    e = _err(f, t)
+    e = _run("sphere", t, "32")
     assert e.total < 6.0, e
 
 
