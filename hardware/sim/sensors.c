@@ -572,15 +572,13 @@ static double hmc_rate(chip_t *c) { return hmc_rates[(c->regs[HMC_CRA] >> 2) & 7
 
 /* One measurement completing at chip time ct: the field (or, in self-test, the bias field alone), averaged
  * over 1/2/4/8 samples (CRA MA1..MA0), at the gain, -4096 on an axis whose ADC over- or underflows. */
+static void hmc_place(chip_t *c, const int16_t out[3], double ct);
+
 static void hmc_measure(chip_t *c, double ct)
 {
 	board_t *b = c->board;
 	hmc_state_t *s = &b->hmc;
 	s->measurements++;
-	if (s->locked) { /* the lock holds the old sample: the new one is not placed (LOCK, register 9) */
-		s->dropped_locked++;
-		return;
-	}
 	double body[3], chip[3];
 	trace_interp(&b->trace->mag, board_of_chip(b, CHIP_HMC5883L, ct), body);
 	to_chip(b, CHIP_HMC5883L, body, chip);
@@ -598,6 +596,20 @@ static void hmc_measure(chip_t *c, double ct)
 		long v = lround(gauss * gain);
 		out[i] = (v < -2048 || v > 2047) ? -4096 : (int16_t)v;
 	}
+	if (s->locked) { /* the lock holds the old sample: the new one waits until it opens (LOCK, register 9) */
+		s->dropped_locked++;
+		memcpy(s->pending_out, out, sizeof out);
+		s->pending = 1;
+		s->pending_ct = ct;
+		return;
+	}
+	hmc_place(c, out, ct);
+}
+
+/* The chip writes a measurement into the data output registers at chip time ct. */
+static void hmc_place(chip_t *c, const int16_t out[3], double ct)
+{
+	hmc_state_t *s = &c->board->hmc;
 	/* output order X, Z, Y; big-endian */
 	const int order[3] = {0, 2, 1};
 	for (int i = 0; i < 3; i++) {
@@ -646,6 +658,17 @@ static void hmc_unlock(board_t *b)
 	b->hmc.read_mask = 0;
 }
 
+/* All six bytes read: the lock opens and a measurement that waited for it is placed now. */
+static void hmc_unlock_by_read(chip_t *c)
+{
+	board_t *b = c->board;
+	hmc_unlock(b);
+	if (b->hmc.pending) {
+		b->hmc.pending = 0;
+		hmc_place(c, b->hmc.pending_out, chip_time(b, CHIP_HMC5883L, board_time_s(b)));
+	}
+}
+
 /* A write to the mode register or CRA starts the measurements again: continuous gives its first after
  * 2/fDO, single after ~6 ms; idle stops. */
 static void hmc_schedule(chip_t *c)
@@ -669,6 +692,7 @@ static void hmc_power_on(chip_t *c)
 	c->has_sample = 0;
 	c->last_sample = 0;
 	hmc_unlock(b);
+	b->hmc.pending = 0;
 	b->hmc.rdy_clear_until_s = -1;
 	b->hmc.next_done_s = chip_time(b, CHIP_HMC5883L, board_time_s(b)) + HMC_POWER_ON_S;
 }
@@ -679,8 +703,9 @@ static void hmc_write(chip_t *c, uint8_t reg, uint8_t v)
 	if (reg > HMC_MODE)
 		return;
 	c->regs[reg] = v;
-	if (reg == HMC_MODE || reg == HMC_CRA) { /* both unlock the data output registers */
+	if (reg == HMC_MODE || reg == HMC_CRA) { /* both unlock the data output registers (a waiting sample is lost) */
 		hmc_unlock(c->board);
+		c->board->hmc.pending = 0;
 		hmc_schedule(c);
 	}
 }
@@ -695,8 +720,8 @@ static uint8_t hmc_read(chip_t *c, uint8_t reg)
 	if (reg >= HMC_DATA && reg < HMC_STATUS) {
 		b->hmc.read_mask |= (uint8_t)(1 << (reg - HMC_DATA));
 		if (b->hmc.read_mask == 0x3F) {
-			hmc_unlock(b);
 			c->data_read_sample = c->last_sample;
+			hmc_unlock_by_read(c);
 			/* single-measurement mode: RDY stays high until the data output register is read */
 			if ((c->regs[HMC_MODE] & 3) != 0)
 				c->regs[HMC_STATUS] &= (uint8_t)~HMC_STATUS_RDY;

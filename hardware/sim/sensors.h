@@ -106,8 +106,9 @@ typedef struct {
 	double rdy_clear_until_s;
 	uint8_t read_mask;      /* data output bytes read since the last unlock (bit i: register 3 + i) */
 	int locked;
-	int pending;            /* a completed measurement waiting for the lock to open... dropped, see README */
-	double pending_field[3];
+	int pending;            /* a completed measurement waiting for the lock to open */
+	int16_t pending_out[3];
+	double pending_ct;
 	uint64_t rng;
 	uint32_t measurements, dropped_locked;
 } hmc_state_t;

@@ -135,7 +135,27 @@ def test_hmc_positive_self_test():
     assert all(243 <= v <= 575 for v in (x, y, z))
 
 
+def test_hmc_continuous_mode_first_sample_after_two_periods():
+    """Continuous-measurement mode: "the first measurement set is available ... after a period of 2/fDO" after
+    the write to the mode register, then one every 1/fDO (15 Hz here)."""
+    cmds = [(0.1, "w 1e 00 10"), (0.15, "r 1e 03 6"), (0.2, "w 1e 02 00"), (0.2001, "p 1e 03 6 2000 160")]
+    r = probe(cmds, _rotating(0.6, 180.0), 0.6)
+    w = r.tagged("w")[1].t_us
+    polls = r.tagged("p")
+    changes = [b.t_us for a, b in zip(polls, polls[1:]) if a.data != b.data]
+    assert 2e6 / 15 - 2500 <= changes[0] - w <= 2e6 / 15 + 2500, changes[0] - w
+    assert all(abs(d - 1e6 / 15) < 2500 for d in np.diff(changes)), np.diff(changes)
+
+
 # ---------------------------------------------------------------- ITG-3200
+
+def test_itg_start_up_time():
+    """Section 3.1, start-up time from power on: 50 ms; the outputs come only after it (here after H_RESET)."""
+    cmds = [(0.2, "w 68 3e 80"), (0.2002, "w 68 16 1b"), (0.2004, "w 68 15 04"), (0.2006, "f 68 1a 01 1000")]
+    r = probe(cmds, T.still(0.4), 0.4)
+    reset = r.tagged("w")[0].t_us
+    first = next(x.t_us for x in r.tagged("f") if x.data[0] & 1)
+    assert 50000 - 200 <= first - reset <= 50000 + 5000 + 500, first - reset  # the write's own time before it
 
 def test_itg_temperature_register():
     """TEMP_OUT: -13200 LSB at 35 degC, 280 LSB/degC (section 3.1); the ambient board is at 25 degC, and
@@ -202,6 +222,17 @@ def test_itg_own_oscillator_sets_the_sample_rate():
 
 
 # ---------------------------------------------------------------- ADXL345
+
+def test_adxl_samples_on_its_own_clock():
+    """The ADXL345's output data rate comes from its own oscillator: 100 Hz (BW_RATE 0x0A) on a clock 1 % fast
+    gives 101 new samples a second of the Nano's time (the sphere turning, so each sample differs)."""
+    def rate(ppm):
+        cmds = [(0.1, "w 53 31 0b"), (0.11, "w 53 2c 0a"), (0.12, "w 53 2d 08"), (0.2, "d 53 32 6 1000")]
+        kw = {"clock_ppm": [f"adxl345:{ppm}"]} if ppm else {}
+        r = probe(cmds, T.rotation(1.3, rate_dps=90.0, axis=(1.0, 0.0, 0.0), still_s=0.0), 1.3, **kw)
+        return r.tagged("d")[0].data[0]
+    assert abs(rate(0) - 100) <= 1 and abs(rate(10000) - 101) <= 1
+
 
 def test_adxl_noise_at_100_hz():
     """Table 1: noise 0.75 LSB rms on x and y, 1.1 LSB rms on z, at 100 Hz output data rate, full resolution."""

@@ -10,6 +10,8 @@
 //                           one "f" line per change of (value & MASK): "<micros> f <value>" (COUNT <= 2000)
 //   n AA RR MASK MS         for MS milliseconds, count the reads where (value & MASK) went from 0 to set
 //                           -> "n <count> <elapsed us>" (hex count, decimal elapsed)
+//   d AA RR N MS            for MS milliseconds, burst-read N bytes (<= 16) as fast as the bus allows and count
+//                           the reads that differ from the one before -> "d <count> <elapsed us>"
 //   c                       bus clear: TWI off, nine SCL pulses and a STOP on the pins, TWI on -> "c"
 #include <Arduino.h>
 #include <Wire.h>
@@ -103,6 +105,21 @@ static void run(char *s) {
       t = micros();
     }
     Serial.print(micros()); Serial.print(" n "); hex(count >> 8); hex(count & 0xFF);
+    Serial.write(' '); Serial.print(t - t0); Serial.write('\n');
+  } else if (cmd == 'd' && n == 4) {
+    uint8_t k = v[2] > 16 ? 16 : v[2], last[16];
+    uint16_t count = 0;
+    bool have = false;
+    uint32_t t0 = micros(), t = t0;
+    while ((uint32_t)(t - t0) < v[3] * 1000UL) {
+      if (rd(v[0], v[1], b, k)) {
+        if (have && memcmp(b, last, k)) count++;
+        memcpy(last, b, k);
+        have = true;
+      }
+      t = micros();
+    }
+    Serial.print(micros()); Serial.print(" d "); hex(count >> 8); hex(count & 0xFF);
     Serial.write(' '); Serial.print(t - t0); Serial.write('\n');
   } else if (cmd == 'c') {
     bus_clear();
