@@ -65,3 +65,15 @@ def test_jitter_at_rest(broad_dir):
     r = evaluation.run(rt)
     fig = evaluation.figures(r, rt)["hybrid"]
     assert fig["jitter_lateral_m"] <= 0.001 and fig["jitter_depth_m"] <= 0.003
+
+
+def test_bad_input_is_one_clear_line(capsys, broad_dir):
+    assert main(["hybrid-eval", "--seconds", "5"]) == 2
+    assert "at least 9" in capsys.readouterr().err
+    assert main(["hybrid-eval", "--trials", "99:40"]) == 1
+    err = capsys.readouterr().err
+    assert "no BROAD trial named '99'" in err and "Traceback" not in err
+    assert main(["hybrid-eval", "--trials", "10:900"]) == 1
+    assert "choose --start and --seconds inside it" in capsys.readouterr().err
+    with pytest.raises(SystemExit, match="TRIAL:START_S"):
+        main(["hybrid-eval", "--trials", "10:soon"])
