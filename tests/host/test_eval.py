@@ -206,10 +206,17 @@ def test_the_recorded_cv_run_matches_the_registry():
         assert len(rec["folds"]) == len(doc["trials"]) >= 12
 
 
-def test_eval_cv_needs_two_trials(capsys):
+def test_eval_cv_refuses_what_it_cannot_do_in_one_line(tmp_path, capsys):
     _need_broad()
-    assert main(["eval", "--cv", "--only", "02", "--filters", "madgwick"]) == 2
-    assert "at least two trials" in capsys.readouterr().err
+    blocker = tmp_path / "file"
+    blocker.write_text("")
+    for argv, says in ((["--cv", "--only", "02"], "at least two trials"),
+                       (["--cv", "--only", "02,03", "--plot", str(tmp_path)], "without --cv"),
+                       (["--cv", "--only", "02,03", "--cache", str(blocker / "sub")], "cannot keep results"),
+                       (["--only", "02,03", "--cache", str(tmp_path)], "add --cv")):
+        assert main(["eval", "--filters", "madgwick", *argv]) == 2, argv
+        err = capsys.readouterr().err.strip().splitlines()
+        assert says in err[-1] and "Traceback" not in "".join(err), (argv, err)
 
 
 def test_ahrs_ekf_per_sample_equals_its_batch_with_a_magnetometer():

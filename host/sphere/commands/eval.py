@@ -478,10 +478,26 @@ def run(args) -> int:
         print(f"sphere eval: unknown filter(s) {', '.join(bad)}; known: {', '.join(registry.ALL)}", file=sys.stderr)
         return 2
     print(f"running {', '.join(names)} on {len(paths)} trial(s) from {directory} ...", file=sys.stderr)
+    if args.cache and not args.cv:
+        print("sphere eval: --cache keeps --cv results; add --cv or leave --cache out", file=sys.stderr)
+        return 2
     if args.cv:
         if len(paths) < 2:
             print("sphere eval: --cv needs at least two trials (it leaves one out at a time)", file=sys.stderr)
             return 2
+        if args.plot:
+            print("sphere eval: --plot draws one plain run; run it without --cv", file=sys.stderr)
+            return 2
+        if args.cache:
+            try:
+                Path(args.cache).mkdir(parents=True, exist_ok=True)
+                probe = Path(args.cache) / ".write-test"
+                probe.write_text("")
+                probe.unlink()
+            except OSError as e:
+                print(f"sphere eval: cannot keep results in --cache {args.cache} ({e.strerror or e}); "
+                      "give a writable folder or leave --cache out", file=sys.stderr)
+                return 2
         try:
             doc = cross_validate(paths, names, seconds=args.seconds, jobs=args.jobs, cache=args.cache,
                                  progress=_trial_progress(len(paths)))
