@@ -111,3 +111,30 @@ def test_bench_pointer_bad_filter_name_is_one_line():
     r = subprocess.run([sys.executable, "-m", "sphere.cli", "bench", "pointer", "--filters", "tremor,kalmann"],
                        capture_output=True, text=True, timeout=120)
     assert r.returncode == 2 and "unknown filter kalmann" in r.stderr and "Traceback" not in r.stderr
+
+
+def test_bench_pointer_pose_mode(tmp_path):
+    """The 3-D stream's pose filter (the daemon's PoseFilter) on synthetic:hold: the issue's targets."""
+    out = tmp_path / "pose.json"
+    r = subprocess.run([sys.executable, "-m", "sphere.cli", "bench", "pointer", "--pose", "--seeds", "1",
+                        "--filters", "none,tremor", "--json", str(out)], capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stderr
+    data = json.loads(out.read_text())["filters"]
+    assert data["tremor"]["still_jitter_deg"] <= 0.05 and data["tremor"]["held_jitter_deg"] <= 0.1
+    assert data["tremor"]["held_jitter_deg"] < 0.5 * data["none"]["held_jitter_deg"]
+    assert data["tremor"]["lag_slow_ms"] <= 20.0
+
+
+def test_pose_filter_has_no_jump_at_180_degrees():
+    from sphere.smoothing.pose import PoseFilter, _conj, _qmul, exp_deg, log_deg
+
+    f = PoseFilter("tremor")
+    prev, worst = None, 0.0
+    for i in range(1600):  # 170° → 530° about z at 90 °/s, through ±180° twice
+        angle = (170.0 + i * 0.005 * 90.0 + 180.0) % 360.0 - 180.0
+        q, _ = f.update(exp_deg((0.0, 0.0, angle)), 0.005)
+        if prev is not None:
+            worst = max(worst, float(np.linalg.norm(log_deg(_qmul(q, _conj(prev))))))
+        prev = q
+    assert worst < 0.6  # 0.45° per sample, nothing like a 360° flip
+    assert PoseFilter("none").update(exp_deg((10.0, 20.0, 30.0)), 0.005)[0] == pytest.approx(exp_deg((10.0, 20.0, 30.0)))

@@ -45,8 +45,14 @@ class PointerSettings:
     invert_y: bool = False
 
     @classmethod
-    def from_config(cls, section) -> "PointerSettings":
-        return cls(**{k: v for k, v in section.as_dict().items() if k in cls.__dataclass_fields__})
+    def from_config(cls, section, cfg=None) -> "PointerSettings":
+        """From the [pointer] section; with the whole config, the filter's [smoothing.NAME] parameters too."""
+        settings = cls(**{k: v for k, v in section.as_dict().items() if k in cls.__dataclass_fields__})
+        if cfg is not None:
+            from sphere.smoothing.config import filter_params
+
+            settings.smoothing_params = filter_params(cfg, settings.smoothing)
+        return settings
 
 
 def _norm3(v):

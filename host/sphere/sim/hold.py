@@ -140,10 +140,12 @@ def _smooth_rate(profile: np.ndarray, rate_hz: float, ramp_s: float) -> np.ndarr
 
 
 def hold_script(seconds: float = 60.0, seed: int = 0, params: HoldParams | None = None,
-                rate_hz: float = RATE_HZ) -> HoldTrace:
+                rate_hz: float = RATE_HZ, script=None) -> HoldTrace:
+    """The motion and its timeline; ``script`` = [(kind, seconds, band, rate_dps, axis)] instead of the seed's
+    shuffled one (e.g. ``[("rest", 3, "", 0, ""), ("held", 5, "", 0, ""), ("turn", 1, "fine", 3, "yaw")]``)."""
     p = params or HoldParams()
     rng = np.random.default_rng(seed)
-    script = _script(seconds, rng, p)
+    script = _script(seconds, rng, p) if script is None else list(script)
     n = int(round(seconds * rate_hz))
     yaw_rate = np.zeros(n)
     pitch_rate = np.zeros(n)

@@ -7,13 +7,16 @@ its rate (≈ 6 °/s) is as fast as slow aiming, so speed alone cannot tell them
 1. **Band-stop.** A cascade of second-order notch filters (RBJ biquads, bilinear transform with the
    frequency pre-warped for the actual sample period) centred in the tremor band removes it. A notch
    passes DC and slow motion with unit gain and delays a slow ramp by only 1 / (Q·2π·f₀) per notch
-   (≈ 18 ms at 10 Hz, Q = 0.9), far less than a low-pass that stops 10 Hz as well would.
+   (≈ 23 ms at 10 Hz, Q = 0.7), far less than a low-pass that stops 10 Hz as well would.
 2. **Rest smoothing by speed.** The intended speed is the rate of the band-stopped signal, averaged
    as a vector over ``speed_tau_s`` (so noise and what is left of the tremor average out); a first-order
    low-pass with the cutoff ``min_cutoff_hz + beta·speed`` (the 1€ filter's rule, Casiez et al. 2012)
    steadies a sphere lying still and leaves aiming speeds nearly undelayed.
 3. **Speed gate.** From ``pass_dps`` up the output is the input itself (no lag on fast moves), below
-   half of it the filtered signal, blended linearly in between — the output never jumps.
+   half of it the filtered signal, blended linearly in between — the output never jumps. While the input
+   passes untouched the filters are held at it (their steady state for the current value), so when a
+   fast move stops they start from where the pointer is: nothing is left to catch up, nothing rings past
+   the stop.
 
 Works per component on any vector (pointer angles, the 3-D stream's rotation vector, positions).
 
@@ -49,6 +52,12 @@ class _Notch:
     def reset(self) -> None:
         self._z = None  # the next sample starts in the steady state of a constant input (no transient)
 
+    def hold(self, x) -> None:
+        """The steady state of a constant input x, as if it had always been there."""
+        b0, b1, b2 = self._b
+        a1, a2 = self._a
+        self._z = [[(b1 - a1 + b2 - a2) * v, (b2 - a2) * v] for v in x]
+
     def update(self, x, dt_s: float):
         if self._dt is None or abs(dt_s - self._dt) > 1e-9:
             self._coefficients(dt_s)
@@ -69,16 +78,16 @@ class _Notch:
 class TremorFilter:
     PARAMS = {
         "notch_hz": Param(10.0, "Hz", 1.0, 100.0, "centre of the tremor band-stop (physiological tremor: 8–12 Hz)"),
-        "notch_q": Param(0.9, "", 0.1, 20.0, "quality factor of each notch (lower = wider band, more delay)"),
+        "notch_q": Param(0.7, "", 0.1, 20.0, "quality factor of each notch (lower = wider band, more delay)"),
         "notch2_hz": Param(0.0, "Hz", 0.0, 100.0, "a second notch (e.g. at the band's other half); 0 = one notch"),
-        "pass_dps": Param(15.0, "°/s", 0.0, 10000.0, "intended speed from which motion passes unfiltered (filtered "
+        "pass_dps": Param(8.0, "°/s", 0.0, 10000.0, "intended speed from which motion passes unfiltered (filtered "
                           "fully below half of it); 0 = always filtered"),
         "speed_tau_s": Param(0.05, "s", 0.0, 2.0, "time constant of the intended-speed estimate"),
         "min_cutoff_hz": Param(0.5, "Hz", 0.01, 1000.0, "cutoff of the rest low-pass when still"),
-        "beta": Param(24.0, "Hz per °/s", 0.0, 1000.0, "how fast the rest low-pass opens with the intended speed"),
+        "beta": Param(48.0, "Hz per °/s", 0.0, 1000.0, "how fast the rest low-pass opens with the intended speed"),
     }
-    GRID = {"notch_q": [0.6, 0.75, 0.9], "beta": [6.0, 12.0, 24.0], "min_cutoff_hz": [0.5, 1.0],
-            "pass_dps": [15.0, 30.0]}
+    GRID = {"notch_q": [0.5, 0.6, 0.7], "beta": [12.0, 24.0, 48.0], "min_cutoff_hz": [0.5],
+            "pass_dps": [8.0, 15.0, 30.0]}
 
     def __init__(self, *args, **kwargs):
         p = resolve(self.PARAMS, args, kwargs)
@@ -124,7 +133,12 @@ class TremorFilter:
         if self.pass_dps > 0:
             half = 0.5 * self.pass_dps
             a = (self.speed - half) / half
+            if a >= 1.0:
+                for n in self._notches:
+                    n.hold(x)
+                self._z = list(x)
+                self._last = list(x)
+                return tuple(x)
             if a > 0.0:
-                a = min(a, 1.0)
                 return tuple(f + a * (r - f) for f, r in zip(z, x))
         return tuple(z)
