@@ -19,7 +19,9 @@ define them (Laidig et al., Data 6(7):72, 2021, CC BY 4.0): q_err = q_est ⊗ q_
 over movement phases with a valid optical reference. Every filter's output is converted to ENU first
 (NWU → ENU: q = [√½, 0, 0, √½] ⊗ q). Also prints microseconds per sample for each filter in this run.
 Filters: madgwick, dissertation-kf, sphere (ours) and the peers vqf, fusion, ahrs-madgwick, ahrs-mahony,
-ahrs-ekf (optional packages; a missing one is skipped with a message)."""
+ahrs-ekf (optional packages; a missing one is skipped with a message). With --cv, every free parameter
+of our filters is chosen from its registry grid on the other trials and scored on the one left out
+(leave-one-trial-out): the figures that do not flatter."""
 
 METRICS = ("total", "heading", "inclination")
 #: The groups of BROAD's trials.json used in the summary (the ones the targets talk about).
