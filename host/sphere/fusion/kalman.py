@@ -24,12 +24,12 @@ Earth frame: **NWU** (same as :mod:`sphere.fusion.madgwick`). ``quat`` is sensor
     ``"gate-norm"`` skips the update when d > ``threshold``; ``"huber-norm"`` scales ν by
     threshold/d when d > threshold (multivariate Huber ψ: ν keeps its direction, only its length is
     limited), counted in ``clipped``.
-  Default ``"none"`` is the plain filter. ``sphere eval`` uses ``"huber-norm"`` (tuned on BROAD, see
+  Default ``"none"`` is the plain filter. ``sphere eval`` uses ``"huber-norm"`` (see
   :mod:`sphere.fusion.registry`): clipping each quaternion component separately turns the correction
   towards the diagonal, mixing heading into inclination and back, while scaling the whole innovation keeps
   the rotation z asks for; it is also the better one on BROAD (mean total RMSE 2.53° against 2.79° for
   the best per-component Huber, 2.75° for the best per-component gate, 2.96° for the best
-  "gate-norm"). With R = 10⁻² I a 1σ measurement error is ≈ 11°, so the tuned
+  "gate-norm"). With R = 10⁻² I a 1σ measurement error is ≈ 11°, so the
   threshold (0.036) is far below the textbook 3: ψ then acts on nearly every sample and limits the
   correction rate to about K·threshold·√r, like Madgwick's normalised gradient step, while small
   innovations still get the linear Kalman update.
@@ -47,7 +47,7 @@ import numpy as np
 from sphere.fusion.common import ecompass
 
 EARTH_FRAME = "NWU"
-#: σ_g default of the class; `sphere eval` uses the value tuned on BROAD (sphere.fusion.registry)
+#: σ_g default of the class; `sphere eval` uses the value `sphere eval --cv` chose (sphere.fusion.registry)
 DEFAULT_GYRO_NOISE_RAD_S = 0.02
 #: heavy-tail protection modes (§2.9): per component ("gate", "huber") or on the normalised innovation
 #: d = √(νᵀS⁻¹ν) ("gate-norm", "huber-norm"); see the module docstring

@@ -39,7 +39,7 @@ import numpy as np
 from sphere.fusion.common import batch_inputs
 
 EARTH_FRAME = "NWU"
-DEFAULT_BETA = 0.041  # Madgwick's published default (rad/s); eval uses the β tuned on BROAD, see fusion.md
+DEFAULT_BETA = 0.041  # Madgwick's published default (rad/s); eval uses the β `sphere eval --cv` chose (registry)
 
 
 def madgwick_step(q, gx, gy, gz, ax, ay, az, mx, my, mz, dt, beta, acc_valid=True, mag_valid=True):

@@ -32,7 +32,8 @@ Laidig & Seel 2023, §3.5): correction rate c ≈ LP(R·b) − LP(R)·b_true, ho
 ``bias_sigma_motion_dps``, the rate's noise over 1 s); the vertical component becomes observable as the
 sensor turns. b is clipped to ``bias_clip_dps``, each diagonal of P to its initial value.
 
-Settings were tuned once for all shipped BROAD trials together (host/docs/fusion.md), never per trial.
+The free settings (``tau_acc_s``, ``bias_sigma_motion_dps``, ``bias_forget_s``) are the ones ``sphere eval --cv``
+chose, leave one trial out (host/docs/fusion.md); the rest are VQF's published defaults where VQF has one.
 """
 
 from __future__ import annotations
