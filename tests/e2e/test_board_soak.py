@@ -56,6 +56,11 @@ def test_a_resent_frame_and_time_going_back_are_stale_a_gap_is_dropped_frames():
     items = [(0.0, _hello(), 0), (0.005, _raw(5000), 1), (0.5, _hello(), 0), (0.505, _raw(5000), 1)]
     s = S.stream_checks(S.read_frames(*_stream(items)), [])
     assert s["stale_frames"].count == 0 and s["hellos"] == 2
+    # the device's time starting again after an injected reset whose HELLO the host never got: a restart
+    items = [(0.0, _hello(), 0), (1.0, _raw(1000000), 1), (1.3, _raw(200000), 7)]
+    s = S.stream_checks(S.read_frames(*_stream(items)), [], resets_t=[1.1])
+    assert s["stale_frames"].count == 0 and s["hellos_lost"] == 1
+    assert S.stream_checks(S.read_frames(*_stream(items)), [])["stale_frames"].count == 1
 
 
 def test_crc_errors_count_only_outside_injected_line_faults():

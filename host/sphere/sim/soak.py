@@ -100,12 +100,14 @@ def _in(t, windows) -> bool:
     return any(a <= t <= b for a, b in windows)
 
 
-def stream_checks(frames: list[Frame], line_windows) -> dict:
-    """stale_frames, crc_errors (outside ``line_windows``), frames_dropped, resets, overruns."""
+def stream_checks(frames: list[Frame], line_windows, resets_t=()) -> dict:
+    """stale_frames, crc_errors (outside ``line_windows``), frames_dropped, resets, overruns. A packet whose
+    device time starts again from an injected reset (its HELLO lost while the host was not reading) is a
+    restart, not a stale frame."""
     stale, crc, dropped = Invariant(), Invariant(), Invariant()
     last_seq = None
     last_t: dict[int, int] = {}
-    hellos = 0
+    hellos = hellos_lost = 0
     overruns_by_boot = [0]
     for f in frames:
         if not f.ok:
@@ -121,8 +123,14 @@ def stream_checks(frames: list[Frame], line_windows) -> dict:
         t_us = getattr(p, "t_us", None)
         prev = last_t.get(f.type_) if t_us is not None else None
         if prev is not None and ((t_us - prev) & 0xFFFFFFFF) >= 0x80000000:
-            stale.add(f.t_s, detail=f"{type(p).__name__} time {t_us} us after {prev} us without a HELLO")
-            continue
+            if any(abs(f.t_s - t_us * 1e-6 - r) < 0.5 for r in resets_t):
+                hellos_lost += 1  # the device started again at an injected reset; its HELLO was not received
+                last_seq, last_t = None, {}
+                overruns_by_boot.append(0)
+                prev = None
+            else:
+                stale.add(f.t_s, detail=f"{type(p).__name__} time {t_us} us after {prev} us without a HELLO")
+                continue
         # 8-bit sequence numbers: a jump of 128 or more is a repeat unless the device's time moved on
         # (then frames were lost, e.g. while the host did not read)
         forward_in_time = prev is not None and t_us != prev
@@ -139,7 +147,7 @@ def stream_checks(frames: list[Frame], line_windows) -> dict:
         if isinstance(p, Status):
             overruns_by_boot[-1] = max(overruns_by_boot[-1], p.loop_overruns)
     return {"stale_frames": stale, "crc_errors": crc, "frames_dropped": dropped,
-            "hellos": hellos, "overruns": sum(overruns_by_boot)}
+            "hellos": hellos, "hellos_lost": hellos_lost, "overruns": sum(overruns_by_boot)}
 
 
 def fault_ends(faults: list[dict], chips: list[str]) -> list[dict]:
@@ -361,10 +369,10 @@ def run_soak(elf, seconds: float, seed: int, board: str | None = None, kinds=FAU
         elif e["kind"] == "host_reads" and stall_t is not None:
             line.append((stall_t, e["t"] + LINE_WINDOW_S))
             stall_t = None
-    s = stream_checks(frames, line)
+    s = stream_checks(frames, line, resets_t)
     rec, rec_rows = recovery(frames, ends)
     ori, ori_rows = orientation_excess(frames, ref, ends, resets_t)
-    resets = max(0, s["hellos"] - 1)
+    resets = max(0, s["hellos"] + s["hellos_lost"] - 1)
     injected = len(resets_t)
     inv = {
         "stale_frames": s["stale_frames"].as_dict(),
