@@ -6,8 +6,8 @@ Everything a command needs is found from an installed package, not only from a c
 - the data the package ships (``sphere/data``: example captures, golden vectors, the virtual board's C
   sources, the firmware image when the wheel was built after ``make -C firmware``); in a checkout these
   are symbolic links into ``protocol/``, ``hardware/sim/`` and ``firmware/build/``;
-- the firmware image: ``$SPHERE_FIRMWARE`` (an .elf with its .hex beside it), else the checkout's
-  ``firmware/build/sphere.elf``, else the one in the package;
+- the firmware image: ``$SPHERE_FIRMWARE`` or ``[paths] firmware`` (an .elf with its .hex beside it),
+  else the checkout's ``firmware/build/sphere.elf``, else the one in the package;
 - the virtual board: built in the checkout's ``hardware/sim/build``, or, installed, on first use into
   ``$XDG_CACHE_HOME/marg-sphere/sim`` (``~/.cache/marg-sphere/sim``);
 - BROAD: ``$SPHERE_BROAD_DIR``, else ``broad_dir`` in the ``[paths]`` table of
@@ -71,12 +71,15 @@ def firmware_build_dir() -> Path | None:
 def firmware_image(suffix: str = ".elf") -> Path:
     """The firmware image (``.elf`` for the simulator, ``.hex`` for avrdude), which may not exist yet.
 
-    ``$SPHERE_FIRMWARE`` names an image (its other format is looked for beside it); otherwise the
-    checkout's build, otherwise the copy shipped in the package.
+    ``$SPHERE_FIRMWARE`` or ``[paths] firmware`` names an image (its other format is looked for beside
+    it); otherwise the checkout's build, otherwise the copy shipped in the package.
     """
     env = os.environ.get(FIRMWARE_ENV)
     if env:
         return Path(env).expanduser().with_suffix(suffix)
+    from_config = configured("firmware")
+    if from_config is not None:
+        return from_config.with_suffix(suffix)
     build = firmware_build_dir()
     if build is not None:
         return build / f"sphere{suffix}"
@@ -84,7 +87,7 @@ def firmware_image(suffix: str = ".elf") -> Path:
 
 
 def firmware_missing_hint() -> str:
-    if in_checkout() and not os.environ.get(FIRMWARE_ENV):
+    if in_checkout() and not os.environ.get(FIRMWARE_ENV) and configured("firmware") is None:
         return "build it with `make -C firmware`"
     return (f"set {FIRMWARE_ENV}=/path/to/sphere.elf (from `make -C firmware` in a checkout of the "
             "repository), or reinstall a package built after `make -C firmware`")
@@ -139,7 +142,8 @@ def vectors_file() -> Path:
 
 # ---- BROAD --------------------------------------------------------------------------------------------
 
-def _config_broad_dir() -> Path | None:
+def configured(key: str) -> Path | None:
+    """``[paths] KEY`` of the config file shared with sphere-mouse (sphere.daemon.paths_config), or None."""
     path = config_file()
     if not path.is_file():
         return None
@@ -148,9 +152,9 @@ def _config_broad_dir() -> Path | None:
     else:  # pragma: no cover - the daemon extra brings tomli on 3.10
         import tomli as tomllib
     try:
-        value = tomllib.loads(path.read_text()).get("paths", {}).get("broad_dir")
+        value = tomllib.loads(path.read_text()).get("paths", {}).get(key)
     except (tomllib.TOMLDecodeError, OSError, AttributeError) as e:
-        raise SystemExit(f"sphere: {path}: {e}; fix the file ([paths] broad_dir = \"/path/to/broad\")")
+        raise SystemExit(f"sphere: {path}: {e}; fix the file ([paths] {key} = \"/some/path\")")
     return Path(value).expanduser() if value else None
 
 
@@ -163,9 +167,9 @@ def broad_dir() -> Path:
     env = os.environ.get(BROAD_ENV)
     if env:
         return Path(env)
-    configured = _config_broad_dir()
-    if configured is not None:
-        return configured
+    from_config = configured("broad_dir")
+    if from_config is not None:
+        return from_config
     if in_checkout():
         return REPO_ROOT.parent / "shared" / "data" / "broad"
     return data_home() / "broad"
