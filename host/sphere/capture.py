@@ -8,13 +8,11 @@ when the host received it (Unix time), for latency and timing studies.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
 from pathlib import Path
 from typing import BinaryIO, Iterator
 
-from sphere.protocol.decoder import DecoderStats, FrameDecoder
-from sphere.protocol.packets import Packet
-from sphere.protocol.timebase import TimeUnwrapper
+from sphere.protocol.decoder import DecoderStats
+from sphere.protocol.stream import DecodedPacket, PacketStream  # noqa: F401  (DecodedPacket: re-exported)
 
 SIDECAR_SUFFIX = ".rx.csv"
 READ_CHUNK = 64 * 1024
@@ -29,28 +27,26 @@ def sidecar_path(path: Path | str) -> Path:
     return path.with_name(path.name + SIDECAR_SUFFIX)
 
 
-@dataclass
-class DecodedPacket:
-    """A packet with the device time unwrapped (``t_us`` is None for packets without a time)."""
-
-    packet: Packet
-    t_us: int | None
-
-
 class CaptureFile:
     """A capture on disk, read as packets."""
 
     def __init__(self, path: Path | str):
-        self.path = Path(path)
+        from sphere.paths import resolve_capture
+
+        try:
+            self.path = resolve_capture(path)  # a path, or example:NAME for a capture shipped with the package
+        except FileNotFoundError as e:
+            raise CaptureError(str(e)) from None
         if not self.path.exists():
             raise CaptureError(f"{self.path}: no such capture file (record one with `sphere capture --port PORT --out FILE`)")
         if self.path.is_dir():
             raise CaptureError(f"{self.path} is a folder, not a capture file")
-        self.decoder = FrameDecoder("device")
+        self.stream = PacketStream("device")
+        self.decoder = self.stream.decoder
 
     @property
     def stats(self) -> DecoderStats:
-        return self.decoder.stats
+        return self.stream.stats
 
     def size(self) -> int:
         return self.path.stat().st_size
@@ -65,13 +61,8 @@ class CaptureFile:
 
     def packets(self, chunk_size: int = READ_CHUNK) -> Iterator[DecodedPacket]:
         """Every packet in the file, in order, with unwrapped device times. Counters in ``stats``."""
-        unwrap = TimeUnwrapper()
         for data in self.chunks(chunk_size):
-            for packet in self.decoder.feed(data):
-                t = getattr(packet, "t_us", None)
-                if packet.NAME == "HELLO" and packet.seq == 0:
-                    unwrap.reset()
-                yield DecodedPacket(packet, unwrap(t) if t is not None else None)
+            yield from self.stream.feed(data)
 
 
 class CaptureWriter:

@@ -72,10 +72,15 @@ def test_damaged_capture_still_decodes_what_is_intact(tmp_path):
 def test_capture_records_a_real_serial_port(tmp_path):
     """`sphere capture` on a pty (pyserial opens the slave side as it would /dev/ttyUSB0)."""
     pytest.importorskip("serial")
+    import tty
+
     master, slave = os.openpty()
+    tty.setraw(slave)
+    name = os.ttyname(slave)
+    os.close(slave)  # nobody else holds the port (sphere capture refuses a port another program has open)
     out = tmp_path / "rec.cap"
     proc = subprocess.Popen(
-        [sys.executable, "-m", "sphere.cli", "capture", "--port", os.ttyname(slave), "--out", str(out), "--times", "--seconds", "30"],
+        [sys.executable, "-m", "sphere.cli", "capture", "--port", name, "--out", str(out), "--times", "--seconds", "30"],
         stderr=subprocess.PIPE, text=True,
     )
     import time
@@ -90,7 +95,6 @@ def test_capture_records_a_real_serial_port(tmp_path):
         time.sleep(0.05)
     os.close(master)  # the "device" goes away: capture must keep what it has and say so
     proc.wait(timeout=15)
-    os.close(slave)
     assert out.read_bytes() == sent
     sidecar = (tmp_path / "rec.cap.rx.csv").read_text().splitlines()
     assert sidecar[0] == "byte_offset,host_time_s" and len(sidecar) > 1

@@ -31,7 +31,7 @@ def test_replay_with_log_backend_prints_moves_and_exits(tmp_path):
     assert r.returncode == 0, r.stderr
     lines = r.stdout.splitlines()
     moves = [tuple(map(int, l.split()[1:3])) for l in lines if l.startswith("move ")]  # summed once a second
-    assert sum(dx for dx, _ in moves) == 250  # 10° right × 1000 px / 40°
+    assert abs(sum(dx for dx, _ in moves) - 250) <= 2  # 10° right × 1000 px / 40° (the smoothing may round ±1)
     assert "click left" in lines
     assert "backend log" in r.stderr and "stopped:" in r.stderr
 
@@ -73,7 +73,7 @@ def test_status_line():
             d.handle(dp)
     clock[0] = 2.0
     text = status.tick(d)
-    assert "scripted sphere" in text and "frames/s" in text and "crc errors 0" in text
+    assert "scripted sphere" in text and "frames/s" in text and "bad 0" in text
     assert "gaps 0 (0 lost)" in text and "mode pointer" in text and "battery 3.90 V" in text
     assert out.getvalue().strip() == text
 

@@ -38,7 +38,7 @@ def test_file_values_are_read_and_converted(tmp_path):
 @pytest.mark.parametrize("text, message", [
     ("[pointer]\nslow_deg_per_widht = 30\n", "unknown key [pointer] slow_deg_per_widht (did you mean 'slow_deg_per_width'?)"),
     ("[pointr]\n", "unknown section [pointr] (did you mean 'pointer'?)"),
-    ("[pointer]\nslow_deg_per_width = -3\n", "[pointer] slow_deg_per_width = -3: must be greater than 0"),
+    ("[pointer]\nslow_deg_per_width = -3\n", "[pointer] slow_deg_per_width = -3: must be between 0.5 and 3600"),
     ("[pointer]\nslow_deg_per_width = \"fast\"\n", "must be a number"),
     ("[pointer]\naxes = \"wrld\"\n", "must be one of 'world', 'local' (did you mean 'world'?)"),
     ("[events]\nsingle_tap = \"click\"\n", "[events] single_tap = 'click': must be one of"),

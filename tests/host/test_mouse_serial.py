@@ -38,6 +38,7 @@ class FakeSphere:
         self.protocol_version = protocol_version
         self.answer = answer
         self.get_hellos = 0
+        self.received = 0  # bytes the host wrote to this device
         self._stop = threading.Event()
         self.thread = threading.Thread(target=self._run, daemon=True)
         self.thread.start()
@@ -53,6 +54,7 @@ class FakeSphere:
             except OSError:
                 time.sleep(0.02)  # nobody has the slave open yet
                 continue
+            self.received += len(data)
             for p in decoder.feed(data):
                 if p.NAME == "GET_HELLO" and self.answer:
                     self.get_hellos += 1
@@ -137,15 +139,18 @@ def test_unplug_and_replug_without_restart(tmp_path):
     assert not thread.is_alive()
 
 
-def test_discovery_picks_the_port_that_answers_hello(tmp_path):
+def test_discovery_asks_only_the_port_named_and_never_writes_to_others(tmp_path):
+    """A glob match is only listened to; the literal path (the udev symlink /dev/sphere) may be asked with GET_HELLO."""
     silent = FakeSphere(tmp_path / "ttyFAKE0", LEFT, answer=False)  # some other serial device
-    sphere = FakeSphere(tmp_path / "ttyFAKE1", LEFT)
-    source = fast_serial("auto", candidates=[str(tmp_path / "ttyFAKE*")], discovery_timeout_s=0.5)
+    sphere = FakeSphere(tmp_path / "sphere", LEFT)
+    source = fast_serial("auto", candidates=[str(tmp_path / "ttyFAKE*"), str(tmp_path / "sphere")],
+                         discovery_timeout_s=0.5, usb_ids=[])
     daemon, backend, thread = start_daemon(source)
     try:
         assert wait_for(lambda: source.port_name is not None)
-        assert source.port_name == str(tmp_path / "ttyFAKE1")
+        assert source.port_name == str(tmp_path / "sphere")
         assert wait_for(lambda: backend.x <= -238)
+        assert silent.received == 0  # the unidentified device got nothing
     finally:
         daemon.stop()
         thread.join(5)
@@ -154,9 +159,9 @@ def test_discovery_picks_the_port_that_answers_hello(tmp_path):
 
 
 def test_protocol_version_mismatch_stops_with_what_to_update(tmp_path):
-    dev = FakeSphere(tmp_path / "sphere", LEFT, protocol_version=2)
+    dev = FakeSphere(tmp_path / "sphere", LEFT, protocol_version=9)
     source = fast_serial(str(tmp_path / "sphere"))
-    with pytest.raises(SourceError, match="protocol version 2.*update the host software"):
+    with pytest.raises(SourceError, match="protocol version 9.*update the host software"):
         for _ in source:
             pass
     dev.unplug()

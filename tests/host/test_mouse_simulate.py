@@ -44,7 +44,7 @@ def test_simulate_runs_the_board_and_ends_with_it(tmp_path, monkeypatch):
         seen["trace"] = trace
         return [sys.executable, str(script)]
 
-    monkeypatch.setattr(sources, "simulator_command", command)
+    monkeypatch.setattr(sources.simulated, "simulator_command", command)
     logs = []
     src = sources.SimulatorSource("synthetic:taps", log=logs.append, hello_timeout_s=0.1, link_timeout_s=5.0,
                                   reconnect_interval_s=0.1)
@@ -61,7 +61,7 @@ def test_simulate_runs_the_board_and_ends_with_it(tmp_path, monkeypatch):
 def test_simulator_that_fails_says_why(tmp_path, monkeypatch):
     script = tmp_path / "broken.py"
     script.write_text("print('make: *** [Makefile:68: build/sphere.elf] Error 1'); raise SystemExit(2)\n")
-    monkeypatch.setattr(sources, "simulator_command", lambda trace="", seconds=0: [sys.executable, str(script)])
+    monkeypatch.setattr(sources.simulated, "simulator_command", lambda trace="", seconds=0: [sys.executable, str(script)])
     with pytest.raises(sources.SourceError, match="did not open its pty: make: .*Error 1"):
         sources.SimulatorSource()
 

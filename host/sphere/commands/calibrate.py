@@ -162,43 +162,27 @@ def _run_capture(args) -> int:
 
 
 class _Link:
-    """A minimal command/reply link over the serial port; RAW_SAMPLE values are kept as they arrive
-    (device time unwrapped), for the steps to judge."""
+    """The session's link: commands and replies through :class:`sphere.device_link.DeviceLink`, and the
+    RAW_SAMPLE values kept as they arrive (device time unwrapped by its PacketStream), for the steps to judge."""
 
     def __init__(self, port, writer=None):
-        from sphere.protocol import FrameDecoder, TimeUnwrapper
+        from sphere.device_link import DeviceLink
 
-        self.port = port
-        self.decoder = FrameDecoder("device")
-        self.unwrap = TimeUnwrapper()
-        self.writer = writer
-        self.seq = 0
-        self.hello = None
         self.values = SeriesBuilder()
         self.last_raw_wall = time.monotonic()
+        self.device = DeviceLink(port, on_bytes=writer.write if writer else None, on_packet=self._packet)
+
+    def _packet(self, dp):
+        if dp.packet.NAME == "RAW_SAMPLE":
+            self.last_raw_wall = time.monotonic()
+            self.values.add(dp.packet, dp.t_us * 1e-6)
+
+    @property
+    def hello(self):
+        return self.device.stream.hello
 
     def pump(self, seconds: float):
-        end = time.monotonic() + seconds
-        out = []
-        while True:
-            data = self.port.read(max(1, self.port.in_waiting or 1))
-            if data:
-                if self.writer:
-                    self.writer.write(data)
-                for p in self.decoder.feed(data):
-                    out.append(p)
-                    if p.NAME == "RAW_SAMPLE":
-                        self._raw(p)
-                    elif p.NAME == "HELLO":
-                        self.hello = p
-                        if p.seq == 0:
-                            self.unwrap.reset()
-            if time.monotonic() >= end:
-                return out
-
-    def _raw(self, p):
-        self.last_raw_wall = time.monotonic()
-        self.values.add(p, self.unwrap(p.t_us) * 1e-6)
+        return self.device.pump(seconds)
 
     def series(self, since: float | None = None):
         """The RAW_SAMPLE values so far (from device time ``since`` on)."""
@@ -206,22 +190,10 @@ class _Link:
 
     def flush(self):
         """Drop what arrived while nobody was reading (a person reading the prompt)."""
-        try:
-            self.port.reset_input_buffer()
-        except (AttributeError, OSError):
-            pass
+        self.device.flush_input()
 
     def command(self, packet, timeout_s: float = 1.0):
-        from sphere.protocol import encode_frame
-
-        self.seq = (self.seq + 1) & 0xFF
-        self.port.write(encode_frame(packet, self.seq))
-        end = time.monotonic() + timeout_s
-        while time.monotonic() < end:
-            for p in self.pump(0.05):
-                if p.NAME == "REPLY" and p.cmd_seq == self.seq and p.cmd_type == packet.TYPE:
-                    return p
-        return None
+        return self.device.command(packet, timeout_s)
 
 
 class _Progress:
@@ -380,9 +352,8 @@ def _step_turn(link, progress, timeout_s):
 
 
 def _run_port(args) -> int:
-    from sphere import calibration_session as session
-    from sphere.protocol import CalibrationBlock, GetCalibration, GetHello, SaveCalibration, SetCalibration
-    from sphere.protocol.packets import CALIBRATION_STATE_BITS, bit_names
+    from sphere.capture import CaptureError
+    from sphere.device_link import LinkLost
     from sphere.serial_link import PortError, open_port
 
     try:
@@ -394,8 +365,39 @@ def _run_port(args) -> int:
     if args.save_capture:
         from sphere.capture import CaptureWriter
 
-        writer = CaptureWriter(args.save_capture)
+        try:
+            writer = CaptureWriter(args.save_capture)
+        except CaptureError as e:
+            port.close()
+            print(f"sphere calibrate: {e}", file=sys.stderr)
+            return 2
     link = _Link(port, writer)
+    try:
+        return _session(args, link)
+    except LinkLost as e:
+        print(f"\nsphere calibrate: {e}; nothing more was sent", file=sys.stderr)
+        return 1
+    except CaptureError as e:
+        print(f"\nsphere calibrate: {e}", file=sys.stderr)
+        return 1
+    finally:
+        try:
+            port.close()
+        except Exception:
+            pass
+        if writer:
+            try:
+                writer.close()
+            except CaptureError:
+                pass
+
+
+def _session(args, link) -> int:
+    """The guided steps on an open link (``_run_port`` opens and closes it)."""
+    from sphere import calibration_session as session
+    from sphere.protocol import CalibrationBlock, GetCalibration, GetHello, SaveCalibration, SetCalibration
+    from sphere.protocol.packets import CALIBRATION_STATE_BITS, bit_names
+
     progress = _Progress()
 
     def wait(msg):
@@ -405,78 +407,73 @@ def _run_port(args) -> int:
         input(msg + " — press Enter ")
         link.flush()
 
-    try:
-        link.pump(0.6)
-        if link.hello is None:
-            link.command(GetHello())
-            link.pump(0.3)
-        if link.hello is not None:
-            from sphere.daemon.sources import version_problem
+    link.pump(0.6)
+    if link.hello is None:
+        link.command(GetHello())
+        link.pump(0.3)
+    if link.hello is not None:
+        from sphere.daemon.sources import version_problem
 
-            problem = version_problem(link.hello)
-            if problem:
-                print(f"sphere calibrate: {problem}", file=sys.stderr)
-                return 1
-        if not link.values.t:
-            link.pump(1.0)
-        if not link.values.t:
-            print("sphere calibrate: no RAW_SAMPLE from the sphere; is the raw stream on (SET_STREAM)?", file=sys.stderr)
+        problem = version_problem(link.hello)
+        if problem:
+            print(f"sphere calibrate: {problem}", file=sys.stderr)
             return 1
-        reply = link.command(GetCalibration())
-        base = block_of(CalibrationBlock.unpack(reply.data[:CalibrationBlock.SIZE])) if (
-            reply is not None and reply.ok and len(reply.data) >= CalibrationBlock.SIZE) else None
-        try:
-            print(f"1/3 gyro bias: put the sphere down and do not touch it (still for {STILL_S:g} s).", file=sys.stderr)
-            wait("   ready?")
-            gyro_still = _step_gyro(link, progress, args.timeout)
-            print(f"2/3 accelerometer: lay the sphere on each of its six faces, still for {FACE_S:g} s each, in any "
-                  "order.", file=sys.stderr)
-            wait("   ready?")
-            faces = _step_faces(link, progress, args.timeout)
-            print("3/3 magnetometer: turn the sphere slowly through every direction (figure eights, all axes).",
-                  file=sys.stderr)
-            wait("   ready?")
-            _step_turn(link, progress, args.timeout)
-        except _StepFailed as e:
-            progress.done("")
-            print(f"sphere calibrate: {e}", file=sys.stderr)
-            return 1
-        except EOFError:
-            print("\nsphere calibrate: no answer on the terminal (use --yes to run without Enter); nothing was sent",
-                  file=sys.stderr)
-            return 1
-        mag = link.series().mag
-        cal = session.calibrate(gyro_still, {k: v.mean for k, v in faces.items()}, mag)
-        block = _finish(args, cal, mag, base)
-        if not (cal.gyro or cal.accel or cal.mag):
-            print("sphere calibrate: nothing could be computed; nothing sent", file=sys.stderr)
-            return 1
-        if base is not None and not (cal.gyro and cal.accel and cal.mag):
-            print("the parts not computed keep the sphere's current values", file=sys.stderr)
-        reply = link.command(SetCalibration(**block))
-        if reply is None or not reply.ok:
-            print(f"sphere calibrate: the sphere did not accept SET_CALIBRATION ({reply})", file=sys.stderr)
-            return 1
-        print("sent to the sphere (in use now)", file=sys.stderr)
-        if not args.no_save:
-            reply = link.command(SaveCalibration(), timeout_s=2.0)
-            if reply is None or not reply.ok:
-                print(f"sphere calibrate: SAVE_CALIBRATION failed ({reply})", file=sys.stderr)
-                return 1
-            print("saved to EEPROM", file=sys.stderr)
-        reply = link.command(GetCalibration())
-        if reply is None or not reply.ok or len(reply.data) < CalibrationBlock.SIZE + 1:
-            print(f"sphere calibrate: GET_CALIBRATION did not answer ({reply})", file=sys.stderr)
-            return 1
-        held = block_of(CalibrationBlock.unpack(reply.data[:CalibrationBlock.SIZE]))
-        state = reply.data[CalibrationBlock.SIZE]
-        if held != block:
-            print(f"sphere calibrate: the sphere holds a different block: {held}", file=sys.stderr)
-            return 1
-        print(f"read back: the sphere holds it (calibration_state {', '.join(bit_names(state, CALIBRATION_STATE_BITS))})",
+    if not link.values.t:
+        link.pump(1.0)
+    if not link.values.t:
+        print("sphere calibrate: no RAW_SAMPLE from the sphere; is the raw stream on (SET_STREAM)?", file=sys.stderr)
+        return 1
+    reply = link.command(GetCalibration())
+    base = block_of(CalibrationBlock.unpack(reply.data[:CalibrationBlock.SIZE])) if (
+        reply is not None and reply.ok and len(reply.data) >= CalibrationBlock.SIZE) else None
+    try:
+        print(f"1/3 gyro bias: put the sphere down and do not touch it (still for {STILL_S:g} s).", file=sys.stderr)
+        wait("   ready?")
+        gyro_still = _step_gyro(link, progress, args.timeout)
+        print(f"2/3 accelerometer: lay the sphere on each of its six faces, still for {FACE_S:g} s each, in any "
+              "order.", file=sys.stderr)
+        wait("   ready?")
+        faces = _step_faces(link, progress, args.timeout)
+        print("3/3 magnetometer: turn the sphere slowly through every direction (figure eights, all axes).",
               file=sys.stderr)
-        return 0
-    finally:
-        port.close()
-        if writer:
-            writer.close()
+        wait("   ready?")
+        _step_turn(link, progress, args.timeout)
+    except _StepFailed as e:
+        progress.done("")
+        print(f"sphere calibrate: {e}", file=sys.stderr)
+        return 1
+    except EOFError:
+        print("\nsphere calibrate: no answer on the terminal (use --yes to run without Enter); nothing was sent",
+              file=sys.stderr)
+        return 1
+    mag = link.series().mag
+    cal = session.calibrate(gyro_still, {k: v.mean for k, v in faces.items()}, mag)
+    block = _finish(args, cal, mag, base)
+    if not (cal.gyro or cal.accel or cal.mag):
+        print("sphere calibrate: nothing could be computed; nothing sent", file=sys.stderr)
+        return 1
+    if base is not None and not (cal.gyro and cal.accel and cal.mag):
+        print("the parts not computed keep the sphere's current values", file=sys.stderr)
+    reply = link.command(SetCalibration(**block))
+    if reply is None or not reply.ok:
+        print(f"sphere calibrate: the sphere did not accept SET_CALIBRATION ({reply})", file=sys.stderr)
+        return 1
+    print("sent to the sphere (in use now)", file=sys.stderr)
+    if not args.no_save:
+        reply = link.command(SaveCalibration(), timeout_s=2.0)
+        if reply is None or not reply.ok:
+            print(f"sphere calibrate: SAVE_CALIBRATION failed ({reply})", file=sys.stderr)
+            return 1
+        print("saved to EEPROM", file=sys.stderr)
+    reply = link.command(GetCalibration())
+    if reply is None or not reply.ok or len(reply.data) < CalibrationBlock.SIZE + 1:
+        print(f"sphere calibrate: GET_CALIBRATION did not answer ({reply})", file=sys.stderr)
+        return 1
+    held = block_of(CalibrationBlock.unpack(reply.data[:CalibrationBlock.SIZE]))
+    state = reply.data[CalibrationBlock.SIZE]
+    if held != block:
+        print(f"sphere calibrate: the sphere holds a different block: {held}", file=sys.stderr)
+        return 1
+    print(f"read back: the sphere holds it (calibration_state {', '.join(bit_names(state, CALIBRATION_STATE_BITS))})",
+          file=sys.stderr)
+    return 0

@@ -9,8 +9,9 @@ Pure core, fed packets, never opening a device:
 - :mod:`~sphere.daemon.config` — the TOML settings, validated;
 - :mod:`~sphere.daemon.synthetic` — a scripted sphere's frames.
 
-Edges: :mod:`~sphere.daemon.sources` (serial with discovery and reconnection, HID, capture replay,
-the virtual board), :mod:`~sphere.daemon.backends` (uinput, x11, pynput, log),
+Edges: :mod:`~sphere.daemon.sources` (a package: one reconnect loop in ``base``, then serial with
+discovery, HID, capture replay, the virtual board, the scripted sphere, and a registry),
+:mod:`~sphere.daemon.backends` (uinput, x11, pynput, log),
 :mod:`~sphere.daemon.stream3d` (WebSocket + the 3-D page), :mod:`~sphere.daemon.status`,
 :mod:`~sphere.daemon.app` (the loop) and :mod:`~sphere.daemon.cli` (flags).
 """

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-import sys
+import logging
 
 from sphere.daemon.actions import Action, EventActions
 from sphere.daemon.motion import GyroBias, MotionTracker
@@ -11,6 +11,15 @@ from sphere.protocol import Event, Hello, Orientation, RawSample, Status
 
 DEFAULT_SCREEN_WIDTH_PX = 1920
 BUTTONS = {"left_click": "left", "right_click": "right", "middle_click": "middle"}
+logger = logging.getLogger("sphere.daemon")
+
+#: RAW_SAMPLE flags (protocol/spec.md §4.2) of the sensors the status line reports when they stop answering.
+SENSOR_FLAGS = (("accelerometer", 0x01), ("gyroscope", 0x02), ("magnetometer", 0x04))
+GYRO_OK = 0x02
+TAP_ACTIVE = 0x10
+GYRO_STALE = 0x40  # protocol v2: the gyro value is held from the last good read
+#: What the loop does for a request a signal handler made (handlers only set a flag).
+REQUESTS = ("recentre", "pause", "stop")
 
 
 def _desktop_size():
@@ -37,7 +46,8 @@ class SphereMouse:
         self.backend = backend
         self.stream = stream
         self.status = status
-        self.log = log or (lambda msg: print(f"sphere-mouse: {msg}", file=sys.stderr, flush=True))
+        self.log = log or logger.info
+        self.warn = log or logger.warning
         width = cfg.output.screen_width_px
         if not width:
             size = backend.screen_size()
@@ -66,6 +76,9 @@ class SphereMouse:
         self._generation = None
         self._recentre_tilt = True
         self._stopped = False
+        self._requests: list[str] = []
+        self.sensor_flags = None  # the last RAW_SAMPLE's sensor bits
+        self.sensors_missing: tuple[str, ...] = ()
         if stream is not None:
             stream.mode = self.mode
 
@@ -150,6 +163,9 @@ class SphereMouse:
         t = dp.t_us
         typ = p.TYPE
         if typ == RawSample.TYPE:
+            flags = p.flags
+            if flags & 0x07 != self.sensor_flags:
+                self._sensors_changed(flags & 0x07)
             dt = self.motion.raw(p, t)
             self.now_us = t
             if self.actions._pending is not None:
@@ -157,8 +173,8 @@ class SphereMouse:
                     self.do(a)
             if self.stream is not None and self.motion.uses_host_filter:
                 self.stream.publish_orientation(self.motion.quat, t)
-            if self.paused or self.actions.frozen(t) or p.flags & 0x10:
-                return
+            if self.paused or self.actions.frozen(t) or flags & (TAP_ACTIVE | GYRO_STALE) or not flags & GYRO_OK:
+                return  # without the gyroscope nothing says how the sphere turns: the pointer holds still
             if self.mode == "pointer":
                 dx, dy = self.mapper.update(self.motion.gyro_dps, dt, self.motion.up)
                 if dx or dy:
@@ -188,6 +204,36 @@ class SphereMouse:
             self.hello = p
             self.motion.reset_time()
 
+    def _sensors_changed(self, bits: int) -> None:
+        """A sensor stopped or started answering (RAW_SAMPLE flags): said in the log and on the status line."""
+        before = self.sensor_flags
+        self.sensor_flags = bits
+        self.sensors_missing = tuple(name for name, bit in SENSOR_FLAGS if not bits & bit)
+        for name, bit in SENSOR_FLAGS:
+            was = before is None or before & bit
+            if was and not bits & bit:
+                extra = ": the pointer holds still until it answers again" if bit == GYRO_OK else ""
+                self.warn(f"the sphere reports its {name} not answering (RAW_SAMPLE flags){extra}")
+            elif before is not None and not before & bit and bits & bit:
+                self.log(f"the sphere's {name} answers again")
+
+    # -- requests (from signal handlers: they only call request(), the loop acts) --
+    def request(self, what: str) -> None:
+        """Ask the loop to ``recentre``, ``pause`` (toggle) or ``stop`` at its next turn: safe from a signal
+        handler (nothing but a list append; no backend, X or serial call happens in the handler)."""
+        if what == "stop":
+            self._stopped = True
+            self.source._stop = True  # a flag the source's loop checks
+        self._requests.append(what)
+
+    def _serve_requests(self) -> None:
+        while self._requests:
+            what = self._requests.pop(0)
+            if what == "recentre":
+                self.recentre()
+            elif what == "pause":
+                self.toggle_pause()
+
     # -- loop --
     def run(self) -> int:
         source = self.source
@@ -199,6 +245,8 @@ class SphereMouse:
                     self.mapper.reset()
                 for dp in batch:
                     self.handle(dp)
+                if self._requests:
+                    self._serve_requests()
                 if self.status is not None:
                     self.status.tick(self)
                 if self._stopped:
@@ -207,10 +255,14 @@ class SphereMouse:
             if self.status is not None:
                 self.status.tick(self, force=True)
                 if self.status.overwrite:
-                    print(file=self.status.stream)
+                    try:
+                        self.status.stream.write("\n")
+                    except (OSError, ValueError):
+                        pass
         return 0
 
     def stop(self) -> None:
+        """Stop the loop (from another thread); the source closes its device when its loop sees it."""
         self._stopped = True
         close = getattr(self.source, "close", None)
         if close:

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import argparse
+import logging
+import os
 import signal
 import sys
 
@@ -42,6 +44,11 @@ def build_parser() -> argparse.ArgumentParser:
                    "stderr is not a terminal")
     p.add_argument("--quiet", action="store_true", help="no status line")
     p.add_argument("--check-config", action="store_true", help="validate the config and exit")
+    p.add_argument("--print-config", action="store_true",
+                   help="print every setting with its default and meaning (a config file to start from) and exit")
+    from sphere import __version__
+
+    p.add_argument("--version", action="version", version=f"sphere-mouse {__version__}")
     return p
 
 
@@ -79,37 +86,54 @@ def settings_from_args(args) -> config_mod.Config:
         cfg = cfg.with_overrides(flags, "command line")
     if args.set:
         cfg = cfg.with_overrides(config_mod.parse_set(args.set), "--set")
-    merged = cfg.as_dict()
-    config_mod._check_together(merged, "settings")
+    config_mod.check_config(cfg, "settings")
     return cfg
 
 
 def open_source(cfg, log):
+    """The source ``[source] kind`` names, from the registry (sphere.daemon.sources.REGISTRY)."""
     from sphere.daemon import sources
 
-    s = cfg.source
-    kind = s.kind
-    if kind == "auto":
-        kind = "replay" if s.replay else "serial"
-    if kind == "replay":
-        if not s.replay:
-            raise ConfigError("[source] kind = \"replay\" needs a capture file: --replay FILE or [source] replay")
-        return sources.ReplaySource(s.replay, s.speed)
-    serial_kwargs = dict(baud=s.baud, hello_timeout_s=s.hello_timeout_s, discovery_timeout_s=s.discovery_timeout_s,
-                         link_timeout_s=s.link_timeout_s, reconnect_interval_s=s.reconnect_interval_s)
-    if kind == "simulate":
-        if sources.simulator_available():
-            try:
-                return sources.SimulatorSource(s.sim_trace, log=log, seconds=s.sim_seconds, **serial_kwargs)
-            except sources.SourceError as e:
-                log(f"the virtual board cannot run here ({e}); using the built-in scripted sphere")
-        else:
-            log("the virtual board (sphere sim) is not installed here; using the built-in scripted sphere")
-        return sources.ScriptedSource(speed=s.speed or 1.0)
-    if kind == "hid":
-        return sources.HidSource(s.hid_vendor_id, s.hid_product_id, s.hid_product,
-                                 reconnect_interval_s=s.reconnect_interval_s, log=log)
-    return sources.SerialSource(s.port, s.candidates, reset_on_open=s.reset_on_open, log=log, **serial_kwargs)
+    return sources.open_source(cfg, log)
+
+
+class _JournalFormatter(logging.Formatter):
+    """``sphere-mouse: message``; under systemd (stderr is the journal) prefixed with the syslog priority
+    (``<4>`` warning, ``<6>`` info, sd-daemon(3)) so that `journalctl -p warning` finds the warnings."""
+
+    PRIORITY = {logging.DEBUG: 7, logging.INFO: 6, logging.WARNING: 4, logging.ERROR: 3, logging.CRITICAL: 2}
+
+    def __init__(self, journal: bool):
+        super().__init__("sphere-mouse: %(message)s")
+        self.journal = journal
+
+    def format(self, record):
+        text = super().format(record)
+        return f"<{self.PRIORITY.get(record.levelno, 6)}>{text}" if self.journal else text
+
+
+def _stderr_is_journal() -> bool:
+    want = os.environ.get("JOURNAL_STREAM", "")
+    try:
+        st = os.fstat(sys.stderr.fileno())
+        return want == f"{st.st_dev}:{st.st_ino}"
+    except (OSError, ValueError, AttributeError):
+        return False
+
+
+def setup_logging() -> logging.Logger:
+    """The daemon's messages (logger "sphere.daemon" and its children) on stderr, one line each."""
+    logger = logging.getLogger("sphere.daemon")
+    for h in list(logger.handlers):
+        if getattr(h, "_sphere_mouse", False):
+            logger.removeHandler(h)
+    handler = logging.StreamHandler(sys.stderr)
+    handler._sphere_mouse = True
+    handler.setFormatter(_JournalFormatter(_stderr_is_journal()))
+    logger.addHandler(handler)
+    logger.setLevel(logging.INFO)
+    logger.propagate = False
+    return logger
 
 
 def main(argv=None) -> int:
@@ -123,14 +147,20 @@ def main(argv=None) -> int:
 def _main(argv=None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    if args.print_config:
+        from sphere.daemon.print_config import defaults_toml
+
+        sys.stdout.write(defaults_toml())
+        return 0
+    logger = setup_logging()
 
     def log(msg: str) -> None:
-        print(f"sphere-mouse: {msg}", file=sys.stderr, flush=True)
+        logger.info(msg)
 
     try:
         cfg = settings_from_args(args)
     except ConfigError as e:
-        print(f"sphere-mouse: config error: {e}", file=sys.stderr)
+        logger.error(f"config error: {e}")
         return 2
     if args.check_config:
         print(f"sphere-mouse: config OK ({cfg.origin})")
@@ -144,46 +174,48 @@ def _main(argv=None) -> int:
     try:
         source = open_source(cfg, log)
     except (SourceError, ConfigError) as e:
-        log(str(e))
+        logger.error(str(e))
         return 2
     try:
-        backend = open_backend(cfg.output.backend, cfg.output.display, warn=log)
+        backend = open_backend(cfg.output.backend, cfg.output.display, warn=logger.warning)
     except BackendUnavailable as e:
-        log(f"backend {cfg.output.backend} cannot start: {e}")
+        logger.error(f"backend {cfg.output.backend} cannot start: {e}")
+        source.close()
         return 2
     stream = None
     if cfg.stream.enabled:
         try:
             from sphere.daemon.stream3d import OrientationStream
 
-            stream = OrientationStream(cfg.stream.host, cfg.stream.port, cfg.stream.rate_hz, log=log)
+            stream = OrientationStream(cfg.stream.host, cfg.stream.port, cfg.stream.rate_hz, log=log,
+                                       max_clients=cfg.stream.max_clients)
             stream.start()
             log(f"3-D view on http://{cfg.stream.host}:{stream.port}/ (WebSocket ws://{cfg.stream.host}:{stream.port}/ws)")
         except Exception as e:  # a taken port must not stop the pointer
-            log(f"no 3-D stream: {e}")
+            logger.warning(f"no 3-D stream: {e}")
             stream = None
     status = None
     if not args.quiet and (args.status or sys.stderr.isatty()):
         status = StatusLine(sys.stderr, cfg.status.interval_s)
-    daemon = SphereMouse(cfg, source, backend, stream=stream, status=status, log=log)
+    daemon = SphereMouse(cfg, source, backend, stream=stream, status=status)
     log(f"source {source.state}, backend {backend.name}, mode {daemon.mode}, "
         f"{cfg.pointer.slow_deg_per_width:g}° per screen width ({daemon.screen_width_px} px)")
 
-    def on_stop(signum, frame):
-        daemon.stop()
-
-    signal.signal(signal.SIGTERM, on_stop)
-    signal.signal(signal.SIGINT, on_stop)
+    # the handlers only set flags; the loop acts on them between batches (no X, serial or log call in a handler)
+    signal.signal(signal.SIGTERM, lambda s, f: daemon.request("stop"))
+    signal.signal(signal.SIGINT, lambda s, f: daemon.request("stop"))
     if hasattr(signal, "SIGUSR1"):
-        signal.signal(signal.SIGUSR1, lambda s, f: daemon.recentre())
-        signal.signal(signal.SIGUSR2, lambda s, f: daemon.toggle_pause())
+        signal.signal(signal.SIGUSR1, lambda s, f: daemon.request("recentre"))
+        signal.signal(signal.SIGUSR2, lambda s, f: daemon.request("pause"))
     code = 0
     try:
         daemon.run()
     except SourceError as e:
-        log(str(e))
+        logger.error(str(e))
         code = 2
     finally:
+        signal.signal(signal.SIGTERM, signal.SIG_DFL)
+        signal.signal(signal.SIGINT, signal.SIG_DFL)
         source.close()
         backend.close()
         if stream is not None:

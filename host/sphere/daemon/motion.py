@@ -313,6 +313,11 @@ class MotionTracker:
         ax, ay, az = a[0] * ka, a[1] * ka, a[2] * ka
         anorm = math.sqrt(ax * ax + ay * ay + az * az)
         flags = sample.flags
+        if flags & 0x42 != 0x02:
+            # gyro_ok clear (spec §4.2: the chip did not answer, its values are 0) or gyro_stale set (a value held
+            # from the last good read): not a rate. Nothing moves, nothing is learnt, the orientation holds.
+            self.gyro_dps = (0.0, 0.0, 0.0)
+            return dt
         tap_active = bool(flags & 0x10)
         accel_ok = bool(flags & 0x01) and anorm > 0.0
         km = 1.0 / chips.HMC5883L_LSB_PER_UT

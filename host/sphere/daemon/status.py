@@ -6,6 +6,10 @@ import sys
 import time
 
 
+def _size(n: int) -> str:
+    return f"{n} B" if n < 10_000 else f"{n / 1000:.0f} kB"
+
+
 class StatusLine:
     def __init__(self, stream=None, interval_s: float = 1.0, overwrite: bool | None = None, clock=time.monotonic):
         self.stream = stream or sys.stderr
@@ -18,10 +22,23 @@ class StatusLine:
         self.last_text = ""
 
     def text(self, daemon) -> str:
+        """Counters of the link as it is (protocol/spec.md §2.1, §3): every kind of bad chunk (framing, CRC,
+        oversize, unknown type, bad length) counts in ``bad``, with the bytes it cost; a reconnect starts the
+        sequence count again instead of counting the frames not sent while unplugged as lost."""
         src = daemon.source
         s = src.stats
-        parts = [src.state, f"{self.rate_fps:.0f} frames/s", f"crc errors {s.crc_errors}",
-                 f"gaps {s.seq_gaps} ({s.frames_lost} lost)", f"mode {daemon.mode}" + (" (paused)" if daemon.paused else "")]
+        bad = f"bad {s.errors}" + (f" ({_size(s.bytes_skipped)} skipped)" if s.bytes_skipped else "")
+        parts = [src.state, f"{self.rate_fps:.0f} frames/s", bad, f"gaps {s.seq_gaps} ({s.frames_lost} lost)"]
+        duplicates = getattr(s, "duplicates", 0)
+        if duplicates:
+            parts.append(f"duplicates {duplicates}")
+        losses = getattr(src, "losses", 0)
+        if losses:
+            parts.append(f"reconnects {losses}")
+        missing = getattr(daemon, "sensors_missing", ())
+        if missing:
+            parts.append(", ".join(missing) + " not answering")
+        parts.append(f"mode {daemon.mode}" + (" (paused)" if daemon.paused else ""))
         if daemon.battery_mv:
             parts.append(f"battery {daemon.battery_mv / 1000:.2f} V")
         return " · ".join(parts)

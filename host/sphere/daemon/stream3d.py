@@ -23,7 +23,9 @@ import threading
 
 
 class OrientationStream:
-    def __init__(self, host: str = "127.0.0.1", port: int = 8765, rate_hz: float = 60.0, log=None):
+    def __init__(self, host: str = "127.0.0.1", port: int = 8765, rate_hz: float = 60.0, log=None,
+                 max_clients: int = 16):
+        self.max_clients = max_clients
         self.host = host
         self.port = port
         self.rate_hz = rate_hz

@@ -5,6 +5,9 @@
     for packet in decoder.feed(chunk_of_bytes):
         ...
     decoder.stats  # crc_errors, oversize, unknown_types, bytes_skipped, seq_gaps, ...
+
+    stream = PacketStream()            # the same, with device time unwrapped: what the daemon,
+    for dp in stream.feed(chunk): ...  # captures and calibration use (sphere.protocol.stream)
 """
 
 from sphere.protocol.framing import MAX_FRAME, MAX_PAYLOAD, crc16, encode_frame, encode_payload
@@ -37,5 +40,6 @@ from sphere.protocol.packets import (
     packet_class,
 )
 from sphere.protocol.timebase import TimeUnwrapper
+from sphere.protocol.stream import DecodedPacket, PacketStream
 
 __all__ = [name for name in dir() if not name.startswith("_")]

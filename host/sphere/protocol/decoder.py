@@ -2,12 +2,18 @@
 
 from __future__ import annotations
 
+from collections import deque
 from dataclasses import asdict, dataclass
 
 from cobs import cobs
 
 from sphere.protocol.framing import MAX_ENCODED, MIN_PAYLOAD, crc16
 from sphere.protocol.packets import BY_TYPE, Hello, Packet, body_sizes
+
+
+#: A CRC-good frame whose seq and CRC equal one of the last this many frames' is a duplicate (a link or a
+#: receiver that re-sent it): dropped before anyone acts on it, counted in ``duplicates``, not as a gap.
+DUPLICATE_WINDOW = 16
 
 
 @dataclass
@@ -25,6 +31,7 @@ class DecoderStats:
     seq_gaps: int = 0
     frames_lost: int = 0
     restarts: int = 0
+    duplicates: int = 0
 
     def as_dict(self) -> dict[str, int]:
         return asdict(self)
@@ -53,6 +60,15 @@ class FrameDecoder:
         self._buf = bytearray()
         self._discarding = False  # inside an oversize chunk: drop bytes up to the next delimiter
         self._last_seq: int | None = None
+        self._recent: deque = deque(maxlen=DUPLICATE_WINDOW)  # (seq << 16 | crc) of the last frames
+
+    def restart(self) -> None:
+        """A new link: a frame cut off by the old one is dropped without being counted, and the
+        sequence count starts again (the frames missed while unplugged were never in transit)."""
+        self._buf.clear()
+        self._discarding = False
+        self._last_seq = None
+        self._recent.clear()
 
     def feed(self, data: bytes) -> list[Packet]:
         stats = self.stats
@@ -109,7 +125,8 @@ class FrameDecoder:
             stats.framing_errors += 1
             self._reject(len(chunk))
             return
-        if crc16(payload[:-2]) != payload[-2] | payload[-1] << 8:
+        crc = payload[-2] | payload[-1] << 8
+        if crc16(payload[:-2]) != crc:
             stats.crc_errors += 1
             self._reject(len(chunk))
             return
@@ -120,6 +137,12 @@ class FrameDecoder:
             if self._last_seq is not None:
                 stats.restarts += 1
             self._last_seq = None
+            self._recent.clear()
+        key = seq << 16 | crc
+        if key in self._recent:
+            stats.duplicates += 1
+            return
+        self._recent.append(key)
         self._count_seq(seq)
         if entry is None:
             stats.unknown_types += 1
@@ -132,6 +155,12 @@ class FrameDecoder:
             return
         stats.frames_ok += 1
         out.append(cls.unpack_body(body, seq))
+
+    def account(self, packet: Packet) -> None:
+        """Count a good frame decoded by another decoder of the same link (a discovery probe's HELLO and
+        what followed it), so the counters and the sequence check go on from it."""
+        self.stats.frames_ok += 1
+        self._count_seq(packet.seq)
 
     def _count_seq(self, seq: int) -> None:
         last = self._last_seq
