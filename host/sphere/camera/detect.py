@@ -331,3 +331,40 @@ class BallDetector:
         G = np.stack([D * e1, D * e2, -D / np.tan(alpha) * c], 1)
         C = D * c
         return Detection(C, G @ cov_p @ G.T, centre_px, r_px, len(u_in), n_rays, float(np.sqrt(np.mean(res * res)) * f))
+
+
+def blob_position(bgr: np.ndarray, camera: Camera, hue_deg: float = 120.0, radius_m: float = 0.04, hint=None):
+    """The colour-blob method of the PlayStation Move's open trackers, as the issue describes it (written
+    here from that description, for comparison): the pixels of the ball's colour, the largest region (or
+    the one nearest the last), its centroid as the direction and its apparent size as the distance
+    (D = f·R/r with r = √(area/π)). No sub-pixel outline, no perspective: what the hybrid is compared with.
+    Returns the centre (camera frame, m) or None."""
+    import cv2
+
+    H, W = bgr.shape[:2]
+    x0, y0, x1, y1 = 0, 0, W, H
+    if hint is not None:
+        (hu, hv), hr = hint
+        m = 2.5 * hr + 24
+        x0, x1 = int(max(0, hu - m)), int(min(W, hu + m + 1))
+        y0, y1 = int(max(0, hv - m)), int(min(H, hv + m + 1))
+        if x1 - x0 < 8 or y1 - y0 < 8:
+            x0, y0, x1, y1 = 0, 0, W, H
+    along, across, bright = hue_projection(bgr[y0:y1, x0:x1], hue_deg)
+    mask = ((along > 0.45 * bright) & (np.abs(across) < 0.35 * along) & (bright > 30)).astype(np.uint8)
+    n, labels, stats, cent = cv2.connectedComponentsWithStats(mask, connectivity=8)
+    if n <= 1:
+        return None
+    areas = stats[1:, cv2.CC_STAT_AREA]
+    if hint is not None:
+        d = np.linalg.norm(cent[1:] + [x0, y0] - np.asarray(hint[0]), axis=1)
+        k = int(np.argmin(d - 0.01 * areas)) + 1
+    else:
+        k = int(np.argmax(areas)) + 1
+    area = float(stats[k, cv2.CC_STAT_AREA])
+    if area < 12:
+        return None
+    c = cent[k] + [x0, y0]
+    r = np.sqrt(area / np.pi)
+    ray = camera.rays(c[None])[0]
+    return ray / ray[2] * (camera.fx * radius_m / r)

@@ -1,5 +1,5 @@
-"""The hybrid tracker on rendered BROAD trials, side by side with camera-only, camera + Kalman filter
-(no IMU) and IMU-only; the figures of issue 16 (RMSE lateral and depth, jitter at rest, latency, loss of
+"""The hybrid tracker on rendered BROAD trials, side by side with the colour-blob method of the
+PlayStation Move's open trackers, camera-only, camera + Kalman filter (no IMU) and IMU-only; the figures of issue 16 (RMSE lateral and depth, jitter at rest, latency, loss of
 the ball, output rate, time per frame).
 
 Time: every event carries the host's clock. IMU sample k (time t_k on the trial's clock) reaches the
@@ -15,14 +15,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from sphere.camera.detect import BallDetector
+from sphere.camera.detect import BallDetector, blob_position
 from sphere.camera.live import hint_from
 from sphere.camera.trials import RenderedTrial
 from sphere.fusion.hybrid import STANDARD_GRAVITY, CameraImuTracker, _rot
 
 IMU_LATENCY_S = 0.004  # serial link: a 40-byte frame at 115200 Bd plus the host's read
 NOMINAL_CAMERA_LATENCY_S = 0.040  # what the host assumes from the middle of the exposure to arrival
-METHODS = ("camera", "camera-kf", "imu", "hybrid")
+METHODS = ("blob", "camera", "camera-kf", "imu", "hybrid")
 
 
 @dataclass
@@ -67,6 +67,7 @@ def run(rt: RenderedTrial, hue_deg: float = 120.0) -> Run:
     last_cam = None
     hint = None
     per_frame, det_ms, detected = [], [], 0
+    last_blob, blob_hint = None, None
     t_ready = None
     frame_iter = {k: None for k in range(len(start))}
     pending = {}
@@ -100,6 +101,14 @@ def run(rt: RenderedTrial, hue_deg: float = 120.0) -> Run:
             t2 = time.perf_counter()
             per_frame.append(1000 * (t2 - t0))
             det_ms.append(1000 * (t1 - t0))
+            if d is not None:  # the same region as ours (the largest one may be something else): what
+                blob_hint = (d.center_px, d.radius_px)  # differs is only how the position is measured
+            b = blob_position(f.image, cam, hue_deg, rt.scene.radius_m, blob_hint)
+            if b is not None:
+                last_blob = b
+                blob_hint = (cam.project(b[None])[0], cam.fx * rt.scene.radius_m / b[2]) if b[2] > 0.05 else None
+            else:
+                blob_hint = None
         q, a = rt.q_host_enu[i], tr.acc_m_s2[i]
         if t_ready is None and hyb.alignment.ready:
             t_ready = float(t_imu_host[i])
@@ -114,6 +123,8 @@ def run(rt: RenderedTrial, hue_deg: float = 120.0) -> Run:
             est["camera-kf"][i] = p
         if last_cam is not None:
             est["camera"][i] = last_cam
+        if last_blob is not None:
+            est["blob"][i] = last_blob
     del frame_iter
     est["imu"] = _imu_only(rt, hyb)
     truth = rt.truth_cam(t_imu_host)

@@ -16,7 +16,9 @@ Each frame reaches the host 35 ms + an exponential tail (mean 5 ms) after the mi
 IMU samples 4 ms after they are taken. The detector and the trackers run as on a live system, and every
 output is compared with where the ball is at the moment of the output.
 
-Methods: camera (the latest fix, held), camera-kf (the same Kalman filter without the IMU: constant
+Methods: blob (the PlayStation Move trackers' method as the issue describes it: the colour region's
+centroid, distance from its apparent size; in the region our detector found, so only the measurement
+differs; latest value held), camera (our outline fit, latest fix held), camera-kf (the same Kalman filter without the IMU: constant
 velocity), imu (dead reckoning from the true start, with the hybrid's alignment), hybrid.
 Figures: RMSE lateral (per image axis) and in depth outside the loss and after the warm-up (until the
 hybrid has learnt the camera's alignment from the motion, typically 1-2 s; the same samples are left out
@@ -182,8 +184,9 @@ def _print_summary(doc):
         fig["losses"] = [{"error_at_return_m": row["error_at_return_m_worst"], "recovery_s": row["recovery_s_worst"]}]
         print(f"{m:11}{_row(fig)}")
     h = mean["hybrid"]
-    for m in ("camera", "camera-kf"):
-        r = [f"{k.replace('_m', '')} ×{mean[m][k] / h[k]:.1f}" for k in ("rmse_lateral_m", "rmse_depth_m")
+    for m in ("blob", "camera", "camera-kf"):
+        r = [f"{k.replace('_m', '')} ×{mean[m][k] / h[k]:.1f}" for k in ("rmse_lateral_m", "rmse_depth_m",
+                                                                        "jitter_lateral_m", "jitter_depth_m")
              if mean[m].get(k) and h.get(k)]
         print(f"  {m} / hybrid: {', '.join(r)}")
     print()
@@ -213,7 +216,8 @@ def _plots(folder: Path, runs, doc) -> None:
     import numpy as np
 
     folder.mkdir(parents=True, exist_ok=True)
-    colours = {"camera": "tab:red", "camera-kf": "tab:orange", "imu": "tab:gray", "hybrid": "tab:blue"}
+    colours = {"blob": "tab:purple", "camera": "tab:red", "camera-kf": "tab:orange", "imu": "tab:gray",
+               "hybrid": "tab:blue"}
     for name, (r, rt) in runs.items():
         fig, ax = plt.subplots(3, 1, figsize=(11, 8), sharex=True)
         for m, c in colours.items():
