@@ -39,6 +39,9 @@ def test_hybrid_meets_the_accuracy_targets_and_beats_the_camera_alone(slow_trans
     h, cam = t["methods"]["hybrid"], t["methods"]["camera"]
     assert h["rmse_lateral_m"] <= 0.01 and h["rmse_depth_m"] <= 0.03
     assert cam["rmse_lateral_m"] > 2 * h["rmse_lateral_m"]
+    # the colour blob's centroid and apparent size (the PS Move trackers' method) against our outline fit
+    blob = t["methods"]["blob"]
+    assert blob["rmse_depth_m"] > 2 * cam["rmse_depth_m"]
     assert t["alignment_error_deg"] < 3.0  # estimated, not given
 
 
