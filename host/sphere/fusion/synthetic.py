@@ -58,23 +58,24 @@ class Trace:
         return np.arange(len(self.gyr_rad_s)) * self.dt_s
 
 
-def _smooth_gate(t):
+def _smooth_gate(t, rest_s=REST_S):
     """0 during the rest, rising to 1 over 0.5 s after it (so motion starts without a jump)."""
-    x = np.clip((t - REST_S) / 0.5, 0.0, 1.0)
+    x = np.clip((t - rest_s) / 0.5, 0.0, 1.0)
     return x * x * (3.0 - 2.0 * x)
 
 
 def trace(scenario: str, seconds: float = 40.0, rate_hz: float = 200.0, seed: int = 0, *,
-          translation: float = 1.0, noise: float = 1.0, bias0_dps=BIAS0_DPS) -> Trace:
+          translation: float = 1.0, noise: float = 1.0, bias0_dps=BIAS0_DPS, rest_s: float = REST_S) -> Trace:
     """One synthetic trace; see the module docstring for the scenarios. ``translation`` and ``noise`` scale
-    the hand's linear acceleration and the sensor noise (1 = as described), ``bias0_dps`` the power-on bias."""
+    the hand's linear acceleration and the sensor noise (1 = as described), ``bias0_dps`` the power-on bias;
+    ``rest_s`` is the rest at the start (0: moving from the first sample)."""
     if scenario not in SCENARIOS:
         raise ValueError(f"unknown scenario {scenario!r}; known: {', '.join(SCENARIOS)}")
     rng = np.random.default_rng(seed)
     dt = 1.0 / rate_hz
     n = int(round(seconds * rate_hz))
     t = np.arange(n) * dt
-    gate = _smooth_gate(t)
+    gate = _smooth_gate(t, rest_s)
     # angular rate in sensor axes: a few incommensurate sines per axis, random phases (rad/s), taken at the
     # middle of each sample interval: sample i is the rate over (t[i-1], t[i]], as a gyro's is, and the
     # orientation at t[i] is q[i-1] ⊗ exp(½ w[i] dt), the order in which a filter applies gyro then accelerometer
@@ -83,7 +84,7 @@ def trace(scenario: str, seconds: float = 40.0, rate_hz: float = 200.0, seed: in
     for k in range(3):
         for amp_dps, f_hz in ((60.0, 0.13 + 0.05 * k), (35.0, 0.41 + 0.07 * k), (15.0, 1.1 + 0.2 * k)):
             w[:, k] += amp_dps * DEG * np.sin(2 * np.pi * f_hz * tm + rng.uniform(0, 2 * np.pi))
-    w *= _smooth_gate(tm)[:, None]
+    w *= _smooth_gate(tm, rest_s)[:, None]
     # true orientation: exact axis-angle step for each interval (start level, x axis pointing north-east)
     q = np.empty((n, 4))
     q[0] = quat.from_axis_angle(np.array([0.0, 0.0, 1.0]), 0.6)
