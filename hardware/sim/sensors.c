@@ -1120,6 +1120,18 @@ static void scl_io_hook(struct avr_t *avr, avr_io_addr_t addr, uint8_t v, void *
 	board_scl_level(b, !low);
 }
 
+static void chip_setup(chip_t *c, const char *name, uint8_t addr7, void (*on_write)(chip_t *, uint8_t, uint8_t),
+                       uint8_t (*on_read)(chip_t *, uint8_t), uint8_t (*next_ptr)(chip_t *, uint8_t),
+                       void (*on_address)(chip_t *))
+{
+	c->name = name;
+	c->addr7 = addr7;
+	c->on_write = on_write;
+	c->on_read = on_read;
+	c->next_ptr = next_ptr;
+	c->on_address = on_address;
+}
+
 void board_init(board_t *b, avr_t *avr, trace_t *trace, int verbose, const board_variant_t *variant,
                 const imperfections_t *imp)
 {
@@ -1145,38 +1157,12 @@ void board_init(board_t *b, avr_t *avr, trace_t *trace, int verbose, const board
 		}
 	}
 
-	chip_t *a = &b->chip[CHIP_ADXL345];
-	a->name = "adxl345";
-	a->addr7 = 0x53;
-	a->on_write = adxl_write;
-	a->on_read = adxl_read;
-	a->next_ptr = adxl_next;
-	a->on_address = adxl_address;
-
-	chip_t *g = &b->chip[CHIP_ITG3200];
-	g->name = "itg3200";
-	g->addr7 = 0x68;
-	g->on_write = itg_write;
-	g->on_read = itg_read;
-	g->next_ptr = itg_next;
-	g->on_address = itg_address;
-
-	chip_t *m = &b->chip[CHIP_HMC5883L];
-	if (b->variant->mag_kind == MAG_QMC5883L) {
-		m->name = "qmc5883l";
-		m->addr7 = 0x0D;
-		m->on_write = qmc_write;
-		m->on_read = qmc_read;
-		m->next_ptr = qmc_next;
-		m->on_address = qmc_address;
-	} else {
-		m->name = "hmc5883l";
-		m->addr7 = 0x1E;
-		m->on_write = hmc_write;
-		m->on_read = hmc_read;
-		m->next_ptr = hmc_next;
-		m->on_address = hmc_address;
-	}
+	chip_setup(&b->chip[CHIP_ADXL345], "adxl345", 0x53, adxl_write, adxl_read, adxl_next, adxl_address);
+	chip_setup(&b->chip[CHIP_ITG3200], "itg3200", 0x68, itg_write, itg_read, itg_next, itg_address);
+	if (b->variant->mag_kind == MAG_QMC5883L)
+		chip_setup(&b->chip[CHIP_HMC5883L], "qmc5883l", 0x0D, qmc_write, qmc_read, qmc_next, qmc_address);
+	else
+		chip_setup(&b->chip[CHIP_HMC5883L], "hmc5883l", 0x1E, hmc_write, hmc_read, hmc_next, hmc_address);
 
 	for (int i = 0; i < CHIP_COUNT; i++)
 		b->chip[i].board = b;

@@ -48,13 +48,17 @@ def need_firmware() -> Path:
     return FIRMWARE_ELF
 
 
-def need_testfw() -> Path:
+def _need_sketch(what: str, make) -> Path:
     if shutil.which("avr-g++") is None or not Path("/usr/share/arduino/hardware/arduino/avr/cores/arduino").is_dir():
-        pytest.skip("avr-g++ or Debian's arduino-core-avr missing: cannot build the board's test sketch")
+        pytest.skip(f"avr-g++ or Debian's arduino-core-avr missing: cannot build the board's {what}")
     try:
-        return testfw_elf(build=True)
+        return make(build=True)
     except BoardUnavailable as e:
         pytest.skip(str(e))
+
+
+def need_testfw() -> Path:
+    return _need_sketch("test sketch", testfw_elf)
 
 
 def _run(name: str, elf: Path, motion: T.Motion, seconds: float, **kw) -> Scenario:
@@ -167,14 +171,9 @@ class ProbeRun:
 
 
 def need_probe() -> Path:
-    if shutil.which("avr-g++") is None or not Path("/usr/share/arduino/hardware/arduino/avr/cores/arduino").is_dir():
-        pytest.skip("avr-g++ or Debian's arduino-core-avr missing: cannot build the board's probe sketch")
     from sphere.sim.board import probe_elf
 
-    try:
-        return probe_elf(build=True)
-    except BoardUnavailable as e:
-        pytest.skip(str(e))
+    return _need_sketch("probe sketch", probe_elf)
 
 
 def probe(commands, motion, seconds: float, **kw) -> ProbeRun:

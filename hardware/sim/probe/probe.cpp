@@ -15,6 +15,7 @@
 //   c                       bus clear: TWI off, nine SCL pulses and a STOP on the pins, TWI on -> "c"
 #include <Arduino.h>
 #include <Wire.h>
+#include "../sketch_wire.h"
 
 static char line[64];
 static uint8_t len;
@@ -24,13 +25,6 @@ static void hex(uint8_t v) {
   Serial.write(d[v >> 4]); Serial.write(d[v & 15]);
 }
 
-static bool rd(uint8_t a, uint8_t r, uint8_t *b, uint8_t n) {
-  Wire.beginTransmission(a); Wire.write(r);
-  if (Wire.endTransmission(false) != 0) { Wire.endTransmission(); return false; }
-  if (Wire.requestFrom(a, n) != n) return false;
-  for (uint8_t i = 0; i < n; i++) b[i] = Wire.read();
-  return true;
-}
 
 static void report_read(const char *tag, uint32_t t, bool ok, const uint8_t *b, uint8_t n) {
   Serial.print(t); Serial.write(' '); Serial.print(tag);

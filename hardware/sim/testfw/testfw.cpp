@@ -7,6 +7,7 @@
 // D13 (PB5) is high during a dummy "update" of a fixed length, so the board's timing is testable.
 #include <Arduino.h>
 #include <Wire.h>
+#include "../sketch_wire.h"
 
 static uint8_t seq;
 static uint16_t crc16(const uint8_t *p, uint8_t n) {
@@ -34,13 +35,6 @@ static void send(uint8_t type, const uint8_t *body, uint8_t n) {
 }
 static bool wr(uint8_t a, uint8_t r, uint8_t v) {
   Wire.beginTransmission(a); Wire.write(r); Wire.write(v); return Wire.endTransmission() == 0;
-}
-static bool rd(uint8_t a, uint8_t r, uint8_t *b, uint8_t n) {
-  Wire.beginTransmission(a); Wire.write(r);
-  if (Wire.endTransmission(false) != 0) { Wire.endTransmission(); return false; }
-  if (Wire.requestFrom(a, n) != n) return false;
-  for (uint8_t i = 0; i < n; i++) b[i] = Wire.read();
-  return true;
 }
 static volatile bool int1, tick;
 ISR(TIMER1_COMPA_vect) { tick = true; }  // the 200 Hz sample clock

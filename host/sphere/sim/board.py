@@ -86,7 +86,7 @@ def firmware_elf(build: bool = True) -> Path:
 
 def _sketch_elf(name: str, build: bool) -> Path:
     elf = SIM_DIR / "build" / f"{name}.elf"
-    if _stale(elf, [SIM_DIR / name / f"{name}.cpp", SIM_DIR / "Makefile"]):
+    if _stale(elf, [SIM_DIR / name / f"{name}.cpp", SIM_DIR / "sketch_wire.h", SIM_DIR / "Makefile"]):
         if not build:
             raise BoardUnavailable(f"the {name} sketch is not built: run `make -C hardware/sim {name}`")
         _make(SIM_DIR, f"make -C hardware/sim {name}", name)
