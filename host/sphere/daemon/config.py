@@ -216,6 +216,15 @@ def _source_kinds():
     return ("auto", *REGISTRY)
 
 
+def _host_filters():
+    """``auto`` and the filters the fusion registry marks live (only ``auto`` without sphere.fusion)."""
+    try:
+        from sphere.fusion.registry import LIVE
+    except ImportError:
+        return ("auto",)
+    return ("auto", *LIVE)
+
+
 # ---- the daemon's sections -----------------------------------------------------------------------
 
 
@@ -350,7 +359,7 @@ class OrientationConfig:
                            "drifts slowly, which pointing does not mind)")
     filter: str = option("auto", "host filter: `sphere` (sphere.fusion's SphereFilter: rejects taps, vibration and hand "
                          "acceleration, learns the gyro bias at rest), `madgwick`; `auto` = the best installed",
-                         choices=("auto", "sphere", "madgwick"))
+                         choices=_host_filters)
     beta: float = option(0.1, "gain β (rad/s) of the host Madgwick filter", _range(0.0, 2.0))
 
 
