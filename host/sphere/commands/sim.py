@@ -30,6 +30,37 @@ DESCRIPTION = (
 DEFAULT_BETA = 0.041  # the firmware's DEFAULT_BETA_MILLI (firmware/src/core/marg_filter.h)
 
 
+CHIPS = ("adxl345", "itg3200", "hmc5883l", "qmc5883l")
+
+
+def _span(text: str) -> str:
+    """T0:T1 in seconds (T1 may be inf), checked here so a typo is one clear line, not a board error."""
+    import argparse
+
+    a, sep, b = text.partition(":")
+    try:
+        float(a), float(b)
+        if not sep:
+            raise ValueError
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: give T0:T1 in seconds, e.g. 3.0:3.5") from None
+    return text
+
+
+def _chip_ppm(text: str) -> str:
+    import argparse
+
+    chip, sep, ppm = text.partition(":")
+    try:
+        float(ppm)
+        if chip not in CHIPS or not sep:
+            raise ValueError
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: give CHIP:PPM with CHIP one of {', '.join(CHIPS)}, "
+                                         "e.g. itg3200:20000") from None
+    return text
+
+
 def add_arguments(p) -> None:
     p.add_argument("--trace", action="append", default=[], metavar="SOURCE",
                    help="BROAD trial (.mat, name or number), synthetic:NAME[:ARG], or a prepared .bin trace; "
@@ -51,7 +82,7 @@ def add_arguments(p) -> None:
     p.add_argument("--stats", metavar="OUT.json", help="write the figures as JSON")
     p.add_argument("--nack", action="append", default=[], metavar="CHIP:T0:T1",
                    help="fault: CHIP (adxl345|itg3200|hmc5883l) stops answering from T0 to T1 s (T1 may be inf)")
-    p.add_argument("--stall", action="append", default=[], metavar="T0:T1",
+    p.add_argument("--stall", action="append", default=[], metavar="T0:T1", type=_span,
                    help="fault: the I2C bus is stalled (clock held) from T0 to T1 s")
     p.add_argument("--send", metavar="FILE", help="bytes for the device's UART, lines 'SECONDS HEX HEX ...'")
     p.add_argument("--timing-pin", default=None, help="pin high during the MARG update (default B5 = D13)")
@@ -61,12 +92,12 @@ def add_arguments(p) -> None:
                    help="(the default now) each I2C byte takes 9 SCL periods at the firmware's TWBR rate")
     p.add_argument("--simavr-i2c-timing", action="store_true",
                    help="simavr's own I2C timing (1 us per step), faster but not the real bus")
-    p.add_argument("--board", default=None, metavar="NAME",
-                   help="board variant: aligned (default), sen10724, gy85, gy85-qmc (each chip's axes as mounted there)")
+    p.add_argument("--board", default=None, choices=("aligned", "sen10724", "gy85", "gy85-qmc"),
+                   help="board variant (default aligned): each chip's axes as mounted there; gy85-qmc has a QMC5883L")
     p.add_argument("--noise", action="store_true",
                    help="the chips' datasheet noise, turn-on offsets and gyro warm-up drift")
     p.add_argument("--seed", type=int, default=None, help="seed of the noise, the clocks and the faults (default 1)")
-    p.add_argument("--clock-ppm", action="append", default=[], metavar="CHIP:PPM",
+    p.add_argument("--clock-ppm", action="append", default=[], metavar="CHIP:PPM", type=_chip_ppm,
                    help="a chip's oscillator off the Nano's crystal by PPM")
     p.add_argument("--clocks", choices=["random"], default=None,
                    help="every chip's oscillator off by a seeded amount within its datasheet's tolerance")
@@ -78,7 +109,7 @@ def add_arguments(p) -> None:
     p.add_argument("--reset-mid-read", action="append", type=float, default=[], metavar="T",
                    help="reset the AVR at the first byte a chip sends after T s (the chip holds SDA)")
     p.add_argument("--sda-held", action="store_true", help="at power-up a sensor holds SDA low")
-    p.add_argument("--host-stall", action="append", default=[], metavar="T0:T1",
+    p.add_argument("--host-stall", action="append", default=[], metavar="T0:T1", type=_span,
                    help="the host stops reading from T0 to T1 s (the adapter's buffer overflows)")
     p.add_argument("--adapter", choices=["ftdi", "ch340"], default=None,
                    help="a USB-serial adapter between the UART and the host: FTDI (62-byte packets, 16 ms latency "
@@ -297,6 +328,8 @@ def run(args) -> int:
         if brun.returncode != 0:
             rc = brun.returncode
             print(f"sphere sim: the board exited with {brun.returncode}: {brun.stderr.strip()[-500:]}", file=sys.stderr)
+            if not stats.get("simulated_seconds"):
+                continue  # it never ran: no figures to show
         if isinstance(args.json, str):
             Path(args.json).write_text(json.dumps({"source": source, **stats}, indent=2) + "\n")
             _print_figures(source, stats)
