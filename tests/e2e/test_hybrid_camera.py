@@ -64,7 +64,7 @@ def test_a_one_second_loss_of_the_ball(slow_translation):
 def test_jitter_at_rest(broad_dir):
     from sphere.camera import evaluation, trials
 
-    rt = trials.rendered_trial("14", 73.0, 4.0)  # a still phase of trial 14
+    rt = trials.rendered_trial("14", 73.0, 4.0, jpeg_quality=85)  # a still phase of trial 14, MJPG-coded
     r = evaluation.run(rt)
     fig = evaluation.figures(r, rt)["hybrid"]
     assert fig["jitter_lateral_m"] <= 0.001 and fig["jitter_depth_m"] <= 0.003

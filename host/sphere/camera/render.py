@@ -11,7 +11,8 @@ What is modelled, and why:
 - Exposure: each frame integrates the ball over its exposure time (sub-frames averaged: motion blur).
   Auto-exposure changes the gain in steps with a 0.3 s settling, and the exposure time with it
   (a darker scene → longer exposure → more blur).
-- Noise: shot noise (∝ √signal) and read noise, 8-bit quantisation.
+- Noise: shot noise (∝ √signal) and read noise, 8-bit quantisation; optionally the JPEG coding of an
+  MJPG webcam (4:2:0 chroma: the colour edges the detector uses are blurred and ring).
 - Scene: a cluttered background with objects of the ball's hue at lower saturation, one of the same
   colour (not round), a hand passing in front of the ball (partly or wholly), and the ball leaving the
   field of view when the trajectory does.
@@ -73,6 +74,7 @@ class Scene:
     seed: int = 1
     read_noise: float = 2.0
     shot_noise: float = 0.6
+    jpeg_quality: int | None = None  # the frame through JPEG (MJPG webcams: 4:2:0 chroma, blocks), or raw
     marker: object = None  # a MarkerSpec printed on the shell (sphere.camera.marker), or None
     body_rotation: object = None  # t ↦ 3×3 body → world rotation (needed with a marker)
 
@@ -138,7 +140,13 @@ class Scene:
         n = self._noise[k, oy:oy + cam.height, ox:ox + cam.width]
         img += n * (self.read_noise + self.shot_noise * np.sqrt(np.maximum(img, 0.0)))
         np.clip(img, 0, 255, out=img)
-        return img[..., ::-1].astype(np.uint8)  # RGB → BGR (OpenCV's order)
+        out = img[..., ::-1].astype(np.uint8)  # RGB → BGR (OpenCV's order)
+        if self.jpeg_quality:
+            import cv2
+
+            ok, buf = cv2.imencode(".jpg", out, [cv2.IMWRITE_JPEG_QUALITY, int(self.jpeg_quality)])
+            out = cv2.imdecode(buf, cv2.IMREAD_COLOR)
+        return out
 
     def _ball_roi(self, centres):
         cam = self.camera

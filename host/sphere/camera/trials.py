@@ -86,7 +86,7 @@ def placement(pos: np.ndarray, distance_m: float, azimuth_off_deg: float = 45.0,
 
 def rendered_trial(name: str, start_s: float, seconds: float, distance_m: float = 1.0, camera: Camera | None = None,
                    occlusions=(), hue_deg: float = 120.0, seed: int = 1, directory=None,
-                   marker=None) -> RenderedTrial:
+                   marker=None, jpeg_quality: int | None = None) -> RenderedTrial:
     """A slice of a BROAD trial, with the host filter's orientation (run from the trial's start, as the
     device would have been running) and the virtual camera placed beside it."""
     from sphere.fusion import registry
@@ -138,5 +138,5 @@ def rendered_trial(name: str, start_s: float, seconds: float, distance_m: float 
                     faces[f] += float(-v @ view > 0.5)
             marker = replace(marker, face=max(faces, key=faces.get))
     scene = render.Scene(camera or Camera.webcam(), R_wc, cam_pos, hue_deg=hue_deg, seed=seed,
-                         occlusions=list(occlusions), marker=marker, body_rotation=body)
+                         occlusions=list(occlusions), marker=marker, body_rotation=body, jpeg_quality=jpeg_quality)
     return RenderedTrial(full.name, sl, t, pf, valid, scene, q)

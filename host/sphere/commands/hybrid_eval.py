@@ -10,7 +10,8 @@ from pathlib import Path
 HELP = "hybrid camera + IMU tracker vs camera-only and IMU-only on rendered BROAD trials"
 DESCRIPTION = """\
 Renders BROAD trials as a 640x480, 30 fps webcam sees the 8 cm ball (the trial's optical positions;
-lens distortion, motion blur, noise, auto-exposure, a cluttered background with same-coloured things),
+lens distortion, motion blur, noise, auto-exposure, JPEG coding as an MJPG webcam sends it, a cluttered
+background with same-coloured things),
 with a hand over a third of the ball from 3 to 4 s and over all of it from 7 to 8 s of each stretch.
 Each frame reaches the host 35 ms + an exponential tail (mean 5 ms) after the middle of its exposure;
 IMU samples 4 ms after they are taken. The detector and the trackers run as on a live system, and every
@@ -38,6 +39,8 @@ def add_arguments(p) -> None:
     p.add_argument("--seconds", type=float, default=12.0, help="length of each stretch (default 12, at least 9)")
     p.add_argument("--distance", type=float, default=1.0, help="camera to the mean ball position, m (default 1.0)")
     p.add_argument("--hue", type=float, default=120.0, help="the ball's hue in degrees (default 120, green)")
+    p.add_argument("--jpeg", type=int, default=85, metavar="Q",
+                   help="frames coded as an MJPG webcam sends them, JPEG quality Q (default 85; 0: raw frames)")
     p.add_argument("--marker", action="store_true",
                    help="print an ArUco marker (DICT_4X4_50 id 7, 35 mm) on the shell (on the face of the sensor "
                         "turned to the camera most of the time): the camera corrects the host filter's heading")
@@ -69,11 +72,15 @@ def run(args) -> int:
     from sphere.camera import evaluation as ev
     from sphere.camera import render, trials
 
+    if not 0 <= args.jpeg <= 100:
+        print("sphere hybrid-eval: --jpeg must be a JPEG quality 1-100, or 0 for raw frames", file=sys.stderr)
+        return 2
     if args.seconds < 9.0:
         print("sphere hybrid-eval: --seconds must be at least 9 (the 1 s loss is at 7-8 s)", file=sys.stderr)
         return 2
     occl = [render.Occlusion(3.0, 4.0, 0.35), render.Occlusion(7.0, 8.0, 1.0)]
     doc = {"settings": {"seconds": args.seconds, "distance_m": args.distance, "hue_deg": args.hue,
+                        "jpeg_quality": args.jpeg or None,
                         "camera": "640x480, 30 fps, 60° HFOV, barrel distortion", "ball_diameter_m": 0.08,
                         "occlusions": [vars(o) for o in occl],
                         "imu_latency_s": ev.IMU_LATENCY_S, "nominal_camera_latency_s": ev.NOMINAL_CAMERA_LATENCY_S},
@@ -87,7 +94,7 @@ def run(args) -> int:
 
                 marker = MarkerSpec(face="auto")
             rt = trials.rendered_trial(name, start, args.seconds, distance_m=args.distance, occlusions=occl,
-                                       hue_deg=args.hue, marker=marker)
+                                       hue_deg=args.hue, marker=marker, jpeg_quality=args.jpeg or None)
         except (broad.BroadMissing, ValueError) as e:
             print(f"sphere hybrid-eval: {e}", file=sys.stderr)
             return 1
