@@ -319,3 +319,15 @@ def test_glitches_are_seeded_and_counted():
     assert a.stats["faults"] == b.stats["faults"] and a.stats["faults"]
     kinds = {f["kind"] for f in a.stats["faults"]}
     assert kinds & {"glitch_nack", "clock_stretch", "reset_mid_read"}
+
+
+def test_watchdog_reset_restarts_the_program_with_wdrf():
+    """A watchdog reset (ATmega328P datasheet, "Watchdog System Reset", MCUSR): the program starts with PORF
+    (bit 0) at power-on and again with WDRF (bit 3) after the watchdog; the board counts it in `resets`; the
+    chips keep their registers (they kept power)."""
+    cmds = [(0.1, "w 1e 00 18"), (0.5, "W"), (0.8, "r 1e 00 1")]
+    r = probe(cmds, T.still(1.0), 1.0)
+    banners = r.tagged("probe")
+    assert [b.data for b in banners] == [[1], [8]], banners
+    assert r.stats["resets"] == 1
+    assert r.tagged("r")[0].data == [0x18]

@@ -12,8 +12,10 @@
 //                           -> "n <count> <elapsed us>" (hex count, decimal elapsed)
 //   d AA RR N MS            for MS milliseconds, burst-read N bytes (<= 16) as fast as the bus allows and count
 //                           the reads that differ from the one before -> "d <count> <elapsed us>"
+//   W                       the watchdog at 15 ms, then hang: a watchdog reset
 //   c                       bus clear: TWI off, nine SCL pulses and a STOP on the pins, TWI on -> "c"
 #include <Arduino.h>
+#include <avr/wdt.h>
 #include <Wire.h>
 #include "../sketch_wire.h"
 
@@ -115,6 +117,10 @@ static void run(char *s) {
     }
     Serial.print(micros()); Serial.print(" d "); hex(count >> 8); hex(count & 0xFF);
     Serial.write(' '); Serial.print(t - t0); Serial.write('\n');
+  } else if (cmd == 'W') {
+    Serial.print(micros()); Serial.print(" W\n"); Serial.flush();
+    wdt_enable(WDTO_15MS);
+    for (;;) {}
   } else if (cmd == 'c') {
     bus_clear();
     Serial.print(micros()); Serial.print(" c\n");
@@ -124,9 +130,12 @@ static void run(char *s) {
 }
 
 void setup() {
+  uint8_t cause = MCUSR;
+  MCUSR = 0;
+  wdt_disable();  // a watchdog reset leaves the watchdog on (WDRF)
   Serial.begin(115200);
   Wire.begin(); Wire.setClock(400000); Wire.setWireTimeout(3000, true);
-  Serial.print(micros()); Serial.print(" probe\n");
+  Serial.print(micros()); Serial.print(" probe "); hex(cause); Serial.write('\n');
 }
 
 void loop() {
