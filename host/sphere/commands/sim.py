@@ -11,6 +11,8 @@ import tempfile
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
+from sphere.argtypes import out_file, seconds_up_to
+
 HELP = "run the firmware on the simulated board (simavr) fed by a BROAD trial or a synthetic motion"
 DESCRIPTION = (
     "Run the firmware image on a simulated ATmega328P at 16 MHz with register-level ADXL345, ITG-3200 "
@@ -50,33 +52,6 @@ def _span(text: str) -> str:
 MAX_SECONDS = 86400.0  # a simulated day: longer runs are a typo (1e9 s would need terabytes of trace)
 
 
-def _sim_seconds(text: str) -> float:
-    """--seconds: a finite number of simulated seconds, 0 < s <= MAX_SECONDS (one clear line otherwise)."""
-    import argparse
-    import math
-
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number of seconds") from None
-    if not math.isfinite(v) or not 0 < v <= MAX_SECONDS:
-        raise argparse.ArgumentTypeError(f"{text!r}: give simulated seconds greater than 0 and at most {MAX_SECONDS:g}")
-    return v
-
-
-def _out_file(text: str) -> str:
-    """An output file: not a folder, in a folder that exists (checked before the board runs)."""
-    import argparse
-    import os
-
-    if os.path.isdir(text):
-        raise argparse.ArgumentTypeError(f"{text!r} is a folder: give a file name to write")
-    parent = os.path.dirname(os.path.abspath(text))
-    if not os.path.isdir(parent):
-        raise argparse.ArgumentTypeError(f"{text!r}: the folder {parent} does not exist")
-    return text
-
-
 def _chip_ppm(text: str) -> str:
     import argparse
 
@@ -95,7 +70,7 @@ def add_arguments(p) -> None:
     p.add_argument("--trace", action="append", default=[], metavar="SOURCE",
                    help="BROAD trial (.mat, name or number), synthetic:NAME[:ARG], or a prepared .bin trace; "
                         "repeatable with --accuracy ('all' = every shipped trial)")
-    p.add_argument("--seconds", type=_sim_seconds, default=None,
+    p.add_argument("--seconds", type=seconds_up_to(MAX_SECONDS), default=None,
                    help="simulated seconds (default: 10; with --accuracy 60 per trial)")
     p.add_argument("--start", default=None,
                    help="start this far into a BROAD trial (s), or 'auto': 10 s before its first movement "
@@ -106,10 +81,10 @@ def add_arguments(p) -> None:
     p.add_argument("--firmware", default=None,
                    help="firmware image (default firmware/build/sphere.elf, built with `make -C firmware`); "
                         "'testfw' = the board's own test sketch")
-    p.add_argument("--capture", metavar="OUT", type=_out_file, help="write the UART's byte stream here")
+    p.add_argument("--capture", metavar="OUT", type=out_file, help="write the UART's byte stream here")
     p.add_argument("--pty", action="store_true", help="serve the UART on a pseudo-terminal (implies --realtime)")
     p.add_argument("--realtime", action="store_true", help="pace simulated time to the wall clock")
-    p.add_argument("--stats", metavar="OUT.json", type=_out_file, help="write the figures as JSON")
+    p.add_argument("--stats", metavar="OUT.json", type=out_file, help="write the figures as JSON")
     p.add_argument("--nack", action="append", default=[], metavar="CHIP:T0:T1",
                    help="fault: CHIP (adxl345|itg3200|hmc5883l) stops answering from T0 to T1 s (T1 may be inf)")
     p.add_argument("--stall", action="append", default=[], metavar="T0:T1", type=_span,

@@ -1,0 +1,35 @@
+"""argparse types for the commands' flags: a bad value is one clear line (argparse's usage error, exit 2),
+never a traceback or a run that cannot end."""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+
+
+def seconds(text: str, max_s: float = math.inf) -> float:
+    """A finite number of seconds greater than 0 (and at most ``max_s``)."""
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number of seconds") from None
+    if not math.isfinite(v) or not 0 < v <= max_s:
+        limit = f" and at most {max_s:g}" if math.isfinite(max_s) else ""
+        raise argparse.ArgumentTypeError(f"{text!r}: give a number of seconds greater than 0{limit}")
+    return v
+
+
+def seconds_up_to(max_s: float):
+    """:func:`seconds` with an upper limit, as an argparse type."""
+    return lambda text: seconds(text, max_s)
+
+
+def out_file(text: str) -> str:
+    """A file to write: not a folder, in a folder that exists (checked before any work is done)."""
+    if os.path.isdir(text):
+        raise argparse.ArgumentTypeError(f"{text!r} is a folder: give a file name to write")
+    parent = os.path.dirname(os.path.abspath(text))
+    if not os.path.isdir(parent):
+        raise argparse.ArgumentTypeError(f"{text!r}: the folder {parent} does not exist")
+    return text
