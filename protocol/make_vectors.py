@@ -75,6 +75,9 @@ def main() -> None:
                   "ORIENTATION: 90° about z (w = z = 0.7071 → 11585 in Q14), accelerometer rejected"))
     out.append(ok("orientation_gyro_missing", p.Orientation(9000000, 0x12, (11585, 0, 0, 11585)), 43,
                   "ORIENTATION held while the gyroscope is missing (gyro_missing), accelerometer rejected"))
+    out.append(ok("orientation_prev", p.Orientation(9005000, 0x41, (11585, 0, 0, 11585)), 44,
+                  "ORIENTATION: this update used the magnetometer, the one before rejected the accelerometer "
+                  "(prev_accel_rejected)"))
     out.append(ok("event_single_tap", p.Event(777000, 1, 0xC3, 0x01, -1), 3,
                   "EVENT single tap on z, spike negative (INT_SOURCE = DATA_READY|SINGLE_TAP|watermark|overrun bits as read)"))
     out.append(ok("event_double_tap", p.Event(1777000, 2, 0xE0, 0x04, 1), 4, "EVENT double tap on x"))

@@ -2,7 +2,7 @@
 // register fakes of tests/firmware/fakes.h) and writes the orientation after every period: the tool
 // that chooses the input gates by leave-one-trial-out (firmware/bench/tune_gates.py, MARG_FILTER.md).
 //
-//   device_replay IN.bin OUT.bin [accel_tol_lsb mag_norm_tol_q8 mag_dip_tol_q14 learn_shift relearn_after]
+//   device_replay IN.bin OUT.bin [beta_milli accel_tol_lsb mag_norm_tol_q8 mag_dip_tol_q14 learn_shift relearn_after hold]
 //
 // IN: b"SPHREPLY", u32 n, then n records of nine int16 (accel, gyro, mag in chip units, the magnetometer
 // value the chip holds at that period). OUT: n records of five int16: ORIENTATION flags, then w, x, y, z
@@ -17,8 +17,8 @@
 using namespace sphere;
 
 int main(int argc, char** argv) {
-    if (argc != 3 && argc != 8) {
-        std::fprintf(stderr, "usage: device_replay IN.bin OUT.bin [accel_tol norm_q8 dip_q14 learn_shift relearn]\n");
+    if (argc != 3 && argc != 10) {
+        std::fprintf(stderr, "usage: device_replay IN.bin OUT.bin [beta_milli accel_tol norm_q8 dip_q14 learn_shift relearn hold]\n");
         return 2;
     }
     FILE* in = std::fopen(argv[1], "rb");
@@ -42,13 +42,14 @@ int main(int argc, char** argv) {
     FakeBus bus;
     FakeHal hal;
     SphereDevice dev(bus, hal);
-    if (argc == 8) {
+    if (argc == 10) {
         GateSettings g = GateSettings::DEFAULTS;
-        g.accel_tol_lsb = (uint16_t)std::atoi(argv[3]);
-        g.mag_norm_tol_q8 = (uint8_t)std::atoi(argv[4]);
-        g.mag_dip_tol_q14 = (uint16_t)std::atoi(argv[5]);
-        g.learn_shift = (uint8_t)std::atoi(argv[6]);
-        g.relearn_after = (uint16_t)std::atoi(argv[7]);
+        g.accel_tol_lsb = (uint16_t)std::atoi(argv[4]);
+        g.mag_norm_tol_q8 = (uint8_t)std::atoi(argv[5]);
+        g.mag_dip_tol_q14 = (uint16_t)std::atoi(argv[6]);
+        g.learn_shift = (uint8_t)std::atoi(argv[7]);
+        g.relearn_after = (uint16_t)std::atoi(argv[8]);
+        g.hold = (uint8_t)std::atoi(argv[9]);
         dev.gates().setSettings(g);
     }
     std::vector<int16_t> out((size_t)n * 5);
@@ -57,6 +58,12 @@ int main(int argc, char** argv) {
     bus.setGyro(r[3], r[4], r[5]);
     bus.setMag(r[6], r[7], r[8]);
     dev.begin();
+    if (argc == 10) {  // β as SET_FILTER sets it (kept until the start-up convergence ends)
+        uint16_t beta = (uint16_t)std::atoi(argv[3]);
+        uint8_t body[2] = {(uint8_t)beta, (uint8_t)(beta >> 8)}, frame[MAX_FRAME];
+        size_t len = FrameEncoder::encodeWithSeq(CMD_SET_FILTER, 0, body, 2, frame);
+        for (size_t k = 0; k < len; ++k) dev.receive(frame[k]);
+    }
     for (uint32_t i = 0; i < n; ++i, r += 9) {
         bus.setAccel(r[0], r[1], r[2]);
         bus.setGyro(r[3], r[4], r[5]);

@@ -17,6 +17,7 @@ static sphere::SphereDevice device(twi, board);
 void setup() {
     // MCUSR (the reset cause) was captured and cleared, and the watchdog stopped, in .init3 (avr_board.cpp)
     Serial.begin(115200);
+    Serial.write((uint8_t)0);  // at once: ends a frame a reset cut off, so the host drops it now, not 0.25 s later
     board.blink(2);      // power-up: two short blinks
     twi.begin();
     twi.clearBus();      // a sensor left holding SDA by a reset mid-read lets go

@@ -380,9 +380,9 @@ TEST_CASE("input gates: accelerometer norm; magnetometer norm and dip against a 
     CHECK(g.hasReference());
     CHECK(std::abs(g.refNorm() - 500) <= 1);
     for (int i = 0; i < 50; ++i) CHECK(g.mag(field, up, false));
-    const int16_t stronger[3] = {360, 0, -480};  // +20 %: a magnet near
+    const int16_t stronger[3] = {390, 0, -520};  // +30 %: a magnet near
     CHECK_FALSE(g.mag(stronger, up, false));
-    const int16_t tilted[3] = {400, 0, -300};  // same norm, dip 37°: a magnet's field added
+    const int16_t tilted[3] = {480, 0, -140};  // same norm, dip 16°: a magnet's field added
     CHECK_FALSE(g.mag(tilted, up, false));
     const int16_t turned[3] = {0, 300, -400};  // the sphere turned about the vertical: same field
     CHECK(g.mag(turned, up, false));
@@ -391,5 +391,27 @@ TEST_CASE("input gates: accelerometer norm; magnetometer norm and dip against a 
     // rejected for relearn_after samples in a row: somewhere else now, learned anew
     for (int i = 0; i < GateSettings::DEFAULTS.relearn_after; ++i) g.mag(stronger, up, false);
     CHECK(g.mag(stronger, up, false));
-    CHECK(std::abs(g.refNorm() - 600) <= 1);
+    CHECK(std::abs(g.refNorm() - 650) <= 1);
+    // with a hold, a rejection outlasts its cause by that many samples
+    GateSettings h = GateSettings::DEFAULTS;
+    h.hold = 2;
+    InputGates gh(h);
+    CHECK(gh.accel(level));
+    CHECK_FALSE(gh.accel(swing));
+    CHECK_FALSE(gh.accel(level));
+    CHECK_FALSE(gh.accel(level));
+    CHECK(gh.accel(level));
+}
+
+TEST_CASE("ORIENTATION bits 5-7 carry the previous update's decisions") {
+    Bench b;
+    b.run(450);
+    b.frames();
+    b.bus.setAccel(0, 100, 300);  // 1.22 g: rejected
+    b.run(1);
+    b.bus.setAccel(0, 0, 256);
+    b.run(1);
+    CHECK_FALSE((b.dev.orientationFlags() & ORI_ACCEL_REJECTED));
+    CHECK(((b.dev.orientationFlags() >> ORI_PREV_SHIFT) & ORI_ACCEL_REJECTED));
+    CHECK(((b.dev.orientationFlags() >> ORI_PREV_SHIFT) & ORI_MAG_USED) == 0);  // IMU-only without the accelerometer
 }

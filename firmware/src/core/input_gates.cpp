@@ -5,12 +5,26 @@
 namespace sphere {
 
 // Chosen by leave-one-trial-out over the shipped BROAD trials (firmware/MARG_FILTER.md, "Input gates").
-const GateSettings GateSettings::DEFAULTS = {38, 26, 1638, 6, 2000};
+const GateSettings GateSettings::DEFAULTS = {26, 51, 3277, 9, 2000, 0};
 
 void InputGates::reset() {
     ref_norm_ = ref_dip_ = 0;
     rejected_run_ = 0;
+    accel_hold_ = mag_hold_ = 0;
     have_ref_ = false;
+}
+
+// A sample out of band starts a hold of s_.hold samples; one in band ends a hold only when it has run out.
+static bool held(bool in_band, uint8_t& left, uint8_t hold) {
+    if (!in_band) {
+        left = hold;
+        return false;
+    }
+    if (left) {
+        --left;
+        return false;
+    }
+    return true;
 }
 
 static uint16_t norm3(const int16_t v[3], bool& ok) {
@@ -19,10 +33,10 @@ static uint16_t norm3(const int16_t v[3], bool& ok) {
     return ok ? sqrtQ28((uint32_t)n2) : 0;
 }
 
-bool InputGates::accel(const int16_t a[3]) const {
+bool InputGates::accel(const int16_t a[3]) {
     bool ok;
     int16_t d = (int16_t)(norm3(a, ok) - 256);
-    return ok && d <= (int16_t)s_.accel_tol_lsb && d >= -(int16_t)s_.accel_tol_lsb;
+    return held(ok && d <= (int16_t)s_.accel_tol_lsb && d >= -(int16_t)s_.accel_tol_lsb, accel_hold_, s_.hold);
 }
 
 bool InputGates::mag(const int16_t m[3], const int16_t up[3], bool learning) {
@@ -40,8 +54,9 @@ bool InputGates::mag(const int16_t m[3], const int16_t up[3], bool learning) {
     }
     int16_t dn = (int16_t)((int16_t)n - ref_norm_), dd = (int16_t)(dip - ref_dip_);
     int16_t norm_tol = (int16_t)(((uint16_t)ref_norm_ * s_.mag_norm_tol_q8) >> 8);
-    bool accept = learning || (dn <= norm_tol && dn >= -norm_tol && dd <= (int16_t)s_.mag_dip_tol_q14 &&
-                               dd >= -(int16_t)s_.mag_dip_tol_q14);
+    bool accept = learning || held(dn <= norm_tol && dn >= -norm_tol && dd <= (int16_t)s_.mag_dip_tol_q14 &&
+                                       dd >= -(int16_t)s_.mag_dip_tol_q14,
+                                   mag_hold_, s_.hold);
     if (!accept) {
         if (++rejected_run_ >= s_.relearn_after) have_ref_ = false;  // somewhere else now: learn again
         return false;

@@ -14,6 +14,7 @@ struct GateSettings {
     uint16_t mag_dip_tol_q14;  // |sin dip − ref| allowed, Q14
     uint8_t learn_shift;       // the reference moves 1/2^shift of the way to each accepted sample
     uint16_t relearn_after;    // this many rejected samples in a row: the reference is learned anew
+    uint8_t hold;              // a rejection lasts until this many samples in a row passed again
     static const GateSettings DEFAULTS;
 };
 
@@ -23,8 +24,9 @@ public:
     void setSettings(const GateSettings& s) { s_ = s; }
     const GateSettings& settings() const { return s_; }
     void reset();  // forget the field reference
-    // Calibrated accelerometer (256 LSB/g): true when its norm is within the tolerance of 1 g.
-    bool accel(const int16_t a[3]) const;
+    // Calibrated accelerometer (256 LSB/g): true when its norm is within the tolerance of 1 g and has
+    // been for `hold` samples (a swing's acceleration passes through 1 g without ending).
+    bool accel(const int16_t a[3]);
     // Calibrated magnetometer (1090 LSB/gauss) and `up`, the earth's vertical in the sensor frame (Q14,
     // unit length). True when it matches the learned field; learns from it when true. While
     // `learning` (the orientation is not yet trusted) every plausible sample is taken into the
@@ -38,6 +40,7 @@ private:
     GateSettings s_;
     int16_t ref_norm_, ref_dip_;
     uint16_t rejected_run_;
+    uint8_t accel_hold_, mag_hold_;  // samples still to pass before a rejection ends
     bool have_ref_;
 };
 

@@ -49,6 +49,8 @@ const uint8_t RAW_ACCEL_OK = 1, RAW_GYRO_OK = 2, RAW_MAG_OK = 4, RAW_MAG_FRESH =
 const uint8_t RAW_ACCEL_STALE = 32, RAW_GYRO_STALE = 64, RAW_MAG_STALE = 128;
 // ORIENTATION flags
 const uint8_t ORI_MAG_USED = 1, ORI_ACCEL_REJECTED = 2, ORI_MAG_REJECTED = 4, ORI_CONVERGING = 8, ORI_GYRO_MISSING = 16;
+// bits 5, 6, 7: bits 0, 1, 2 of the update before this one (the period a 100 Hz stream skips)
+const uint8_t ORI_PREV_SHIFT = 5;
 // EVENT kinds
 const uint8_t EVENT_SINGLE_TAP = 1, EVENT_DOUBLE_TAP = 2, EVENT_FREE_FALL = 3;
 // stream_mode bits

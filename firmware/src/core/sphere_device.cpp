@@ -184,7 +184,7 @@ __attribute__((noinline)) void SphereDevice::handleEvents() {
 __attribute__((noinline)) void SphereDevice::runFilter(uint16_t dt_us) {
     if (!(raw_flags_ & RAW_GYRO_OK)) {
         // no gyroscope: integrating zeros would turn a moving sphere still; hold the orientation
-        ori_flags_ = (uint8_t)(ORI_GYRO_MISSING | (converge_left_ ? ORI_CONVERGING : 0));
+        ori_flags_ = (uint8_t)(ORI_GYRO_MISSING | (converge_left_ ? ORI_CONVERGING : 0) | ((ori_flags_ & 7) << 5));
         return;
     }
     int16_t g[3], a[3], m[3], up[3];
@@ -204,7 +204,8 @@ __attribute__((noinline)) void SphereDevice::runFilter(uint16_t dt_us) {
         f |= ORI_CONVERGING;
         if (acc_ok && --converge_left_ == 0) filter_.setBetaMilli(beta_milli_);
     }
-    ori_flags_ = f;
+    // bits 5-7: the previous update's decisions, so a 100 Hz stream tells every 200 Hz update's inputs
+    ori_flags_ = (uint8_t)(f | ((ori_flags_ & 7) << 5));
 }
 
 // Power-up and CALIBRATION_STEP estimates take the window's mean; between them every still window of

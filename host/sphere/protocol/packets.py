@@ -37,7 +37,8 @@ EVENT_NAMES = {1: "single_tap", 2: "double_tap", 3: "free_fall"}
 CALIBRATION_STEPS = {0: "none", 1: "gyro_bias", 2: "accel", 3: "mag"}
 
 RAW_FLAGS = ("accel_ok", "gyro_ok", "mag_ok", "mag_fresh", "tap_active", "accel_stale", "gyro_stale", "mag_stale")
-ORIENTATION_FLAGS = ("mag_used", "accel_rejected", "mag_rejected", "converging", "gyro_missing")
+ORIENTATION_FLAGS = ("mag_used", "accel_rejected", "mag_rejected", "converging", "gyro_missing", "prev_mag_used",
+                     "prev_accel_rejected", "prev_mag_rejected")
 RESET_CAUSE_BITS = ("power_on", "external", "brown_out", "watchdog")
 MAG_CHIPS = {0: "none", 1: "hmc5883l", 2: "qmc5883l"}
 BOARD_PROFILES = {0: "aligned", 1: "sen10724", 2: "gy85"}
