@@ -84,3 +84,27 @@ def test_firmware_startup_bias_replays_the_devices_windows():
     assert firmware_startup_bias(raw(half))[1] == [-8, 0, 0]
     always_moving = [((i % 2) * 100, 0, 0) for i in range(12 * N)]
     assert firmware_startup_bias(raw(always_moving)) is None
+
+
+def test_firmware_bias_schedule_follows_the_tracking_windows():
+    """The host's replay of the firmware's bias tracking (SphereDevice::trackBias, the same numbers as the
+    native test "gyro bias is tracked whenever the sphere is still"): after the power-up estimate, every
+    still window of TRACK_SAMPLES moves the bias by at most TRACK_STEP_LSB towards its mean; stale gyro
+    readings are skipped; a moving reading restarts the window after it."""
+    from sphere.sim.analysis import STARTUP_BIAS_SAMPLES as N, TRACK_SAMPLES as W, TRACK_STEP_LSB as S
+    from sphere.sim.analysis import firmware_bias_schedule
+
+    def raw(gyros, flags=7):
+        return [RawSample(t_us=5000 * i, flags=flags, accel=[0, 0, 256], gyro=list(g), mag=[100, 0, -300])
+                for i, g in enumerate(gyros)]
+
+    r = raw([(5, -7, 1)] * N + [(11, -7, 1)] * (4 * W))
+    sched = firmware_bias_schedule(r)
+    assert sched[0] == (N - 1, [5, -7, 1])
+    assert [b for _, b in sched[1:]] == [[5 + S, -7, 1], [5 + 2 * S, -7, 1], [11, -7, 1], [11, -7, 1]]
+    assert [k for k, _ in sched[1:]] == [N + W * (j + 1) - 1 for j in range(4)]
+    # a gyro_stale reading is not part of a window; a moving one restarts it
+    r = raw([(5, -7, 1)] * N) + raw([(8, -7, 1)] * 10, flags=7 | 0x40) + raw([(5, -7, 1)] * 5 + [(60, 0, 0)]
+                                                                            + [(5, -7, 1)] * W)
+    sched = firmware_bias_schedule(r)
+    assert len(sched) == 2 and sched[1][0] == len(r) - 1

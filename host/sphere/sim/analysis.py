@@ -131,19 +131,89 @@ def firmware_startup_bias(raw: list):
     return None
 
 
+TRACK_SAMPLES, TRACK_STEP_LSB = 400, 2  # the firmware's bias tracking (SphereDevice::trackBias)
+
+
+def firmware_bias_schedule(raw: list) -> list[tuple[int, list[int]]]:
+    """Every gyro bias the firmware used, replayed on its RAW_SAMPLEs: the power-up estimate
+    (:func:`firmware_startup_bias`), then the tracking windows SphereDevice::trackBias runs whenever no other
+    estimate does: windows of TRACK_SAMPLES readings with the same stillness test, each moving the bias
+    by at most TRACK_STEP_LSB per axis towards its mean (all the way when no bias was found at power-up);
+    a window that moves ends at the moving reading and the next starts after it. Readings with the gyro
+    missing or stale (flags bit 1 clear, or bit 5/6 set) are skipped as the firmware skips them.
+    Returns [(index of the reading from which a bias applies, bias in LSB)], in order."""
+    half = (GYRO_SPAN_LSB // 2, ACCEL_SPAN_LSB // 2, MAG_SPAN_LSB // 2)
+
+    def near(v, ref, h):
+        return all(-h <= int(a) - int(b) <= h for a, b in zip(v, ref))
+
+    out = []
+    found = firmware_startup_bias(raw)
+    if found is not None:
+        out.append(found)
+        start, bias = found[0] + 1, list(found[1])
+    else:  # the power-up windows all moved: tracking starts after the last of them
+        start, bias = _startup_end(raw), None
+    n = TRACK_SAMPLES
+    usable = [i for i in range(start, len(raw)) if raw[i].flags & 0x02 and not raw[i].flags & 0x60]
+    k = 0
+    while k + n <= len(usable):
+        first = raw[usable[k]]
+        mag_ref = first.mag if first.flags & 0x04 else (0, 0, 0)
+        moved = None
+        for j in range(k, k + n):
+            p = raw[usable[j]]
+            if not (near(p.gyro, first.gyro, half[0]) and near(p.accel, first.accel, half[1])
+                    and (not p.flags & 0x04 or near(p.mag, mag_ref, half[2]))):
+                moved = j
+                break
+        if moved is not None:
+            k = moved + 1
+            continue
+        total = np.sum([raw[usable[j]].gyro for j in range(k, k + n)], axis=0)
+        est = [int((t + n // 2 if t >= 0 else t - n // 2) / n) for t in total.tolist()]
+        bias = est if bias is None else [b + max(-TRACK_STEP_LSB, min(TRACK_STEP_LSB, e - b)) for b, e in zip(bias, est)]
+        out.append((usable[k + n - 1], list(bias)))
+        k += n
+    return out
+
+
+def _startup_end(raw: list) -> int:
+    """The reading after the last power-up window when all STARTUP_BIAS_TRIES windows moved."""
+    half = (GYRO_SPAN_LSB // 2, ACCEL_SPAN_LSB // 2, MAG_SPAN_LSB // 2)
+    i = 0
+    for _ in range(STARTUP_BIAS_TRIES):
+        if i + STARTUP_BIAS_SAMPLES > len(raw):
+            return len(raw)
+        first = raw[i]
+        mag_ref = first.mag if first.flags & 0x04 else (0, 0, 0)
+        for j in range(i, i + STARTUP_BIAS_SAMPLES):
+            p = raw[j]
+            if not (all(-half[0] <= int(a) - int(b) <= half[0] for a, b in zip(p.gyro, first.gyro))
+                    and all(-half[1] <= int(a) - int(b) <= half[1] for a, b in zip(p.accel, first.accel))
+                    and (not p.flags & 0x04 or all(-half[2] <= int(a) - int(b) <= half[2]
+                                                     for a, b in zip(p.mag, mag_ref)))):
+                i = j + 1
+                break
+    return i
+
+
 def host_madgwick(raw: list, imu_rate_hz: float, beta: float, bias_s: float = 0.0, orientation: list | None = None,
                   startup_beta: float = STARTUP_BETA):
     """The host's double-precision Madgwick on the RAW_SAMPLE values the firmware read.
 
     Returns (t_s, q_nwu) or None when sphere.fusion.madgwick is not there. ``bias_s`` > 0: subtract
     the mean gyro of the first ``bias_s`` seconds; following the firmware, its power-up estimate exactly
-    (:func:`firmware_startup_bias`, from the reading where the firmware starts applying it).
+    (:func:`firmware_startup_bias`, from the reading where the firmware starts applying it) and the
+    changes its bias tracking made later (:func:`firmware_bias_schedule`).
     With ``orientation`` (the firmware's ORIENTATION packets) the host takes the firmware's decisions
     sample by sample, so that only the arithmetic differs: the accelerometer is left out where the
     firmware flagged a tap (RAW_SAMPLE ``tap_active``) or ``accel_rejected``, the magnetometer where it
     was missing or ``mag_rejected`` (gravity-only), β is ``startup_beta`` while ``converging``, and the
     state starts at the identity as the firmware's does (without ``orientation``: at the e-compass).
-    The flags of a raw sample without its own ORIENTATION packet are those of the newest before it.
+    The flags of a raw sample without its own ORIENTATION packet are the next packet's "previous update"
+    bits (protocol v2, flags bits 5-7) when that packet belongs to the next raw sample, else those of the
+    newest packet before it.
     """
     try:
         from sphere.fusion.madgwick import madgwick_step
@@ -158,10 +228,12 @@ def host_madgwick(raw: list, imu_rate_hz: float, beta: float, bias_s: float = 0.
     mag = np.array([p.mag_uT for p in raw], dtype=float)
     rflags = np.array([p.flags for p in raw], dtype=int)
     if bias_s > 0 and orientation:
-        found = firmware_startup_bias(raw)
-        if found is not None:
-            k, bias_lsb = found
-            gyr[k:] -= np.radians(np.asarray(bias_lsb, dtype=float) / ITG3200_LSB_PER_DPS)
+        # the firmware's biases as it changed them: power-up estimate, then tracking while still
+        applied = np.zeros(3)
+        for k, bias_lsb in firmware_bias_schedule(raw):
+            b = np.radians(np.asarray(bias_lsb, dtype=float) / ITG3200_LSB_PER_DPS)
+            gyr[k:] -= b - applied
+            applied = b
     elif bias_s > 0:
         first = t < t[0] + bias_s
         gyr = gyr - gyr[first].mean(axis=0)
@@ -175,6 +247,14 @@ def host_madgwick(raw: list, imu_rate_hz: float, beta: float, bias_s: float = 0.
         idx = np.searchsorted(t_o, t_us, side="right") - 1
         has = idx >= 0
         f = np.where(has, of[np.clip(idx, 0, None)], 0)
+        if (of & 0xE0).any():
+            # protocol v2: a raw sample without its own ORIENTATION is the update the next packet calls
+            # "previous" (flags bits 5-7), when that packet is the next raw sample's
+            nxt = np.clip(idx + 1, 0, len(t_o) - 1)
+            own = has & (t_o[np.clip(idx, 0, None)] == t_us)
+            t_next_raw = np.append(t_us[1:], -1)
+            use = ~own & (idx + 1 < len(t_o)) & (t_o[nxt] == t_next_raw)
+            f = np.where(use, (f & ~0x07) | ((of[nxt] >> 5) & 0x07), f)
         acc_valid &= ~((f & 0x02).astype(bool) & has)
         mag_valid &= ~(((f & 0x04).astype(bool) | ~(f & 0x01).astype(bool)) & has)
         betas = np.where(has & (f & 0x08).astype(bool), startup_beta, betas)
