@@ -79,6 +79,9 @@ def test_recovery_waits_for_ok_and_not_stale_and_fresh_magnetometer_data():
     got = {r["chip"]: r["recovery_ms"] for r in rows}
     assert got == {"itg3200": pytest.approx(11.0), "hmc5883l": pytest.approx(16.0)}
     assert worst.count == pytest.approx(16.0) and worst.first_s is None  # within the 100 ms limit
+    # a fault ending while the host did not read: counted from the end of that stall
+    _, rows = S.recovery(frames, ends, host_stalls=[(0.5, 1.004)])
+    assert {r["chip"]: r["recovery_ms"] for r in rows} == {"itg3200": pytest.approx(6.0), "hmc5883l": pytest.approx(11.0)}
 
 
 def test_orientation_excess_against_the_reference_two_seconds_after_a_fault():

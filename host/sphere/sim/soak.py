@@ -171,7 +171,7 @@ def fault_ends(faults: list[dict], chips: list[str]) -> list[dict]:
     return out
 
 
-def recovery(frames: list[Frame], ends: list[dict]) -> tuple[Invariant, list]:
+def recovery(frames: list[Frame], ends: list[dict], host_stalls=()) -> tuple[Invariant, list]:
     """sensor_recovery_ms: the longest time from a fault's end to its sensor's fresh data in RAW_SAMPLE: its
     ``_ok`` flag set and its ``_stale`` flag clear (``mag_fresh`` too for the magnetometer)."""
     raw_t = np.array([f.t_s for f in frames if isinstance(f.packet, RawSample)])
@@ -182,10 +182,13 @@ def recovery(frames: list[Frame], ends: list[dict]) -> tuple[Invariant, list]:
         for chip in e["chips"]:
             bit = CHIP_BITS[chip]
             need = bit | (MAG_FRESH if bit == 0x04 else 0)
-            i0 = np.searchsorted(raw_t, e["t_end"])
+            # while the host was not reading, the sensor's fresh samples may have been lost on the way:
+            # count from the end of that stall
+            t0 = max([e["t_end"]] + [b for a, b in host_stalls if a <= e["t_end"] <= b])
+            i0 = np.searchsorted(raw_t, t0)
             f = raw_flags[i0:]
             ok = np.nonzero(((f & need) == need) & ((f & STALE_BITS[bit]) == 0))[0]
-            ms = (raw_t[i0 + ok[0]] - e["t_end"]) * 1e3 if len(ok) else math.inf
+            ms = (raw_t[i0 + ok[0]] - t0) * 1e3 if len(ok) else math.inf
             rows.append({"kind": e["kind"], "chip": chip, "t_end": round(e["t_end"], 4), "recovery_ms": round(ms, 1)})
             limit = LIMITS["recovery_after_reset_ms" if e["kind"] in RESET_KINDS + ("sda_held_at_power_up",)
                           else "recovery_ms"]
@@ -362,15 +365,16 @@ def run_soak(elf, seconds: float, seed: int, board: str | None = None, kinds=FAU
     ends = fault_ends(log, chips)
     resets_t = [e["t"] for e in log if e["kind"] in RESET_KINDS]
     line = [(e["t"], e["t"] + LINE_WINDOW_S) for e in log if e["kind"] in RESET_KINDS]
-    stall_t = None
+    stall_t, host_stalls = None, []
     for e in log:
         if e["kind"] == "host_stall":
             stall_t = e["t"]
         elif e["kind"] == "host_reads" and stall_t is not None:
             line.append((stall_t, e["t"] + LINE_WINDOW_S))
+            host_stalls.append((stall_t, e["t"]))
             stall_t = None
     s = stream_checks(frames, line, resets_t)
-    rec, rec_rows = recovery(frames, ends)
+    rec, rec_rows = recovery(frames, ends, host_stalls)
     ori, ori_rows = orientation_excess(frames, ref, ends, resets_t)
     resets = max(0, s["hellos"] + s["hellos_lost"] - 1)
     injected = len(resets_t)
