@@ -25,7 +25,7 @@ def run(trial: str = "10", start_s: float = 40.0, seconds: float = 5.0, distance
     from sphere.fusion.hybrid import CameraImuTracker
 
     cv2.setNumThreads(1)
-    rt = trials.rendered_trial(trial, start_s, seconds, distance_m=distance_m)
+    rt = trials.rendered_trial(trial, start_s, seconds, distance_m=distance_m, jpeg_quality=85)  # as MJPG sends them
     frames = list(rt.frames())
     det = BallDetector(rt.scene.camera)
     trk = CameraImuTracker()
