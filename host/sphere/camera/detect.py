@@ -246,6 +246,10 @@ class BallDetector:
 
         H, W = bgr.shape[:2]
         if hint is not None:  # tracking: rays straight from where the ball should be
+            # a good prediction (the tracker's, at the exposure time) needs only the fine pass
+            det = self._measure(bgr, np.asarray(hint[0], float), float(hint[1]), fine_only=True)
+            if det is not None and det.inliers >= 0.85 * det.rays and det.residual_px < 0.5:
+                return det
             det = self._measure(bgr, np.asarray(hint[0], float), float(hint[1]))
             if det is not None and det.inliers >= TRACK_INLIERS * det.rays:
                 return det
@@ -287,7 +291,7 @@ class BallDetector:
                 return best
         return None
 
-    def _measure(self, bgr, centre, r0):
+    def _measure(self, bgr, centre, r0, fine_only: bool = False):
         H, W = bgr.shape[:2]
         out = None
         m = 1.9 * r0 + 10
@@ -297,7 +301,8 @@ class BallDetector:
             return None
         rgb = np.ascontiguousarray(bgr[y0:y1, x0:x1, ::-1], dtype=np.float32)
         # first 48 rays over a wide range; then 96 from the fitted centre, over the fitted outline ± 40 %
-        for n_rays, span in ((self.n_rays // 2, (0.35, 1.9)), (self.n_rays, (0.6, 1.4))):
+        passes = ((self.n_rays // 2, (0.35, 1.9)), (self.n_rays, (0.6, 1.4)))
+        for n_rays, span in passes[1:] if fine_only else passes:
             fit = self._fit(rgb, centre, r0, (x0, y0), n_rays, span)
             if fit is None:
                 return out
