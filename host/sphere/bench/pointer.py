@@ -223,26 +223,28 @@ def with_breaks_trials(directory=None):
 # ---------------------------------------------------------------- the pointer for one filter setting
 
 
-def pointer_path(rec: Recording, smoothing: str, params: dict | None = None, exact: bool = False) -> np.ndarray:
-    """The pointer (px, summed integer steps) the daemon's mapper gives for these inputs; with ``exact``,
-    plus the mapper's sub-pixel remainder (where the pointer is heading between whole pixels)."""
+def pointer_paths(rec: Recording, smoothing: str, params: dict | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """The pointer (px, summed integer steps) the daemon's mapper gives for these inputs, and the same plus
+    the mapper's sub-pixel remainder (where the pointer is heading between whole pixels)."""
     from sphere.daemon.pointer import PointerMapper, PointerSettings
 
     mapper = PointerMapper(PointerSettings(smoothing=smoothing, smoothing_params=params), 1920)
     update = mapper.update
     rem = mapper.remainder
     out = np.empty((len(rec.inputs), 2))
+    exact = np.empty((len(rec.inputs), 2))
     x = y = 0
     for i, (g, dt, up) in enumerate(rec.inputs):
         dx, dy = update(g, dt, up)
         x += dx
         y += dy
-        out[i, 0] = x
-        out[i, 1] = y
-        if exact:
-            out[i, 0] += rem[0]
-            out[i, 1] += rem[1]
-    return out
+        out[i] = x, y
+        exact[i] = x + rem[0], y + rem[1]
+    return out, exact
+
+
+def pointer_path(rec: Recording, smoothing: str, params: dict | None = None) -> np.ndarray:
+    return pointer_paths(rec, smoothing, params)[0]
 
 
 # ---------------------------------------------------------------- figures
@@ -386,9 +388,10 @@ def pick(rows: list[dict]) -> dict:
 
 def evaluate(recs: list[Recording], name: str, params: dict | None) -> dict:
     t0 = time.perf_counter()
-    paths = [pointer_path(r, name, params) for r in recs]
+    both = [pointer_paths(r, name, params) for r in recs]
     us = (time.perf_counter() - t0) / max(1, sum(len(r.inputs) for r in recs)) * 1e6
-    exact = [pointer_path(r, name, params, exact=True) if r.kind != "broad" else None for r in recs]
+    paths = [p for p, _ in both]
+    exact = [e for _, e in both]
     return {"params": params or {}, "figures": figures(recs, paths, exact) | {"us_per_sample": us}}
 
 
