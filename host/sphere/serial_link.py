@@ -51,21 +51,52 @@ def _parent(pid: int) -> int:
         return 0
 
 
-def _ours(pid: int, me: int) -> bool:
-    """True when ``pid`` is a descendant of ``me`` (the virtual board we started holds its own pty)."""
+def _within(pid: int, roots) -> bool:
+    """True when ``pid`` is one of ``roots`` or a descendant of one (the virtual board we started holds its pty)."""
     for _ in range(64):
-        pid = _parent(pid)
-        if pid == me:
+        if pid in roots:
             return True
         if pid <= 1:
             return False
+        pid = _parent(pid)
     return False
 
 
-def holders(path: str) -> list[tuple[int, str]]:
+def _pty_index(path: str) -> int | None:
+    """N for a pty slave /dev/pts/N, else None."""
+    real = os.path.realpath(path)
+    if real.startswith("/dev/pts/") and real[9:].isdigit():
+        return int(real[9:])
+    return None
+
+
+def _holds_master(pid: str, index: int) -> bool:
+    """True when process ``pid`` holds the master side of pty ``index``: it is the device end of that pty (the
+    virtual board, a simulated device), not a program using the port."""
+    fd_dir = f"/proc/{pid}/fd"
+    try:
+        fds = os.listdir(fd_dir)
+    except OSError:
+        return False
+    for fd in fds:
+        try:
+            if os.path.basename(os.readlink(f"{fd_dir}/{fd}")) != "ptmx":
+                continue
+            with open(f"/proc/{pid}/fdinfo/{fd}") as f:
+                for line in f:
+                    if line.startswith("tty-index:") and int(line.split()[1]) == index:
+                        return True
+        except (OSError, ValueError):
+            continue
+    return False
+
+
+def holders(path: str, allow_pids=()) -> list[tuple[int, str]]:
     """(pid, program name) of other programs that have the device ``path`` open, as far as /proc shows
     them (processes of other users are not visible without privileges; TIOCEXCL still stops us there).
-    Our own children (the virtual board) do not count. Empty where /proc does not exist."""
+    ``allow_pids`` and their descendants do not count (the virtual board we started), nor does a process that
+    holds the master side of the same pty (it is the device: the virtual board). Empty where /proc does not
+    exist."""
     try:
         rdev = os.stat(path).st_rdev
     except OSError:
@@ -73,6 +104,7 @@ def holders(path: str) -> list[tuple[int, str]]:
     if not rdev or not os.path.isdir("/proc"):
         return []
     me = os.getpid()
+    pty_index = _pty_index(path)
     out = []
     for name in os.listdir("/proc"):
         if not name.isdigit() or int(name) == me:
@@ -93,7 +125,8 @@ def holders(path: str) -> list[tuple[int, str]]:
                         comm = f.read().strip()
                 except OSError:
                     comm = "?"
-                if not _ours(int(name), me):
+                device_end = pty_index is not None and _holds_master(name, pty_index)
+                if not device_end and not (allow_pids and _within(int(name), set(allow_pids))):
                     out.append((int(name), comm))
                 break
     return out
@@ -111,7 +144,7 @@ def _set_exclusive(ser) -> None:
 
 
 def open_port(port: str, baud: int = DEFAULT_BAUD, timeout_s: float = 0.1, *, reset_on_open: bool = True,
-              write_timeout_s: float | None = None, exclusive: bool = True) -> serial.Serial:
+              write_timeout_s: float | None = None, exclusive: bool = True, allow_pids=()) -> serial.Serial:
     """Open a port for reading frames: 8N1, no flow control, a short read timeout, exclusively.
 
     ``reset_on_open=False`` holds DTR low while opening, so a USB Nano is not reset where the driver
@@ -123,7 +156,7 @@ def open_port(port: str, baud: int = DEFAULT_BAUD, timeout_s: float = 0.1, *, re
     if problem:
         raise PortError(f"cannot open {port}: {problem}")
     if exclusive:
-        held = holders(port)
+        held = holders(port, allow_pids)
         if held:
             who = ", ".join(f"{comm} (pid {pid})" for pid, comm in held)
             raise PortBusy(f"{port} is open in another program: {who}; it is left alone")

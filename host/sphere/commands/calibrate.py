@@ -9,6 +9,8 @@ from pathlib import Path
 
 import numpy as np
 
+from sphere.argtypes import seconds
+
 from sphere import chips
 from sphere.calibration_session import COVERAGE_BINS, COVERAGE_TARGET, FACE_S, STILL_S, TURN_MIN_S, TURN_S
 from sphere.calibration_session import FACES as _FACES
@@ -55,7 +57,7 @@ def add_arguments(p) -> None:
     p.add_argument("--save-capture", metavar="FILE", help="with --port: also keep the session's bytes as a capture")
     p.add_argument("--no-save", action="store_true", help="with --port: apply on the device but do not save to EEPROM")
     p.add_argument("--yes", action="store_true", help="with --port: do not wait for Enter before each step")
-    p.add_argument("--timeout", type=float, default=DEFAULT_TIMEOUT_S, metavar="SECONDS",
+    p.add_argument("--timeout", type=seconds, default=DEFAULT_TIMEOUT_S, metavar="SECONDS",
                    help=f"with --port: give up a step not done within this many seconds (default {DEFAULT_TIMEOUT_S:g})")
 
 

@@ -32,25 +32,30 @@ def _text_line(obj: dict) -> str:
 def run(args) -> int:
     try:
         capture = CaptureFile(args.capture)
-        size = capture.size()
     except CaptureError as e:
         print(f"sphere decode: {e}", file=sys.stderr)
         return 2
-    if size == 0:
-        print(f"sphere decode: {args.capture} is empty: nothing was received (is the sphere on, and the port right?)", file=sys.stderr)
-        return 1
     wanted = {t.lower() for t in args.type} if args.type else None
     out = sys.stdout
     count = 0
-    for item in capture.packets():
-        obj = item.packet.to_json(raw=args.raw)
-        if wanted and obj["type"] not in wanted:
-            continue
-        if item.t_us is not None:
-            obj["t_us"] = item.t_us
-        count += 1
-        out.write((json.dumps(obj) if args.jsonl else _text_line(obj)) + "\n")
+    try:
+        for item in capture.packets():
+            obj = item.packet.to_json(raw=args.raw)
+            if wanted and obj["type"] not in wanted:
+                continue
+            if item.t_us is not None:
+                obj["t_us"] = item.t_us
+            count += 1
+            out.write((json.dumps(obj) if args.jsonl else _text_line(obj)) + "\n")
+    except CaptureError as e:
+        print(f"sphere decode: {e}", file=sys.stderr)
+        return 2
+    except BrokenPipeError:  # `sphere decode ... | head`
+        return 0
     stats = capture.stats
+    if stats.bytes_in == 0:  # what was read, so a FIFO or a pipe is judged by its contents, not its size
+        print(f"sphere decode: {args.capture} is empty: nothing was received (is the sphere on, and the port right?)", file=sys.stderr)
+        return 1
     summary = {"summary": True, "packets": count, **stats.as_dict()}
     if args.jsonl:
         print(json.dumps(summary), file=sys.stderr)
@@ -59,7 +64,7 @@ def run(args) -> int:
             f"{stats.frames_ok} frames from {stats.bytes_in} bytes; errors: {stats.crc_errors} CRC, "
             f"{stats.framing_errors} framing, {stats.oversize} oversize, {stats.unknown_types} unknown type, "
             f"{stats.bad_lengths} bad length; {stats.bytes_skipped} bytes skipped; {stats.seq_gaps} sequence "
-            f"gaps ({stats.frames_lost} frames lost)",
+            f"gaps ({stats.frames_lost} frames lost); {stats.duplicates} duplicates dropped",
             file=sys.stderr,
         )
     if stats.frames_ok == 0:

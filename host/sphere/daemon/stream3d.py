@@ -19,13 +19,53 @@ import asyncio
 import collections
 import http
 import json
+import logging
 import threading
+
+
+class _QuietLog:
+    """What goes wrong with clients (a refused flood, a client that vanished) as one line at most every 10 s,
+    never a traceback: a hostile page or a connection flood must not fill the journal."""
+
+    def __init__(self, log, every_s: float = 10.0):
+        import time
+
+        self.log = log or (lambda m: None)
+        self.every_s = every_s
+        self._clock = time.monotonic
+        self._last = -1e18
+        self.suppressed = 0
+        self.logger = logging.Logger("sphere.daemon.stream.websockets", logging.WARNING)  # this server's own
+        self.logger.addHandler(_Forward(self))
+
+    def __call__(self, msg: str) -> None:
+        now = self._clock()
+        if now - self._last < self.every_s:
+            self.suppressed += 1
+            return
+        extra = f" ({self.suppressed} more like it not shown)" if self.suppressed else ""
+        self._last, self.suppressed = now, 0
+        self.log(f"3-D stream: {msg}{extra}")
+
+
+class _Forward(logging.Handler):
+    """Hands a log record's message (never its traceback) to a _QuietLog."""
+
+    def __init__(self, quiet):
+        super().__init__()
+        self.quiet = quiet
+
+    def emit(self, record):
+        self.quiet(record.getMessage())
 
 
 class OrientationStream:
     def __init__(self, host: str = "127.0.0.1", port: int = 8765, rate_hz: float = 60.0, log=None,
                  max_clients: int = 16):
         self.max_clients = max_clients
+        self.refused = 0  # requests refused (foreign Host or Origin, too many connections)
+        self.open_connections = 0
+        self._quiet = _QuietLog(log)
         self.host = host
         self.port = port
         self.rate_hz = rate_hz
@@ -79,9 +119,47 @@ class OrientationStream:
             self._error = e
             self._started.set()
 
+    # -- who may connect --
+    def _local_names(self) -> set[str]:
+        names = {"127.0.0.1", "localhost", "[::1]", "::1"}
+        if self.host not in ("", "0.0.0.0", "::"):
+            names.add(self.host)
+        return names
+
+    def allowed_host(self, host_header: str | None) -> bool:
+        """The Host header names this machine as a loopback name (not a DNS name rebound to 127.0.0.1)."""
+        if not host_header:
+            return False
+        host = host_header.strip().lower()
+        if host.startswith("["):
+            name = host[: host.find("]") + 1]
+        else:
+            name = host.rsplit(":", 1)[0] if host.count(":") == 1 else host
+        return name in self._local_names()
+
+    def allowed_origin(self, origin: str | None) -> bool:
+        """No Origin (a program, not a page) or the page this server serves, on a loopback name."""
+        if origin is None:
+            return True
+        origin = origin.strip().lower()
+        for scheme in ("http://", "https://"):
+            if origin.startswith(scheme):
+                return self.allowed_host(origin[len(scheme):])
+        return False
+
+    def _refuse(self, connection, status, text: str):
+        self.refused += 1
+        return connection.respond(status, text)
+
     def _process_request(self, connection, request):
         from sphere.daemon.page import PAGE_HTML
 
+        if not self.allowed_host(request.headers.get("Host")):
+            return self._refuse(connection, http.HTTPStatus.FORBIDDEN,
+                                "forbidden: this server answers only on 127.0.0.1 / localhost\n")
+        if not self.allowed_origin(request.headers.get("Origin")):
+            return self._refuse(connection, http.HTTPStatus.FORBIDDEN,
+                                "forbidden: only the page served here (or a local program) may connect\n")
         path = request.path.split("?", 1)[0]
         if path == "/ws":
             return None  # go on with the WebSocket handshake
@@ -106,12 +184,33 @@ class OrientationStream:
             self.clients.discard(ws)
 
     async def _main(self) -> None:
-        from websockets.asyncio.server import broadcast, serve
+        from websockets.asyncio.server import ServerConnection, broadcast, serve
 
         self._loop = asyncio.get_running_loop()
+        self._loop.set_exception_handler(lambda loop, context: self._quiet(context.get("message", "error")))
         self._stop_event = asyncio.Event()
+        stream = self
+
+        class Limited(ServerConnection):
+            """Refuses a connection beyond ``max_clients`` before reading from it (an idle flood of connections
+            then costs no handshake, and the daemon keeps descriptors for the sphere's port)."""
+
+            def connection_made(self, transport):
+                stream.open_connections += 1
+                if stream.open_connections > stream.max_clients:
+                    stream.refused += 1
+                    stream._quiet(f"more than {stream.max_clients} connections at once: refusing")
+                    transport.abort()
+                    return
+                super().connection_made(transport)
+
+            def connection_lost(self, exc):
+                stream.open_connections -= 1
+                super().connection_lost(exc)
+
         async with serve(self._handler, self.host, self.port, process_request=self._process_request,
-                         compression=None, close_timeout=1.0) as server:
+                         compression=None, close_timeout=1.0, open_timeout=3.0, create_connection=Limited,
+                         logger=self._quiet.logger) as server:
             self.port = server.sockets[0].getsockname()[1]
             self._started.set()
             period = 1.0 / self.rate_hz

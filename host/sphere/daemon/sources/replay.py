@@ -22,6 +22,8 @@ class ReplaySource(Source):
             self.capture = CaptureFile(path)
         except CaptureError as e:
             raise SourceError(str(e)) from None
+        if not self.capture.path.is_file():  # a FIFO would block the daemon before it could see a SIGTERM
+            raise SourceError(f"{path} is not a regular file: --replay needs a capture file (sphere capture --out)")
         self.stream = self.capture.stream
         self.path = str(path)
         self.speed = float(speed)

@@ -108,6 +108,7 @@ class SerialSource(Source):
         self.link = None
         self.state = "looking for the sphere"
         self._comports = comports
+        self.allow_pids: tuple[int, ...] = ()  # processes that may hold the port (the virtual board we started)
         self._warned: set[str] = set()
 
     @classmethod
@@ -118,7 +119,8 @@ class SerialSource(Source):
 
     # -- connecting --
     def _open(self, path: str):
-        ser = open_port(path, self.baud, self.read_timeout_s, reset_on_open=self.reset_on_open, write_timeout_s=0.5)
+        ser = open_port(path, self.baud, self.read_timeout_s, reset_on_open=self.reset_on_open, write_timeout_s=0.5,
+                        allow_pids=self.allow_pids)
         try:
             ser.reset_input_buffer()  # bytes from before the (DTR) reset belong to an older session
         except Exception:

@@ -89,6 +89,7 @@ class SimulatorSource(SerialSource):
         self.proc, path = start_simulator(trace, log, seconds=seconds)
         serial_kwargs.setdefault("reset_on_open", False)
         super().__init__(port=path, log=log, **serial_kwargs)
+        self.allow_pids = (self.proc.pid,)  # the board holds its own pty
         self.state = f"simulated sphere on {path}"
 
     @classmethod

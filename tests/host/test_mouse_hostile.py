@@ -1,0 +1,233 @@
+"""sphere-mouse on a real desk (issue 14): a hostile web page, a connection flood, a frame received twice,
+a gyroscope that stops answering, signals while the pointer moves, a port held by another program."""
+
+from __future__ import annotations
+
+import asyncio
+import os
+import socket
+import threading
+import time
+import tty
+
+import pytest
+
+from sphere.daemon.app import SphereMouse
+from sphere.daemon.backends.memory import RecordingBackend
+from sphere.daemon.config import Config
+from sphere.daemon.synthetic import ScriptedSphere, hello_packet
+from sphere.protocol import PacketStream, RawSample, encode_frame
+
+
+def make_daemon(**overrides):
+    cfg = Config().with_overrides({"stream": {"enabled": False}, **overrides}, "test")
+    backend = RecordingBackend()
+    return SphereMouse(cfg, source=None, backend=backend, log=lambda m: None), backend
+
+
+def feed_bytes(daemon, data: bytes, stream: PacketStream | None = None) -> PacketStream:
+    stream = stream or PacketStream()
+    for dp in stream.feed(data):
+        daemon.handle(dp)
+    return stream
+
+
+# ---- a frame received twice: one action ----
+
+
+def test_a_frame_received_twice_is_acted_on_once():
+    d, b = make_daemon(events={"single_tap": "left_click"})
+    sphere = ScriptedSphere()
+    data = sphere.frame(hello_packet()) + b"".join(f for _, f in sphere.steps([("still", 0.3)]))
+    stream = feed_bytes(d, data)
+    tap = b"".join(f for _, f in sphere.steps([("tap", "single_tap")]))
+    event = [f for f in tap.split(b"\x00") if f][-1] + b"\x00"  # the EVENT frame, the last of the tap
+    feed_bytes(d, tap + event, stream)  # a link that re-sent the intact EVENT frame
+    assert [c[0] for c in b.clicks] == ["left"]
+    s = stream.stats
+    assert s.duplicates == 1 and s.seq_gaps == 0 and s.frames_lost == 0  # not "255 lost"
+
+
+def test_duplicate_window_keeps_real_frames():
+    """Frames that only share a seq (256 frames apart) are not duplicates: their CRC differs."""
+    sphere = ScriptedSphere()
+    data = b"".join(f for _, f in sphere.steps([("still", 2.0)]))  # > 256 frames
+    stream = PacketStream()
+    out = stream.feed(data)
+    assert stream.stats.duplicates == 0 and len(out) == stream.stats.frames_ok
+
+
+# ---- RAW_SAMPLE flags: no gyro, no motion ----
+
+
+def _raw(t_us, gyro, flags):
+    return RawSample(t_us, flags, (0, 0, 256), gyro, (200, 0, -400))
+
+
+def test_gyro_missing_while_still_does_not_move_the_pointer():
+    """A 5 °/s offset learnt as bias, then the gyro stops answering (flags gyro_ok = 0, values 0) for 3 s while
+    the sphere lies still: the pointer moves < 5 px (it ran at ~211 px/s before)."""
+    logs = []
+    cfg = Config().with_overrides({"stream": {"enabled": False}, "orientation": {"source": "device"}}, "t")
+    b = RecordingBackend()
+    d = SphereMouse(cfg, source=None, backend=b, log=logs.append)
+    offset = round(5.0 * 14.375)  # 5 °/s in ITG-3200 LSB about z
+    stream = PacketStream()
+    seq = 0
+    t = 1_000_000
+    frames = [encode_frame(hello_packet(), 0)]
+    for _ in range(600):  # 3 s still with the offset: learnt as bias
+        seq += 1
+        t += 5000
+        frames.append(encode_frame(_raw(t, (0, 0, offset), 0x0F), seq & 0xFF))
+    feed_bytes(d, b"".join(frames), stream)
+    x0, y0 = b.x, b.y
+    frames = []
+    for _ in range(600):  # 3 s without the gyro
+        seq += 1
+        t += 5000
+        frames.append(encode_frame(_raw(t, (0, 0, 0), 0x0D), seq & 0xFF))
+    feed_bytes(d, b"".join(frames), stream)
+    assert abs(b.x - x0) + abs(b.y - y0) < 5
+    assert d.sensors_missing == ("gyroscope",)
+    assert any("gyroscope not answering" in m for m in logs), logs
+
+
+def test_stale_gyro_does_not_move_the_pointer():
+    d, b = make_daemon(orientation={"source": "device"})
+    frames = [encode_frame(hello_packet(), 0)]
+    for i in range(1, 400):  # a turn of 20 °/s held from the last good read (gyro_stale, protocol v2)
+        frames.append(encode_frame(_raw(1_000_000 + 5000 * i, (0, 0, 288), 0x4F), i & 0xFF))
+    feed_bytes(d, b"".join(frames))
+    assert b.x == 0 and b.y == 0
+
+
+# ---- signals only set flags ----
+
+
+def test_requests_from_signal_handlers_are_served_by_the_loop():
+    calls = []
+
+    class Backend(RecordingBackend):
+        def move_to(self, x, y):
+            calls.append(threading.current_thread().name)
+
+        def screen_size(self):
+            return (1920, 1080)
+
+    sphere = ScriptedSphere()
+    data = sphere.frame(hello_packet()) + b"".join(f for _, f in sphere.steps([("still", 0.5)]))
+    stream = PacketStream()
+    batches = [[dp] for dp in stream.feed(data)]
+
+    class Source:
+        stats, state, generation, _stop = stream.stats, "test", 1, False
+
+        def __iter__(self):
+            for i, batch in enumerate(batches):
+                if i == 10:
+                    d.request("recentre")  # what the SIGUSR1 handler does: no backend call here
+                    assert calls == []
+                    d.request("pause")
+                yield batch
+
+    cfg = Config().with_overrides({"stream": {"enabled": False}}, "t")
+    d = SphereMouse(cfg, Source(), Backend(), log=lambda m: None)
+    d.run()
+    assert len(calls) == 1 and d.paused
+
+
+# ---- the 3-D server: Origin, Host, connection limit ----
+
+
+websockets = pytest.importorskip("websockets", reason="[optional] the 3-D stream needs websockets")
+
+
+@pytest.fixture
+def server():
+    from sphere.daemon.stream3d import OrientationStream
+
+    logs = []
+    s = OrientationStream("127.0.0.1", 0, rate_hz=100, log=logs.append, max_clients=8)
+    s.start()
+    s.logs = logs
+    yield s
+    s.stop()
+
+
+def _http(port, headers: dict, path="/ws") -> int:
+    """Status code of a WebSocket upgrade request with these headers."""
+    req = (f"GET {path} HTTP/1.1\r\n" + "".join(f"{k}: {v}\r\n" for k, v in headers.items())
+           + "Upgrade: websocket\r\nConnection: Upgrade\r\nSec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\n"
+           "Sec-WebSocket-Version: 13\r\n\r\n")
+    with socket.create_connection(("127.0.0.1", port), timeout=5) as c:
+        c.sendall(req.encode())
+        return int(c.recv(200).split()[1])
+
+
+def test_foreign_origin_and_host_are_refused(server):
+    p = server.port
+    assert _http(p, {"Host": f"127.0.0.1:{p}", "Origin": "https://evil.example"}) == 403
+    assert _http(p, {"Host": f"evil.example:{p}"}) == 403  # DNS rebinding: a foreign name for 127.0.0.1
+    assert _http(p, {"Host": f"localhost:{p}", "Origin": f"http://localhost:{p}"}) == 101  # the page served here
+    assert _http(p, {"Host": f"127.0.0.1:{p}"}) == 101  # a local program (no Origin)
+    assert _http(p, {"Host": f"evil.example:{p}"}, path="/") == 403
+
+
+def test_connection_flood_is_refused_and_the_server_keeps_serving(server):
+    """2,000 connection attempts, many held open: beyond max_clients they are refused at once; afterwards a
+    client still connects, and the log has a few lines, not a traceback per connection."""
+    held = []
+    for _ in range(2000):
+        try:
+            c = socket.create_connection(("127.0.0.1", server.port), timeout=2)
+        except OSError:
+            continue
+        if len(held) < 200:
+            held.append(c)
+        else:
+            c.close()
+    for c in held:
+        c.close()
+    time.sleep(0.3)
+    assert server.refused >= 1000
+    assert _http(server.port, {"Host": f"127.0.0.1:{server.port}"}) == 101
+    assert len(server.logs) <= 5 and not any("Traceback" in m for m in server.logs), server.logs
+
+
+# ---- ports held by another program ----
+
+
+def _pty():
+    master, slave = os.openpty()
+    tty.setraw(slave)
+    name = os.ttyname(slave)
+    return master, slave, name
+
+
+def test_open_port_is_exclusive_and_leaves_held_ports_alone(tmp_path):
+    pytest.importorskip("serial")
+    import subprocess
+    import sys
+
+    from sphere.serial_link import PortBusy, open_port
+
+    master, slave, name = _pty()
+    os.close(slave)
+    first = open_port(name)
+    try:
+        with pytest.raises(PortBusy):
+            open_port(name)  # sphere capture beside sphere-mouse: refused, not a split stream
+    finally:
+        first.close()
+    # another program holds it (a 3-D printer's host program)
+    holder = subprocess.Popen([sys.executable, "-c", f"import time; f = open({name!r}, 'rb', buffering=0); "
+                               "print('held', flush=True); time.sleep(30)"], stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout.readline().strip() == "held"
+        with pytest.raises(PortBusy, match="open in another program"):
+            open_port(name)
+    finally:
+        holder.kill()
+        holder.wait()
+        os.close(master)
