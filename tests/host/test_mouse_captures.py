@@ -58,7 +58,7 @@ def test_fast_rotation_moves_the_pointer_by_the_turn_about_the_vertical():
     device's own orientation), integrated independently here, times the sensitivity."""
     path = capture("sim_07_fast_rotation.bin")
     daemon, backend = replay(path, orientation={"source": "device"}, gyro={"auto_bias": False},
-                             pointer={"tightening_dps": 0.0, "smoothing_dps": 0.0})
+                             pointer={"tightening_dps": 0.0, "smoothing": "none"})
     up = None
     last_t = None
     yaw_deg = 0.0

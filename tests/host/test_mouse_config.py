@@ -82,8 +82,8 @@ def test_flags_override_file_and_set_overrides_flags(tmp_path):
 
 
 def test_bad_set_is_reported_as_such():
-    args = build_parser().parse_args(["--set", "pointer.smoothing_time_s=5"])
-    with pytest.raises(C.ConfigError, match=r"--set: \[pointer\] smoothing_time_s = 5: must be between"):
+    args = build_parser().parse_args(["--set", "smoothing.tiered.smoothing_time_s=5"])
+    with pytest.raises(C.ConfigError, match=r"--set: \[smoothing.tiered\] smoothing_time_s = 5: must be between"):
         settings_from_args(args)
 
 

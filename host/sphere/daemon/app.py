@@ -7,6 +7,7 @@ import logging
 from sphere.daemon.actions import Action, EventActions
 from sphere.daemon.motion import GyroBias, MotionTracker
 from sphere.daemon.pointer import PointerMapper, PointerSettings, TiltMapper, TiltSettings
+from sphere.smoothing.pose import pose_filter
 from sphere.protocol import Event, Hello, Orientation, RawSample, Status
 
 DEFAULT_SCREEN_WIDTH_PX = 1920
@@ -55,7 +56,8 @@ class SphereMouse:
                 size = _desktop_size()
             width = size[0] if size else DEFAULT_SCREEN_WIDTH_PX
         self.screen_width_px = width
-        self.mapper = PointerMapper(PointerSettings.from_config(cfg.pointer), width)
+        self.mapper = PointerMapper(PointerSettings.from_config(cfg.pointer, cfg), width)
+        self.pose = pose_filter(cfg)  # the pose the stream and every output get ([stream] smoothing)
         self.tilt = TiltMapper(TiltSettings.from_config(cfg.tilt, cfg.pointer))
         g = cfg.gyro
         self.motion = MotionTracker(cfg.orientation.source, cfg.orientation.use_mag, cfg.orientation.beta,
@@ -172,7 +174,7 @@ class SphereMouse:
                 for a in self.actions.due(t):
                     self.do(a)
             if self.stream is not None and self.motion.uses_host_filter:
-                self.stream.publish_orientation(self.motion.quat, t)
+                self.stream.publish_orientation(self.pose.at(self.motion.quat, t), t)
             if self.paused or self.actions.frozen(t) or flags & (TAP_ACTIVE | GYRO_STALE) or not flags & GYRO_OK:
                 return  # without the gyroscope nothing says how the sphere turns: the pointer holds still
             if self.mode == "pointer":
@@ -186,7 +188,7 @@ class SphereMouse:
             if self.motion.uses_host_filter:
                 return
             if self.stream is not None:
-                self.stream.publish_orientation(self.motion.quat, t)
+                self.stream.publish_orientation(self.pose.at(self.motion.quat, t), t)
             if not self.paused and not self.actions.frozen(t):
                 if self.mode == "tilt":
                     self._tilt_step(t, dt)

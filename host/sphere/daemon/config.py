@@ -58,6 +58,7 @@ MODES = ("pointer", "tilt", "3d")
 #: per contributing module; a module that is not installed is skipped.
 CONTRIBUTORS: tuple[str, ...] = (
     "sphere.daemon.outputs",  # [outputs.opentrack], [outputs.osc], [outputs.gamepad]
+    "sphere.smoothing.config",  # [smoothing.NAME] for every filter of the smoothing registry
 )
 
 #: The daemon's own sections, in the order the reference lists them (contributed ones follow).
@@ -210,6 +211,12 @@ def _baud(v):
     return check_baud(v)
 
 
+def _smoothing_names():
+    from sphere.smoothing.registry import FILTERS
+
+    return tuple(FILTERS)
+
+
 def _source_kinds():
     from sphere.daemon.sources import REGISTRY
 
@@ -293,9 +300,9 @@ class PointerConfig:
                                    "two it is blended linearly", _range(0.001, 5000.0))
     tightening_dps: float = option(1.0, "rotations slower than this are scaled down in proportion to their speed "
                                    "(soft, instead of a dead zone that swallows them); 0 = off", _range(0.0, 100.0))
-    smoothing_dps: float = option(8.0, "rotations slower than this are smoothed (fully below half of it), faster ones "
-                                  "pass unsmoothed; 0 = off", _range(0.0, 500.0))
-    smoothing_time_s: float = option(0.06, "averaging window of the smoothing", _range(0.005, 1.0))
+    smoothing: str = option("tremor", "smoothing filter of the pointer, from the smoothing registry (its parameters "
+                            "in [smoothing.NAME]); `tremor` takes out the hand's 8–12 Hz tremor, `none` = off",
+                            choices=_smoothing_names)
     axes: str = option("world", "`world`: turning about the vertical moves the pointer sideways however the sphere is "
                        "rolled (uses gravity); `local`: the sensor's own z (yaw) and y (pitch) axes",
                        choices=("world", "local"))
@@ -369,6 +376,8 @@ class StreamConfig:
     host: str = option("127.0.0.1", "address to listen on (keep it local)")
     port: int = option(8765, "TCP port of the WebSocket and the page (http://127.0.0.1:PORT/)", _port)
     rate_hz: float = option(60.0, "orientation messages per second", _range(1.0, 200.0))
+    smoothing: str = option("tremor", "smoothing filter of the streamed pose, from the smoothing registry (its "
+                            "parameters in [smoothing.NAME]); `none` = the pose as measured", choices=_smoothing_names)
     max_clients: int = option(16, "most WebSocket and page connections at once; more are refused (503)",
                               _range(1, 1000))
 

@@ -1,0 +1,195 @@
+"""Every smoothing filter of the registry drives the real X pointer (sphere-mouse --backend x11 on Xvfb,
+replayed captures), a sphere held in the air is measured from the X pointer itself (sampled at ~1 kHz), and
+the 3-D stream's pose is measured from the stream's own WebSocket messages."""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import subprocess
+import sys
+import threading
+import time
+
+import numpy as np
+import pytest
+
+from sphere.daemon.synthetic import hello_packet, script_bytes
+from sphere.protocol import encode_frame
+from sphere.smoothing.registry import FILTERS
+from test_mouse_x11 import pointer, pytestmark, run_mouse, xdotool, xvfb  # noqa: F401  (the Xvfb fixture)
+
+PX_PER_DEG = 1920 / 40.0  # the issue's scale: 40° per 1920 px (--set output.screen_width_px=1920)
+
+
+def hold_capture(path, script, seed=3):
+    """A replayable capture of synthetic:hold with this script (HELLO, then RAW_SAMPLE at 200 Hz)."""
+    from sphere.bench.pointer import raw_packets
+    from sphere.sim.hold import hold_script
+
+    h = hold_script(sum(step[1] for step in script), seed, script=script)
+    frames = [encode_frame(hello_packet(), 0)]
+    frames += [encode_frame(p, (i + 1) & 0xFF) for i, (_, p) in enumerate(raw_packets(h.motion))]
+    path.write_bytes(b"".join(frames))
+    return h
+
+
+class PointerSampler:
+    """The X pointer read with python-xlib as fast as it answers (~1 kHz), with perf_counter times."""
+
+    def __init__(self, display_name: str):
+        from Xlib import display
+
+        self.d = display.Display(display_name)
+        self.root = self.d.screen().root
+        self.samples: list[tuple[float, int, int]] = []
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._loop, daemon=True)
+
+    def _loop(self):
+        while not self._stop.is_set():
+            p = self.root.query_pointer()
+            self.samples.append((time.perf_counter(), p.root_x, p.root_y))
+            time.sleep(0.0008)
+
+    def __enter__(self):
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc):
+        self._stop.set()
+        self._thread.join(2)
+        self.d.close()
+
+
+@pytest.mark.parametrize("name", list(FILTERS))
+def test_every_registry_filter_drives_the_x_pointer(xvfb, tmp_path, name):
+    """A 5° turn left ends 160 px left (1280 px per 40°) with every filter: it moves, it settles, it is exact."""
+    capture = tmp_path / "turn.bin"
+    capture.write_bytes(script_bytes([("still", 1.0), ("turn", (0, 0, 1), 10.0, 0.5), ("still", 0.6)]))
+    xdotool(xvfb, "mousemove", "640", "512")
+    r = run_mouse(xvfb, capture, "--speed", "0", "--set", f"pointer.smoothing={name}")
+    assert r.returncode == 0, r.stderr
+    assert "Traceback" not in r.stderr
+    x, y = pointer(xvfb)
+    assert abs(x - (640 - 160)) <= 2 and abs(y - 512) <= 2, (name, x, y)
+
+
+@pytest.mark.parametrize("setting, says", [
+    ("pointer.smoothing=kalmann", "[pointer] smoothing = 'kalmann': must be one of 'none', 'tremor'"),
+    ("stream.smoothing=wobble", "[stream] smoothing = 'wobble': must be one of"),
+    ("smoothing.tremor.notch_q=0", "[smoothing.tremor] notch_q = 0: must be between 0.1 and 20"),
+    ("smoothing.tremor.notch_qq=1", "unknown key [smoothing.tremor] notch_qq"),
+])
+def test_bad_smoothing_settings_are_one_clear_line(xvfb, tmp_path, setting, says):
+    capture = tmp_path / "s.bin"
+    capture.write_bytes(script_bytes([("still", 0.2)]))
+    r = run_mouse(xvfb, capture, "--speed", "0", "--set", setting)
+    assert r.returncode == 2, r.stderr
+    assert says in r.stderr and "Traceback" not in r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1, r.stderr
+
+
+#: rest on the table (the bias is learnt), picked up and held still, a fine 3 °/s aiming turn, held, a fast turn
+HELD = [("rest", 3.0, "", 0.0, ""), ("held", 5.5, "", 0.0, ""), ("turn", 1.0, "fine", -3.0, "yaw"),
+        ("held", 2.0, "", 0.0, ""), ("turn", 0.1, "fast", -120.0, "yaw"), ("held", 1.5, "", 0.0, "")]
+
+
+def _half_travel_s(t, x, start_s, end_s):
+    """When x first gets half way between its means over 0.25 s before start_s and 0.4 s from end_s + 0.5 s."""
+    pre = x[(t >= start_s - 0.3) & (t < start_s - 0.05)].mean()
+    post = x[(t >= end_s + 0.5) & (t < end_s + 0.9)].mean()
+    level = pre + 0.5 * (post - pre)
+    after = (t >= start_s - 0.05) & (np.sign(post - pre) * (x - level) >= 0)
+    return float(t[after][0]), post - pre
+
+
+def test_held_in_the_air_tremor_jitter_from_the_x_pointer(xvfb, tmp_path):
+    """Issue 20's targets through X: held still, the tremor jitter (RMS about a line over 1-s windows) is
+    ≤ 1.5 px at 40° per 1920 px (≈ 7 px unfiltered), and the fine 3 °/s turn reaches half its travel no more
+    than 40 ms later than the fast one (each against the motion's own timeline)."""
+    capture = tmp_path / "held.bin"
+    h = hold_capture(capture, HELD)
+    xdotool(xvfb, "mousemove", "100", "500")
+    with PointerSampler(xvfb) as s:
+        r = run_mouse(xvfb, capture, "--speed", "1", "--set", "output.screen_width_px=1920", timeout=120)
+    assert r.returncode == 0, r.stderr
+    a = np.array(s.samples)
+    t, x, y = a[:, 0] - a[0, 0], a[:, 1], a[:, 2]
+    # the motion's time in the X trace: the fast turn (12° = 576 px right, nothing else comes near) is taken
+    # as reaching half its travel at its own half time; the fine turn's lag is then measured against it
+    fine, fast = [p for p in h.phases if p.kind == "turn"]
+    level = x[-1] - 0.5 * 12.0 * PX_PER_DEG
+    t0 = t[np.flatnonzero(x >= level)[0]] - 0.5 * (fast.start_s + fast.end_s)
+    held = [p for p in h.phases if p.kind == "held"][0]
+    sq, n = 0.0, 0
+    for w0 in np.arange(held.start_s + 0.8, held.end_s - 1.0, 1.0):
+        m = (t >= t0 + w0) & (t < t0 + w0 + 1.0)
+        tt = t[m]
+        for v in (x[m], y[m]):
+            resid = v - np.polyval(np.polyfit(tt, v, 1), tt)
+            sq += float(np.sum(resid * resid))
+        n += int(m.sum())
+    jitter = math.sqrt(sq / n)
+    print(f"held tremor jitter from the X pointer: {jitter:.2f} px RMS over {n} samples")
+    assert jitter <= 1.5
+    tf, travel_f = _half_travel_s(t - t0, x, fine.start_s, fine.end_s)
+    tq, travel_q = _half_travel_s(t - t0, x, fast.start_s, fast.end_s)
+    lag_fine = (tf - 0.5 * (fine.start_s + fine.end_s)) * 1000
+    lag_fast = (tq - 0.5 * (fast.start_s + fast.end_s)) * 1000
+    print(f"half travel: fine 3 °/s {lag_fine:.1f} ms, fast 120 °/s {lag_fast:.1f} ms after the motion's")
+    assert abs(travel_f - 3.0 * PX_PER_DEG) <= 0.05 * 3.0 * PX_PER_DEG  # 144 px ± 5 %
+    assert lag_fine - lag_fast <= 40.0
+
+
+def test_stream_pose_jitter_from_the_websocket(tmp_path):
+    """The 3-D stream's own messages: orientation jitter ≤ 0.05° lying still and ≤ 0.1° held in the air."""
+    from websockets.sync.client import connect
+
+    from sphere.smoothing.pose import _conj, _qmul, log_deg
+
+    capture = tmp_path / "held.bin"
+    h = hold_capture(capture, [("rest", 4.5, "", 0.0, ""), ("held", 4.0, "", 0.0, "")])
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "sphere.mouse", "--replay", str(capture), "--speed", "1", "--backend", "log",
+         "--stream-port", "0", "--config", os.devnull], stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True)
+    try:
+        port = None
+        for line in proc.stderr:
+            if "WebSocket ws://" in line:
+                port = int(line.rsplit(":", 1)[1].split("/")[0])
+                break
+        assert port, "no stream"
+        messages = []
+        with connect(f"ws://127.0.0.1:{port}/ws", origin=f"http://127.0.0.1:{port}") as ws:
+            deadline = time.monotonic() + 30
+            while time.monotonic() < deadline:
+                try:
+                    m = json.loads(ws.recv(timeout=2))
+                except TimeoutError:
+                    break
+                except Exception:
+                    break
+                if m.get("type") == "orientation":
+                    messages.append((m["t_us"], m["quat"]))
+    finally:
+        proc.wait(30)
+    assert len(messages) > 100, len(messages)
+    t = np.array([m[0] for m in messages], dtype=float) * 1e-6 - 1.0  # raw_packets start at 1 s device time
+    q0 = messages[0][1]
+    r = np.array([log_deg(_qmul(q, _conj(q0))) for _, q in messages])
+
+    def jitter(a, b):
+        sq, n = 0.0, 0
+        for w0 in np.arange(a, b - 1.0 + 1e-9, 1.0):
+            m = (t >= w0) & (t < w0 + 1.0)
+            for k in range(3):
+                resid = r[m, k] - np.polyval(np.polyfit(t[m], r[m, k], 1), t[m])
+                sq += float(np.sum(resid * resid))
+            n += int(m.sum())
+        return math.sqrt(sq / n)
+
+    still, held = jitter(1.5, 4.5), jitter(5.1, 8.4)
+    print(f"stream orientation jitter: still {still:.4f}°, held {held:.4f}° RMS ({len(messages)} messages)")
+    assert still <= 0.05 and held <= 0.1
