@@ -16,14 +16,14 @@ from sphere.cli import main  # noqa: E402
 TRUE = Camera(640, 480, 560.0, 556.0, 322.5, 236.0, (-0.15, 0.08, 0.001, -0.0006, 0.0))
 
 
-def _views(tmp_path, n=10):
+def _views(tmp_path, n=10, texture=None):
     rng = np.random.default_rng(11)
     for k in range(n):
         rv = np.array([rng.uniform(-0.5, 0.5), rng.uniform(-0.5, 0.5), rng.uniform(-0.3, 0.3)])
         R = cv2.Rodrigues(rv)[0]
         centre = np.array([rng.uniform(-0.12, 0.12), rng.uniform(-0.08, 0.08), rng.uniform(0.45, 0.6)])
         t = centre - R @ np.array([0.125, 0.0875, 0.0])  # the board's middle at `centre`
-        img = render.render_board(TRUE, R, t, 9, 6, 0.025, seed=k)
+        img = render.render_board(TRUE, R, t, 9, 6, 0.025, seed=k, texture=texture)
         cv2.imwrite(str(tmp_path / f"view{k:02d}.png"), img)
 
 
@@ -56,3 +56,20 @@ def test_calibrate_says_what_is_wrong(tmp_path, capsys):
     assert "found in 0 of 1 images" in err and "Traceback" not in err
     with pytest.raises(SystemExit, match="squares across"):
         main(["camera", "calibrate", str(tmp_path), "--board", "nine"])
+
+
+def test_calibrate_with_a_charuco_board(tmp_path, capsys):
+    from sphere.camera.calibration import charuco_board
+
+    board = charuco_board(9, 6, 0.025, 0.018).generateImage((900, 600), marginSize=0)
+    _views(tmp_path, texture=board)
+    out = tmp_path / "cam.json"
+    assert main(["camera", "calibrate", str(tmp_path), "--board", "9x6", "--square-mm", "25", "--charuco", "18",
+                 "-o", str(out)]) == 0
+    cam = Camera.load(out)
+    assert cam.fx == pytest.approx(TRUE.fx, rel=0.005) and abs(cam.cx - TRUE.cx) < 2.0 and cam.rms_px < 0.3
+    # a plain chessboard given as ChArUco: no markers, a clear line
+    (tmp_path / "plain").mkdir()
+    _views(tmp_path / "plain", n=5)
+    assert main(["camera", "calibrate", str(tmp_path / "plain"), "--charuco", "18"]) == 1
+    assert "ChArUco board was found in 0 of 5" in capsys.readouterr().err

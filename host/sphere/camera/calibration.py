@@ -1,8 +1,10 @@
-"""The camera's intrinsics from images of a printed chessboard (OpenCV's calibrateCamera).
+"""The camera's intrinsics from images of a printed chessboard or ChArUco board (OpenCV's calibrateCamera).
 
 The board is given as the squares one counts on it (9×6 squares have 8×5 inner corners, which OpenCV
-finds). Corners are refined to sub-pixel accuracy; the views where the board is not found are reported
-and left out; at least :data:`MIN_VIEWS` must remain.
+finds). A ChArUco board (a chessboard with ArUco markers, DICT_5X5_100, in its white squares) may be
+seen in part: each corner is identified by its markers, so views with the board cut by the image edge
+or a finger still count. Corners are refined to sub-pixel accuracy; the views where the board is not
+found are reported and left out; at least :data:`MIN_VIEWS` must remain.
 """
 
 from __future__ import annotations
@@ -52,10 +54,35 @@ def find_corners(gray: np.ndarray, cols: int, rows: int):
     return corners.reshape(-1, 2)
 
 
-def calibrate(views, cols: int, rows: int, square_m: float) -> Result:
-    """``views``: (name, grey uint8 image) pairs, all of one size."""
+CHARUCO_DICTIONARY = 6  # cv2.aruco.DICT_5X5_100
+MIN_CHARUCO_CORNERS = 8
+
+
+def charuco_board(cols: int, rows: int, square_m: float, marker_m: float):
     import cv2
 
+    return cv2.aruco.CharucoBoard((cols, rows), square_m, marker_m,
+                                  cv2.aruco.getPredefinedDictionary(CHARUCO_DICTIONARY))
+
+
+def _charuco_points(detector, board, gray):
+    """(object points, image points) of the ChArUco corners found, or None."""
+    cc, ci, _, _ = detector.detectBoard(gray)
+    if cc is None or len(cc) < MIN_CHARUCO_CORNERS:
+        return None
+    obj, imgp = board.matchImagePoints(cc, ci)
+    return obj.reshape(-1, 3).astype(np.float32), imgp.reshape(-1, 2).astype(np.float32)
+
+
+def calibrate(views, cols: int, rows: int, square_m: float, charuco_marker_m: float | None = None) -> Result:
+    """``views``: (name, grey uint8 image) pairs, all of one size. With ``charuco_marker_m`` the board is a
+    ChArUco board with markers that size."""
+    import cv2
+
+    board = detector = None
+    if charuco_marker_m is not None:
+        board = charuco_board(cols, rows, square_m, charuco_marker_m)
+        detector = cv2.aruco.CharucoDetector(board)
     obj, img, used, skipped = [], [], [], []
     size = None
     for name, gray in views:
@@ -64,15 +91,20 @@ def calibrate(views, cols: int, rows: int, square_m: float) -> Result:
         elif gray.shape[::-1] != size:
             raise CalibrationError(f"{name} is {gray.shape[1]}x{gray.shape[0]}, the others {size[0]}x{size[1]}; "
                                    f"calibrate one camera mode at a time")
-        c = find_corners(gray, cols, rows)
-        if c is None:
+        if board is not None:
+            found = _charuco_points(detector, board, gray)
+        else:
+            c = find_corners(gray, cols, rows)
+            found = None if c is None else (board_points(cols, rows, square_m), c.astype(np.float32))
+        if found is None:
             skipped.append(name)
             continue
-        obj.append(board_points(cols, rows, square_m))
-        img.append(c.astype(np.float32))
+        obj.append(found[0])
+        img.append(found[1])
         used.append(name)
     if len(used) < MIN_VIEWS:
-        raise CalibrationError(f"the {cols}x{rows}-square board was found in {len(used)} of "
+        kind = "ChArUco board" if board is not None else "board"
+        raise CalibrationError(f"the {cols}x{rows}-square {kind} was found in {len(used)} of "
                                f"{len(used) + len(skipped)} images; at least {MIN_VIEWS} are needed (check --board: "
                                f"count the squares, and show the whole board, tilted, in different places)")
     rms, K, D, rvecs, tvecs = cv2.calibrateCamera(obj, img, size, None, None)

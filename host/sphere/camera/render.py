@@ -274,23 +274,36 @@ def _fine_rays(camera: Camera, k: int = 3) -> np.ndarray:
     return camera.rays(px).reshape(h * k, w * k, 3).astype(np.float32)
 
 
+def chessboard_texture(cols: int, rows: int, px_per_square: int = 20) -> np.ndarray:
+    """A printed chessboard, cols × rows squares, the top-left one black (grey levels 0-255)."""
+    j, i = np.mgrid[0:rows * px_per_square, 0:cols * px_per_square] // px_per_square
+    return np.where((i + j) % 2 == 0, 25, 235).astype(np.uint8)
+
+
 def render_board(camera: Camera, R_cb: np.ndarray, t_cb: np.ndarray, cols: int, rows: int, square_m: float,
-                 noise: float = 2.0, seed: int = 0) -> np.ndarray:
-    """A printed chessboard (cols × rows squares, a white margin of one square) seen by ``camera``: board
-    point X_b (z = 0 plane) is at R_cb X_b + t_cb in the camera frame. Grey uint8, 3×3 supersampled."""
+                 noise: float = 2.0, seed: int = 0, texture: np.ndarray | None = None) -> np.ndarray:
+    """A printed board seen by ``camera``: board point X_b (z = 0 plane; x right, y down from the board's
+    top-left corner) is at R_cb X_b + t_cb in the camera frame. The board is ``texture`` (default a
+    chessboard of cols × rows squares) over cols × rows squares, on white paper one square wider all round,
+    in front of a dark background. Grey uint8, 3×3 supersampled."""
     h, w = camera.height, camera.width
+    tex = chessboard_texture(cols, rows) if texture is None else np.asarray(texture)
     rays = _fine_rays(camera).reshape(-1, 3)
     R_cb = np.asarray(R_cb, np.float32)
     t_cb = np.asarray(t_cb, np.float32)
     n_cb = R_cb[:, 2]
     s = (n_cb @ t_cb) / (rays @ n_cb)
     pts = (rays * s[:, None] - t_cb) @ R_cb  # board coordinates
-    i = np.floor(pts[:, 0] / square_m)
-    j = np.floor(pts[:, 1] / square_m)
-    inside = (i >= 0) & (i < cols) & (j >= 0) & (j < rows) & (s > 0)
-    paper = (i >= -1) & (i < cols + 1) & (j >= -1) & (j < rows + 1) & (s > 0)
+    u = pts[:, 0] / (cols * square_m)  # 0…1 across the printed area
+    v = pts[:, 1] / (rows * square_m)
+    inside = (u >= 0) & (u < 1) & (v >= 0) & (v < 1) & (s > 0)
+    paper = (pts[:, 0] >= -square_m) & (pts[:, 0] < (cols + 1) * square_m) & (pts[:, 1] >= -square_m) \
+        & (pts[:, 1] < (rows + 1) * square_m) & (s > 0)
     val = np.where(paper, 235.0, 60.0).astype(np.float32)
-    val[inside & ((i + j) % 2 == 0)] = 25.0
+    th, tw = tex.shape[:2]
+    ti = np.clip((v[inside] * th).astype(int), 0, th - 1)
+    tj = np.clip((u[inside] * tw).astype(int), 0, tw - 1)
+    val[inside] = tex[ti, tj]
     img = val.reshape(h, 3, w, 3).mean(axis=(1, 3))
     img += np.random.default_rng(seed).normal(0, noise, (h, w)).astype(np.float32)
     return np.clip(img, 0, 255).astype(np.uint8)

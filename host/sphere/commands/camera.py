@@ -7,7 +7,7 @@ import sys
 HELP = "camera tools: intrinsics from chessboard images (calibrate); the virtual webcam (render); the ball in a webcam or video (track); timing (bench)"
 DESCRIPTION = """\
 calibrate: the camera's focal lengths, principal point and lens distortion from 5 or more images of a
-printed chessboard (OpenCV's calibrateCamera), written as the JSON file that `sphere hybrid-eval
+printed chessboard or ChArUco board (OpenCV's calibrateCamera), written as the JSON file that `sphere hybrid-eval
 --camera-file` and the tracker read.
 render: frames of a BROAD trial's ball (8 cm, at the trial's optical positions) as the virtual webcam
 sees them, to an .avi (MJPG) with a .csv of each frame's exposure and arrival times."""
@@ -19,6 +19,8 @@ def add_arguments(p) -> None:
     c.add_argument("images", nargs="+", help="image files, folders of images, or videos (every 10th frame)")
     c.add_argument("--board", default="9x6", help="squares across x down on the printed board (default 9x6)")
     c.add_argument("--square-mm", type=float, default=25.0, help="side of one square in mm (default 25)")
+    c.add_argument("--charuco", type=float, metavar="MARKER_MM",
+                   help="the board is a ChArUco board (ArUco DICT_5X5_100) with markers this size in mm")
     c.add_argument("-o", "--output", default="camera.json", help="where to write the camera file")
     r = sub.add_parser("render", help="the virtual webcam's view of a BROAD trial")
     r.add_argument("--trial", default="16", help="BROAD trial name or number (default 16)")
@@ -129,8 +131,13 @@ def _calibrate(args) -> int:
     if not args.square_mm > 0:
         print("sphere camera: --square-mm must be positive", file=sys.stderr)
         return 2
+    if args.charuco is not None and not 0 < args.charuco < args.square_mm:
+        print("sphere camera: --charuco (the marker size) must be positive and smaller than --square-mm",
+              file=sys.stderr)
+        return 2
     try:
-        res = calibrate(list(read_views(args.images)), cols, rows, args.square_mm / 1000.0)
+        res = calibrate(list(read_views(args.images)), cols, rows, args.square_mm / 1000.0,
+                        None if args.charuco is None else args.charuco / 1000.0)
     except CalibrationError as e:
         print(f"sphere camera calibrate: {e}", file=sys.stderr)
         return 1
