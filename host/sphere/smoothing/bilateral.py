@@ -17,8 +17,8 @@ def _wrap_deg(a: float) -> float:
 
 class BilateralAngleFilter:
     PARAMS = {
-        "sigma_c": Param(1.0, "samples", 1e-3, 1e3, "σ_c of the spatial Gaussian (sample distance without positions)"),
-        "sigma_s_deg": Param(0.1, "°", 1e-4, 180.0, "σ_s of the Gaussian of the angle difference"),
+        "sigma_c": Param(3.0, "samples", 1e-3, 1e3, "σ_c of the spatial Gaussian (sample distance without positions)"),
+        "sigma_s_deg": Param(0.3, "°", 1e-4, 180.0, "σ_s of the Gaussian of the angle difference"),
     }
     GRID = {"sigma_c": [1.0, 3.0], "sigma_s_deg": [0.02, 0.05, 0.1, 0.3]}
 

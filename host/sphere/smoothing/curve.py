@@ -15,7 +15,7 @@ from sphere.smoothing.params import Param, resolve
 
 class WindowedCurveSmoother:
     PARAMS = {
-        "m": Param(2, "samples", 2, 50, "the output is m samples late; the window holds n = 2 + m points", integer=True),
+        "m": Param(4, "samples", 2, 50, "the output is m samples late; the window holds n = 2 + m points", integer=True),
         "point_weight": Param(0.2, "", 1e-6, 1e6, "weight of the measured points against the smoothed edges"),
         "passes": Param(2, "", 0, 20, "smoothing passes over the edge directions", integer=True),
     }

@@ -9,8 +9,8 @@ from sphere.smoothing.params import Param, resolve
 
 class ConstantKalman:
     PARAMS = {
-        "q_per_s": Param(0.01, "unit²/s", 0.0, 1e6, "process variance per second: how fast the held value may move"),
-        "r": Param(0.0001, "unit²", 1e-12, 1e6, "measurement variance (the jitter's)"),
+        "q_per_s": Param(0.001, "unit²/s", 0.0, 1e6, "process variance per second: how fast the held value may move"),
+        "r": Param(0.001, "unit²", 1e-12, 1e6, "measurement variance (the jitter's)"),
     }
     GRID = {"q_per_s": [0.001, 0.01, 0.1], "r": [1e-5, 1e-4, 1e-3]}
 

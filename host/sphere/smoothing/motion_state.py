@@ -26,9 +26,10 @@ REST, SLOW, FAST = "rest", "slow", "fast"
 
 
 class MotionStateFilter:
+    FAST_FILTER = "pass"  # what fast motion gets when PARAMS has no `fast` (a subclass fixes it)
     PARAMS = {
-        "rest_speed": Param(1.0, "unit/s", 1e-6, 1e6, "below this speed the signal is at rest (constant Kalman)"),
-        "fast_speed": Param(20.0, "unit/s", 1e-6, 1e6, "from this speed the motion is fast (pass or particle)"),
+        "rest_speed": Param(2.0, "unit/s", 1e-6, 1e6, "below this speed the signal is at rest (constant Kalman)"),
+        "fast_speed": Param(5.0, "unit/s", 1e-6, 1e6, "from this speed the motion is fast (pass or particle)"),
         "hysteresis": Param(0.3, "", 0.0, 0.99, "a state is entered above threshold·(1+h), left below threshold·(1−h)"),
         "speed_tau_s": Param(0.02, "s", 0.0, 10.0, "time constant of the speed estimate"),
         "rest_q_per_s": Param(0.01, "unit²/s", 0.0, 1e6, "the rest Kalman filter's process variance per second"),
@@ -37,13 +38,13 @@ class MotionStateFilter:
         "fast": Param("pass", "", 0, 0, "`pass` or `particle` (the SIR particle filter) when fast", choices=("pass", "particle")),
         "particle_process_sigma": Param(0.1, "unit", 1e-9, 1e6, "the particle filter's model noise per sample"),
         "particle_obs_sigma": Param(0.05, "unit", 1e-9, 1e6, "the particle filter's observation σ"),
-        "t_smooth_s": Param(0.03, "s", 0.001, 10.0, "the handover spring's smoothing time"),
+        "t_smooth_s": Param(0.02, "s", 0.001, 10.0, "the handover spring's smoothing time"),
         "settle": Param(0.001, "unit", 0.0, 1e6, "the spring lets go once the offset is below this"),
     }
     GRID = {"rest_speed": [0.5, 1.0, 2.0], "fast_speed": [5.0, 20.0], "rest_q_per_s": [0.001, 0.01, 0.1], "t_smooth_s": [0.02, 0.05]}
 
     def __init__(self, *args, **kwargs):
-        p = resolve(MotionStateFilter.PARAMS, args, kwargs)
+        p = resolve(self.PARAMS, args, kwargs)
         rest_speed, fast_speed, hysteresis = p["rest_speed"], p["fast_speed"], p["hysteresis"]
         if not 0 < rest_speed < fast_speed:
             raise ValueError("need 0 < rest_speed < fast_speed")
@@ -52,7 +53,7 @@ class MotionStateFilter:
         self._rest = ConstantKalman(q_per_s=p["rest_q_per_s"], r=p["rest_r"])
         self._slow = WindowedCurveSmoother(m=p["slow_m"])
         self._fast = (ParticleFilterAR2(process_sigma=p["particle_process_sigma"], obs_sigma=p["particle_obs_sigma"])
-                      if p["fast"] == "particle" else None)
+                      if p.get("fast", self.FAST_FILTER) == "particle" else None)
         self._spring = CriticallyDampedSpring(t_smooth_s=p["t_smooth_s"])
         self.reset()
 

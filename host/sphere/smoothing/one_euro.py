@@ -19,7 +19,7 @@ def _alpha(cutoff_hz: float, dt_s: float) -> float:
 
 class OneEuroFilter:
     PARAMS = {
-        "min_cutoff_hz": Param(1.0, "Hz", 0.01, 100.0, "cutoff of the low-pass when the signal is still"),
+        "min_cutoff_hz": Param(0.5, "Hz", 0.01, 100.0, "cutoff of the low-pass when the signal is still"),
         "beta": Param(0.3, "1/unit", 0.0, 1000.0, "how fast the cutoff rises with speed (Hz per unit/s; °/s for angles)"),
         "d_cutoff_hz": Param(1.0, "Hz", 0.01, 100.0, "cutoff of the speed estimate"),
     }

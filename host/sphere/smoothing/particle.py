@@ -15,8 +15,8 @@ class ParticleFilterAR2:
         "particles": Param(100, "", 2, 10000, "number of particles (the paper: 100)", integer=True),
         "a1": Param(2.0, "", -10.0, 10.0, "A1 of the AR(2) motion model (2 with A2 = −1: constant velocity)"),
         "a2": Param(-1.0, "", -10.0, 10.0, "A2 of the AR(2) motion model"),
-        "process_sigma": Param(0.05, "unit", 1e-9, 1e6, "σ of the model's noise B_t per sample"),
-        "obs_sigma": Param(0.05, "unit", 1e-9, 1e6, "σ of the observation (the jitter)"),
+        "process_sigma": Param(0.1, "unit", 1e-9, 1e6, "σ of the model's noise B_t per sample"),
+        "obs_sigma": Param(0.02, "unit", 1e-9, 1e6, "σ of the observation (the jitter)"),
         "seed": Param(0, "", 0, 2**31 - 1, "random seed (runs repeat exactly)", integer=True),
     }
     GRID = {"process_sigma": [0.02, 0.1, 0.5], "obs_sigma": [0.02, 0.1]}
