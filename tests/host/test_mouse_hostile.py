@@ -231,3 +231,90 @@ def test_open_port_is_exclusive_and_leaves_held_ports_alone(tmp_path):
         holder.kill()
         holder.wait()
         os.close(master)
+
+
+# ---- honest status counters ----
+
+
+def _status_text(stream):
+    from sphere.daemon.status import StatusLine
+
+    class Src:
+        state = "/dev/ttyUSB0"
+        stats = stream.stats
+        losses = 0
+
+    d, _ = make_daemon()
+    d.source = Src()
+    clock = [0.0]
+    import io
+
+    line = StatusLine(io.StringIO(), 1.0, overwrite=False, clock=lambda: clock[0])
+    line.tick(d)
+    clock[0] = 1.0
+    return line.tick(d)
+
+
+def test_replugs_count_no_errors_and_no_lost_frames():
+    """Six clean replugs of a sphere that kept running (no HELLO on the new link, its seq moved on while the cable
+    was out), each cut in the middle of a frame: no bad frame, no gap (it showed `crc errors 5 · gaps 6 (747 lost)`)."""
+    sphere = ScriptedSphere()
+    stream = PacketStream()
+    for link in range(7):
+        data = b"".join(f for _, f in sphere.steps([("still", 0.2)]))
+        if link:
+            stream.restart()
+        stream.feed(data[: len(data) - 7])  # unplugged in the middle of a frame
+        for _ in sphere.steps([("still", 0.3)]):  # frames sent while unplugged
+            pass
+    s = stream.stats
+    assert s.errors == 0 and s.seq_gaps == 0 and s.frames_lost == 0, s
+    assert "bad 0 · gaps 0 (0 lost)" in _status_text(stream)
+
+
+def test_garbage_is_counted_as_what_it_is():
+    """30 s of noise at 115200 baud: every dropped chunk counts (it showed `crc errors 1`)."""
+    import random
+
+    rng = random.Random(3)
+    stream = PacketStream()
+    stream.feed(bytes(rng.randrange(256) for _ in range(11520 * 30)))
+    s = stream.stats
+    text = _status_text(stream)
+    assert s.errors > 1000 and f"bad {s.errors} (" in text and "kB skipped" in text, text
+
+
+def test_a_duplicate_is_not_255_lost_frames():
+    sphere = ScriptedSphere()
+    frames = [f for _, f in sphere.steps([("still", 0.1)])]
+    stream = PacketStream()
+    stream.feed(b"".join(frames[:5] + [frames[4]] + frames[5:]))
+    assert "gaps 0 (0 lost) · duplicates 1" in _status_text(stream)
+
+
+# ---- least privilege (host/packaging) ----
+
+
+def test_udev_rules_give_nothing_to_groups_or_to_other_adapters():
+    rules = [line for line in open(os.path.join(os.path.dirname(__file__), "..", "..", "host", "packaging",
+                                                "70-sphere-mouse.rules")).read().splitlines()
+             if line.strip() and not line.startswith("#")]
+    assert rules and not any("GROUP=" in r for r in rules)  # no group input (every keyboard), no dialout
+    for r in rules:
+        if 'SUBSYSTEM=="tty"' in r or 'SUBSYSTEM=="hidraw"' in r:
+            # seat access only for one adapter: its IDs and its serial number (or socket), not a whole chip family
+            assert "ATTRS{idVendor}" in r and ("ATTRS{serial}" in r or "KERNELS" in r), r
+
+
+def test_udev_rule_for_a_port():
+    from serial.tools.list_ports_common import ListPortInfo
+
+    from sphere.daemon.cli import udev_rule
+
+    ftdi = ListPortInfo("/dev/ttyUSB0", skip_link_detection=True)
+    ftdi.vid, ftdi.pid, ftdi.serial_number = 0x0403, 0x6001, "A50285BI"
+    ch340 = ListPortInfo("/dev/ttyUSB1", skip_link_detection=True)
+    ch340.vid, ch340.pid, ch340.location = 0x1A86, 0x7523, "1-1.2:1.0"
+    assert 'ATTRS{idVendor}=="0403", ATTRS{idProduct}=="6001", ATTRS{serial}=="A50285BI"' in \
+        udev_rule("/dev/ttyUSB0", lambda: [ftdi, ch340])
+    assert 'KERNELS=="1-1.2:1.0"' in udev_rule("/dev/ttyUSB1", lambda: [ftdi, ch340])

@@ -46,10 +46,31 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--check-config", action="store_true", help="validate the config and exit")
     p.add_argument("--print-config", action="store_true",
                    help="print every setting with its default and meaning (a config file to start from) and exit")
+    p.add_argument("--udev-rule", metavar="PORT", help="print the udev rule that gives /dev/sphere and seat access "
+                   "to the sphere on PORT only (its USB IDs and serial number), then exit")
     from sphere import __version__
 
     p.add_argument("--version", action="version", version=f"sphere-mouse {__version__}")
     return p
+
+
+def udev_rule(port: str, comports=None) -> str:
+    """The host/packaging/70-sphere-mouse.rules line for the USB-serial adapter on ``port``: its VID:PID and its
+    serial number, or, for an adapter without one (CH340), the USB socket it is plugged into."""
+    if comports is None:
+        from serial.tools.list_ports import comports
+    real = os.path.realpath(port)
+    for info in comports():
+        if os.path.realpath(info.device) != real:
+            continue
+        if info.vid is None:
+            break
+        ident = (f'ATTRS{{serial}}=="{info.serial_number}"' if info.serial_number
+                 else f'KERNELS=="{info.location}"')
+        return (f'SUBSYSTEM=="tty", ATTRS{{idVendor}}=="{info.vid:04x}", ATTRS{{idProduct}}=="{info.pid:04x}", '
+                f'{ident}, SYMLINK+="sphere", MODE="0660", TAG+="uaccess"')
+    raise ConfigError(f"{port} is not a USB serial port this machine lists (python3 -m serial.tools.list_ports); "
+                      "a Bluetooth port needs no rule: name it with --port")
 
 
 def settings_from_args(args) -> config_mod.Config:
@@ -162,6 +183,13 @@ def _main(argv=None) -> int:
     except ConfigError as e:
         logger.error(f"config error: {e}")
         return 2
+    if args.udev_rule:
+        try:
+            print(udev_rule(args.udev_rule))
+        except ConfigError as e:
+            logger.error(str(e))
+            return 2
+        return 0
     if args.check_config:
         print(f"sphere-mouse: config OK ({cfg.origin})")
         return 0
