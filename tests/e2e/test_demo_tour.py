@@ -1,7 +1,7 @@
 """The demo's `synthetic:tour` on the real firmware in the virtual board, then through sphere-mouse: the
 pointer goes right, left, up and down and comes back; a tap clicks, a double tap double-clicks; tosses
-step through tilt (the pointer glides while the sphere is held turned) and 3-D (the pointer is left
-alone) and back to pointer."""
+step through tilt (the pointer glides while the sphere is held turned) and 3-D (the page's URL is
+printed; the pointer is left alone) and back to pointer."""
 
 import subprocess
 import sys
@@ -83,3 +83,11 @@ def test_the_tour_through_sphere_mouse(tour_capture):
     t3d = w["toss: 3-D mode (open the page)"][0] + 1.0
     assert not [m for m in log if t3d <= m[0] < w["toss: back to pointer mode"][0] and m[1] != "click"]
 
+
+def test_the_3d_mode_prints_the_page_url(tour_capture):
+    r = subprocess.run([sys.executable, "-m", "sphere.mouse", "--config", "/dev/null", "--replay", str(tour_capture),
+                        "--speed", "0", "--backend", "log", "--stream-port", "0"],
+                       capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    assert "mode 3d (the 3-D view: http://127.0.0.1:" in r.stderr, r.stderr
+    assert len(r.stdout.splitlines()) < 40  # a summary a second, not a line per move

@@ -90,7 +90,9 @@ class SphereMouse:
         self.mode_changes.append(mode)
         self.mapper.reset()
         self._recentre_tilt = True  # tilt starts from the pose held once the pointer unfreezes
-        self.log(f"mode {mode}")
+        port = getattr(self.stream, "port", None)
+        page = f" (the 3-D view: http://{self.stream.host}:{port}/)" if mode == "3d" and port else ""
+        self.log(f"mode {mode}{page}")
         if self.stream is not None:
             self.stream.publish_mode(mode)
 

@@ -222,6 +222,9 @@ def _main(argv=None) -> int:
         except Exception as e:  # a taken port must not stop the pointer
             logger.warning(f"no 3-D stream: {e}")
             stream = None
+    from sphere.daemon.outputs import attach
+
+    stream = attach(stream, cfg, log)  # OpenTrack, OSC, gamepad: those enabled get what the stream gets
     status = None
     if not args.quiet and (args.status or sys.stderr.isatty()):
         status = StatusLine(sys.stderr, cfg.status.interval_s)

@@ -57,7 +57,8 @@ MODES = ("pointer", "tilt", "3d")
 #: Modules that declare config sections of their own (imported before the settings are read). One line
 #: per contributing module; a module that is not installed is skipped.
 CONTRIBUTORS: tuple[str, ...] = (
-    "sphere.daemon.outputs",  # [outputs.opentrack], [outputs.osc], [outputs.gamepad]
+    "sphere.daemon.outputs",
+    "sphere.daemon.paths_config",  # [paths] (read by sphere.paths)  # [outputs.opentrack], [outputs.osc], [outputs.gamepad]
     "sphere.smoothing.config",  # [smoothing.NAME] for every filter of the smoothing registry
 )
 

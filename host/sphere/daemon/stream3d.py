@@ -169,6 +169,14 @@ class OrientationStream:
             response.headers["Content-Type"] = "text/html; charset=utf-8"
             response.headers["Cache-Control"] = "no-store"
             return response
+        from sphere.daemon.page import static_response
+
+        found = static_response(path)  # three.js, shipped in the package
+        if found is not None:
+            response = connection.respond(http.HTTPStatus.OK, found[0])
+            del response.headers["Content-Type"]
+            response.headers["Content-Type"] = found[1]
+            return response
         return connection.respond(http.HTTPStatus.NOT_FOUND, "not found: the page is at / and the WebSocket at /ws\n")
 
     async def _handler(self, ws) -> None:

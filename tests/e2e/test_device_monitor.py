@@ -1,0 +1,105 @@
+"""`sphere device` and `sphere monitor` against the real firmware on the virtual board over its pty: the
+settings reach the firmware and change what it does (a 4 g knock is no tap with an 8 g threshold, and is
+one with 2 g), the stream settings come back in its HELLO, identify and reboot are answered; the monitor
+shows the packets, rates, flags, values, link quality and the events as they happen."""
+
+import subprocess
+import time
+
+import pytest
+
+from sphere.cli import main
+from sphere.sim import trace as T
+
+from simscenarios import need_board, need_firmware
+
+pytestmark = pytest.mark.slow
+
+KNOCKS_S = (5.0, 6.5, 11.0, 11.15)  # two single knocks, then a double knock (4 g each, as synthetic:taps)
+SECOND_SET_S = 7.5  # device time after the single knocks and well before the double one
+
+
+@pytest.fixture(scope="module")
+def board(tmp_path_factory):
+    from sphere.daemon.sources import SourceError, start_simulator
+
+    need_board()
+    need_firmware()
+    path = tmp_path_factory.mktemp("knocks") / "knocks.bin"
+    T.to_chips(T.taps(30.0, at_s=KNOCKS_S)).write(path)
+    try:
+        proc, pty = start_simulator(str(path), seconds=30)
+    except SourceError as e:
+        pytest.fail(str(e))
+    yield pty
+    if proc.poll() is None:
+        proc.terminate()
+    try:
+        proc.wait(10)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+
+
+def _events_until(pty, t_s):
+    """Listen (DeviceLink on the pty) until the device's clock passes t_s; the events heard."""
+    from sphere.device_link import DeviceLink
+    from sphere.serial_link import open_port
+
+    ser = open_port(pty)
+    try:
+        link, events, t = DeviceLink(ser), [], 0.0
+        while t < t_s:
+            for dp in link.read():
+                if dp.packet.NAME == "RAW_SAMPLE":
+                    t = dp.packet.t_us / 1e6
+                elif dp.packet.NAME == "EVENT":
+                    events.append((dp.packet.t_us / 1e6, dp.packet.event_name))
+        return events
+    finally:
+        ser.close()
+
+
+def test_settings_change_what_the_firmware_does(board, capsys, tmp_path):
+    assert main(["device", "--port", board, "get"]) == 0
+    out = capsys.readouterr().out
+    assert "(protocol 2); sensors found: adxl345, itg3200, hmc5883l" in out and "stream.status = on" in out
+
+    assert main(["device", "--port", board, "set", "tap.threshold_g=8", "stream.status=off"]) == 0
+    cap = capsys.readouterr()
+    assert "set: stream.status = off, tap.threshold_g = 8 g" in cap.out
+    assert "tap.duration_ms sent as the firmware's default 20 ms" in cap.err
+    assert main(["device", "--port", board, "get"]) == 0
+    assert "stream.status = off" in capsys.readouterr().out  # the firmware's own HELLO says so
+
+    assert _events_until(board, SECOND_SET_S) == []  # the 4 g knocks at 5.0 and 6.5 s are under the 8 g threshold
+
+    assert main(["device", "--port", board, "set", "tap.threshold_g=2"]) == 0
+    capsys.readouterr()
+    png = tmp_path / "monitor.png"
+    out, deadline = "", time.monotonic() + 120
+    while "double_tap" not in out and time.monotonic() < deadline:  # the board may run slower than real time
+        assert main(["monitor", "--port", board, "--seconds", "3", "--plot", "--plot-out", str(png)]) == 0
+        out += capsys.readouterr().out
+    assert "event 11.0" in out and "single_tap (z)" in out and "double_tap (z)" in out, out
+    assert "HELLO seq" in out and "firmware 0.2.0, protocol 2" in out
+    for expected in ("RAW_SAMPLE", "ORIENTATION", "flags: accel_ok gyro_ok mag_ok", "accel g", "gyro °/s", "mag µT",
+                     "orientation  heading", "link: frames ok", "CRC errors", "frames lost"):
+        assert expected in out, (expected, out)
+    assert png.stat().st_size > 10_000
+
+    assert main(["device", "--port", board, "identify", "2"]) == 0
+    assert "blinks for 2 s" in capsys.readouterr().out
+    assert main(["device", "--port", board, "reboot"]) == 0
+    assert "rebooted; firmware 0.2.0 is back" in capsys.readouterr().out
+
+
+def test_bad_settings_are_one_line_and_touch_nothing(capsys):
+    for argv, text in ((["set", "tap.treshold_g=3"], "did you mean tap.threshold_g?"),
+                       (["set", "tap.threshold_g=30"], "0.0625 … 15.9375 g"),
+                       (["set", "stream.raw_rate_hz=7"], "a divisor of 200"),
+                       (["set", "board=nano"], "one of aligned, sen10724, gy85"),
+                       (["set", "tap.axes=xq"], "letters from xyz"),
+                       (["identify", "99"], "1 … 60")):
+        assert main(["device", "--port", "/dev/nonexistent", *argv]) == 1
+        err = capsys.readouterr().err
+        assert err.startswith("sphere device: ") and text in err and err.count("\n") == 1, err
