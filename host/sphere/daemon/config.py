@@ -37,6 +37,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
 
+from sphere.smoothing.registry import DEFAULT as _SMOOTHING  # the registry imports nothing of the daemon
+
 if sys.version_info >= (3, 11):
     import tomllib
 else:  # pragma: no cover - Python 3.9/3.10
@@ -301,7 +303,7 @@ class PointerConfig:
                                    "two it is blended linearly", _range(0.001, 5000.0))
     tightening_dps: float = option(1.0, "rotations slower than this are scaled down in proportion to their speed "
                                    "(soft, instead of a dead zone that swallows them); 0 = off", _range(0.0, 100.0))
-    smoothing: str = option("tremor", "smoothing filter of the pointer, from the smoothing registry (its parameters "
+    smoothing: str = option(_SMOOTHING, "smoothing filter of the pointer, from the smoothing registry (its parameters "
                             "in [smoothing.NAME]); `tremor` takes out the hand's 8–12 Hz tremor, `none` = off",
                             choices=_smoothing_names)
     axes: str = option("world", "`world`: turning about the vertical moves the pointer sideways however the sphere is "
@@ -377,7 +379,7 @@ class StreamConfig:
     host: str = option("127.0.0.1", "address to listen on (keep it local)")
     port: int = option(8765, "TCP port of the WebSocket and the page (http://127.0.0.1:PORT/)", _port)
     rate_hz: float = option(60.0, "orientation messages per second", _range(1.0, 200.0))
-    smoothing: str = option("tremor", "smoothing filter of the streamed pose, from the smoothing registry (its "
+    smoothing: str = option(_SMOOTHING, "smoothing filter of the streamed pose, from the smoothing registry (its "
                             "parameters in [smoothing.NAME]); `none` = the pose as measured", choices=_smoothing_names)
     max_clients: int = option(16, "most WebSocket and page connections at once; more are refused (503)",
                               _range(1, 1000))

@@ -28,6 +28,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from sphere.smoothing.registry import DEFAULT as DEFAULT_SMOOTHING
 from sphere.smoothing.registry import make_filter
 
 
@@ -38,7 +39,7 @@ class PointerSettings:
     accel_low_dps: float = 20.0  # °/s
     accel_high_dps: float = 120.0  # °/s
     tightening_dps: float = 1.0  # °/s; 0 = off
-    smoothing: str = "tremor"  # a name from sphere.smoothing.registry.FILTERS
+    smoothing: str = DEFAULT_SMOOTHING  # a name from sphere.smoothing.registry.FILTERS
     smoothing_params: dict | None = None  # the filter's parameters (None = its defaults)
     axes: str = "world"  # "world" or "local"
     invert_x: bool = False
