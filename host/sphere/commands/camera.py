@@ -52,7 +52,7 @@ def _board(text: str):
 
 def run(args) -> int:
     if args.camera_command is None:
-        print("sphere camera: say what to do: calibrate or render (see sphere camera --help)", file=sys.stderr)
+        print("sphere camera: say what to do: calibrate, render, track or bench (see sphere camera --help)", file=sys.stderr)
         return 2
     try:
         import cv2  # noqa: F401
