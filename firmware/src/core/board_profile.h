@@ -7,6 +7,10 @@
 namespace sphere {
 
 const uint8_t BOARD_ALIGNED = 0, BOARD_SEN10724 = 1, BOARD_GY85 = 2, BOARD_PROFILE_COUNT = 3;
+// The profile used while the EEPROM holds none (`make -C firmware BOARD=1` builds an image for a SEN-10724).
+#ifndef SPHERE_DEFAULT_BOARD
+#define SPHERE_DEFAULT_BOARD 0
+#endif
 const uint8_t CHIP_ACCEL = 0, CHIP_GYRO = 1, CHIP_MAG = 2;
 
 // One body axis: the chip axis it comes from (bits 0-1: 0 x, 1 y, 2 z) and bit 2 set for a minus sign.

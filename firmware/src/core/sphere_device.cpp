@@ -69,7 +69,7 @@ __attribute__((noinline)) void SphereDevice::begin() {
 void SphereDevice::loadBoardProfile() {
     uint8_t b[2];
     hal_.eepromRead(BOARD_EEPROM_ADDR, b, 2);
-    board_profile_ = (b[0] < BOARD_PROFILE_COUNT && b[1] == (uint8_t)~b[0]) ? b[0] : BOARD_ALIGNED;
+    board_profile_ = (b[0] < BOARD_PROFILE_COUNT && b[1] == (uint8_t)~b[0]) ? b[0] : SPHERE_DEFAULT_BOARD;
 }
 
 void SphereDevice::loadCalibration(bool at_start) {
