@@ -243,3 +243,38 @@ def test_recorded_captures_under_x(xvfb):
     assert [c[0] for c in clicks.presses] == [1], clicks.presses
     r = run_mouse(xvfb, toss, "--speed", "0")
     assert r.returncode == 0 and "mode tilt" in r.stderr, r.stderr
+
+
+def test_signal_storm_while_the_pointer_moves(xvfb, tmp_path):
+    """Thousands of SIGUSR1 (recentre) while the pointer moves through XTEST: the handler only sets a flag, the loop
+    recentres between batches, so python-xlib is never re-entered (it died with `RuntimeError: Expected reply for
+    request …` after ~4,400 signals)."""
+    import signal
+
+    cap = tmp_path / "turns.bin"
+    cap.write_bytes(script_bytes([("turn", (0, 0, 1), 30.0, 1.0), ("turn", (0, 0, 1), -30.0, 1.0)] * 60))
+    env = dict(os.environ, DISPLAY=xvfb, XDG_CONFIG_HOME=str(tmp_path))
+    # as fast as it goes: the loop is inside python-xlib nearly all the time, where a handler that called the backend
+    # would re-enter it
+    p = subprocess.Popen([sys.executable, "-m", "sphere.mouse", "--replay", str(cap), "--speed", "0", "--backend", "x11",
+                          "--no-stream", "--quiet"], env=env, stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True)
+    time.sleep(1.5)  # started and moving
+    sent = 0
+    deadline = time.monotonic() + 8.0
+    while p.poll() is None and sent < 5000 and time.monotonic() < deadline:
+        p.send_signal(signal.SIGUSR1)
+        sent += 1
+        if sent % 50 == 0:
+            time.sleep(0.001)
+    alive = p.poll() is None
+    p.send_signal(signal.SIGTERM)
+    try:
+        _, err = p.communicate(timeout=20)
+    finally:
+        if p.poll() is None:  # hung (the old handler re-entered python-xlib): do not leave it running
+            p.kill()
+            p.wait(5)
+    assert alive, (sent, err)
+    assert sent >= 2000, sent  # a machine too busy to send them makes this test say so, not pass quietly
+    assert p.returncode == 0 and "Traceback" not in err and "RuntimeError" not in err, err
+    assert "recentred" in err
