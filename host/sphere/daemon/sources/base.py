@@ -160,11 +160,14 @@ class Source:
                 continue
             yield batch
 
+    #: what the log and the status line call the device
+    DEVICE = "the sphere"
+
     def _lose(self, why: str) -> None:
         self._close()
         self.losses += 1
-        self.state = "looking for the sphere (link lost)"
-        self.log(f"lost the sphere ({why}); looking for it again", logging.WARNING)
+        self.state = f"looking for {self.DEVICE} (link lost)"
+        self.log(f"lost {self.DEVICE} ({why}); looking for it again", logging.WARNING)
 
     def _close(self) -> None:
         if self.connected:

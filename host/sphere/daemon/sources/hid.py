@@ -20,6 +20,7 @@ class HidSource(Source):
     """The receiver found by USB IDs (or its product string), reopened when it is unplugged."""
 
     NAME = "hid"
+    DEVICE = "the HID receiver"
 
     def __init__(self, vendor_id: int = 0, product_id: int = 0, product: str = "sphere",
                  reconnect_interval_s: float = 1.0, log=None, hid_module=None):
@@ -73,12 +74,6 @@ class HidSource(Source):
         except (OSError, IOError, ValueError) as e:
             raise LinkLost(str(e)) from None
         return hid_report_bytes(report)
-
-    def _lose(self, why: str) -> None:
-        self._close()
-        self.losses += 1
-        self.state = "looking for a HID receiver (lost)"
-        self.log(f"lost the HID receiver: {why}; looking for it again", logging.WARNING)
 
     def _disconnect(self) -> None:
         dev, self.device = self.device, None
