@@ -118,16 +118,16 @@ class SeriesBuilder:
 def series_from_packets(packets) -> Series:
     """A :class:`Series` from decoded packets (RAW_SAMPLE or DecodedPacket; others are skipped), as
     :class:`SeriesBuilder` keeps them. Device time is unwrapped (``DecodedPacket.t_us`` already is)."""
-    from sphere.protocol import TimeUnwrapper
+    from sphere.protocol import PacketStream
 
-    unwrap = TimeUnwrapper()
+    stream = PacketStream()  # times for bare packets, unwrapped as every reader of the link does
     out = SeriesBuilder()
     for dp in packets:
         p = getattr(dp, "packet", dp)
-        if p.NAME != "RAW_SAMPLE":
-            continue
-        tt = getattr(dp, "t_us", None)
-        out.add(p, (tt if tt is not None and dp is not p else unwrap(p.t_us)) * 1e-6)
+        if dp is p:
+            dp = stream.packet(p)
+        if p.NAME == "RAW_SAMPLE":
+            out.add(p, dp.t_us * 1e-6)
     return out.series()
 
 
