@@ -652,6 +652,42 @@ static void hmc_refresh(chip_t *c)
 	c->regs[HMC_STATUS] = (uint8_t)((c->regs[HMC_STATUS] & ~HMC_STATUS_LOCK) | (s->locked ? HMC_STATUS_LOCK : 0));
 }
 
+/* DRDY (pin description: "Low for 250 usec when data is placed in the data output registers", pulled up
+ * otherwise). Only with a pin for it (--drdy-pin): then the chip's events run on a cycle timer, so the pin
+ * moves at the measurement's time and not only when the bus next reads the chip. */
+static avr_cycle_count_t hmc_drdy_timer(avr_t *avr, avr_cycle_count_t when, void *param);
+
+static void hmc_drdy_arm(chip_t *c)
+{
+	board_t *b = c->board;
+	if (!b->drdy_pin)
+		return;
+	hmc_state_t *s = &b->hmc;
+	double ct = chip_time(b, CHIP_HMC5883L, board_time_s(b));
+	int low = s->rdy_clear_until_s >= 0 && ct < s->rdy_clear_until_s;
+	if (low != b->drdy_low) {
+		b->drdy_low = low;
+		avr_raise_irq(b->drdy_pin, low ? 0 : 1);
+	}
+	double next = s->rdy_clear_until_s > ct ? s->rdy_clear_until_s : -1;
+	if (s->next_done_s >= 0 && (next < 0 || s->next_done_s < next))
+		next = s->next_done_s;
+	avr_cycle_timer_cancel(b->avr, hmc_drdy_timer, c);
+	if (next >= 0) {
+		avr_cycle_count_t at = (avr_cycle_count_t)ceil(board_of_chip(b, CHIP_HMC5883L, next) * b->avr->frequency);
+		avr_cycle_timer_register(b->avr, at > b->avr->cycle ? at - b->avr->cycle : 1, hmc_drdy_timer, c);
+	}
+}
+
+static avr_cycle_count_t hmc_drdy_timer(avr_t *avr, avr_cycle_count_t when, void *param)
+{
+	(void)avr; (void)when;
+	chip_t *c = param;
+	hmc_refresh(c);
+	hmc_drdy_arm(c);
+	return 0;
+}
+
 static void hmc_unlock(board_t *b)
 {
 	b->hmc.locked = 0;
@@ -708,6 +744,7 @@ static void hmc_write(chip_t *c, uint8_t reg, uint8_t v)
 		c->board->hmc.pending = 0;
 		hmc_schedule(c);
 	}
+	hmc_drdy_arm(c);
 }
 
 static uint8_t hmc_read(chip_t *c, uint8_t reg)
@@ -731,6 +768,7 @@ static uint8_t hmc_read(chip_t *c, uint8_t reg)
 		b->hmc.locked = 1; /* reading the mode register locks the data output registers */
 	if (reg == HMC_STATUS)
 		v = (uint8_t)((v & ~HMC_STATUS_LOCK) | (b->hmc.locked ? HMC_STATUS_LOCK : 0));
+	hmc_drdy_arm(c); /* the lock may have opened and placed a waiting measurement */
 	return v;
 }
 
@@ -1038,6 +1076,17 @@ void board_restart_timers(board_t *b)
 {
 	avr_cycle_timer_cancel(b->avr, adxl_tick, b);
 	avr_cycle_timer_register(b->avr, b->avr->frequency / 1000, adxl_tick, b);
+	if (b->variant->mag_kind == MAG_HMC5883L)
+		hmc_drdy_arm(&b->chip[CHIP_HMC5883L]);
+}
+
+void board_wire_drdy(board_t *b, avr_irq_t *pin)
+{
+	b->drdy_pin = pin;
+	b->drdy_low = 0;
+	avr_raise_irq(pin, 1);
+	if (b->variant->mag_kind == MAG_HMC5883L)
+		hmc_drdy_arm(&b->chip[CHIP_HMC5883L]);
 }
 
 void board_power_cycle(board_t *b)
@@ -1049,6 +1098,7 @@ void board_power_cycle(board_t *b)
 	b->cur_chip = -1;
 	adxl_update_int1(b);
 	board_sda_update(b);
+	board_restart_timers(b);
 }
 
 void board_avr_reset(board_t *b)

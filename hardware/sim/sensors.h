@@ -141,6 +141,8 @@ typedef struct board_t {
 	avr_irq_t *irq;          /* our TWI irqs: [0] input (to the AVR), [1] output (from the AVR) */
 	avr_irq_t *int1_pin;     /* ATmega pin that ADXL345 INT1 drives (D2 = PD2) */
 	avr_irq_t *sda_pin;      /* PC4: driven low while a chip holds SDA */
+	avr_irq_t *drdy_pin;     /* the ATmega pin HMC5883L DRDY drives (--drdy-pin), NULL when not wired */
+	int drdy_low;
 	int sda_pin_low;
 	int int1_level;
 	uint8_t adxl_int_source;
@@ -192,6 +194,8 @@ int board_sda_held(board_t *b);
 void board_sda_update(board_t *b);
 /* An AVR reset cancels every cycle timer (simavr): start the chips' own again. */
 void board_restart_timers(board_t *b);
+/* Wire the HMC5883L's DRDY to an ATmega pin. */
+void board_wire_drdy(board_t *b, avr_irq_t *pin);
 /* The chip's own time for board time t_s (its oscillator's ppm offset). */
 double chip_time(board_t *b, int chip, double t_s);
 double board_time_s(board_t *b);

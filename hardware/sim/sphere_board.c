@@ -458,6 +458,7 @@ static void usage(FILE *f)
 		"  --adapter NAME       the USB-serial adapter between the UART and the host (capture, pty): ftdi (62-byte\n"
 		"                       packets, 16 ms latency timer, 256-byte buffer) or ch340 (32-byte packets each 1 ms\n"
 		"                       frame, 32-byte buffer); default none: bytes reach the host as they are sent\n"
+		"  --drdy-pin PIN       wire the HMC5883L's DRDY to PIN (e.g. D3; not wired on the sphere)\n"
 		"  --capture-times FILE at each frame delimiter in the capture: u64 bytes captured so far, f64 simulated s\n"
 		"  --simavr-i2c-timing  simavr's 1 us per I2C step (default: 9 SCL periods a byte at the TWBR rate)\n"
 		"  --i2c-real-timing    (the default; kept for old scripts)\n"
@@ -478,8 +479,8 @@ int main(int argc, char **argv)
 	int clocks_random = 0, sda_held = 0, n_brownouts = 0, n_stalls = 0, n_resets_mid = 0, n_resets_at = 0;
 	double glitch_rate = 0, brownouts[MAX_FAULTS], resets_mid[MAX_FAULTS], host_stalls[MAX_FAULTS][2], resets_at[MAX_FAULTS];
 	const char *adapter = NULL, *times_path = NULL;
-	char tpin_port = 'B', lpin_port = 0;
-	int tpin_bit = 5, lpin_bit = 0;
+	char tpin_port = 'B', lpin_port = 0, dpin_port = 0;
+	int tpin_bit = 5, lpin_bit = 0, dpin_bit = 0;
 	fault_t faults[MAX_FAULTS];
 	int n_faults = 0;
 
@@ -497,7 +498,7 @@ int main(int argc, char **argv)
 		{"brownout", required_argument, 0, 'b'}, {"sda-held", no_argument, 0, 'H'},
 		{"host-stall", required_argument, 0, 'o'}, {"adapter", required_argument, 0, 'a'},
 		{"simavr-i2c-timing", no_argument, 0, 'U'}, {"capture-times", required_argument, 0, 'X'},
-		{"reset-at", required_argument, 0, 'A'}, {0, 0, 0, 0}};
+		{"reset-at", required_argument, 0, 'A'}, {"drdy-pin", required_argument, 0, 'D'}, {0, 0, 0, 0}};
 	int o;
 	while ((o = getopt_long(argc, argv, "t:s:c:prj:vh", opts, NULL)) != -1) {
 		switch (o) {
@@ -513,6 +514,9 @@ int main(int argc, char **argv)
 		case 'I': real_i2c = 1; break;
 		case 'U': real_i2c = 0; break;
 		case 'X': times_path = optarg; break;
+		case 'D':
+			if (parse_pin(optarg, &dpin_port, &dpin_bit)) { fprintf(stderr, "bad pin %s (e.g. D3)\n", optarg); return 2; }
+			break;
 		case 'B': variant_name = optarg; break;
 		case 'n': imp.noise = 1; break;
 		case 'e': imp.seed = strtoull(optarg, NULL, 0); break;
@@ -637,6 +641,8 @@ int main(int argc, char **argv)
 	static board_t board;
 	board_init(&board, avr, &trace, verbose, variant, &imp);
 	board.on_fault = board_fault;
+	if (dpin_port)
+		board_wire_drdy(&board, avr_io_getirq(avr, AVR_IOCTL_IOPORT_GETIRQ(dpin_port), dpin_bit));
 	the_board = &board;
 	if (sda_held) {
 		board.chip[CHIP_HMC5883L].holds_sda = 9;

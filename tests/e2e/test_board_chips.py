@@ -67,6 +67,20 @@ def test_hmc_rdy_low_for_250_us_around_each_write():
     assert np.all(np.abs(gaps - np.round(gaps)) < 0.05), gaps
 
 
+def test_hmc_drdy_pin_low_for_250_us_at_each_new_sample():
+    """DRDY (pin description): "Low for 250 usec when data is placed in the data output registers", high
+    otherwise; at 75 Hz once every 13.3 ms, with no bus traffic at all while the pin is watched."""
+    cmds = [(0.1, "w 1e 00 18"), (0.11, "w 1e 02 00"), (0.2, "e 03 00 00 100")]
+    r = probe(cmds, T.still(0.4), 0.4, drdy_pin="D3")
+    e = r.tagged("e")
+    falls = [x.t_us for x in e if x.data == [0]]
+    rises = [x.t_us for x in e if x.data == [1]]
+    assert len(falls) >= 7 and len(rises) >= 7
+    lows = [next(t for t in rises if t > f) - f for f in falls if any(t > f for t in rises)]
+    assert all(230 <= d <= 270 for d in lows), lows
+    assert np.all(np.abs(np.diff(falls) - 1e6 / 75) < 40), np.diff(falls)
+
+
 def _heading_deg(x, y):
     return math.degrees(math.atan2(y, x))
 

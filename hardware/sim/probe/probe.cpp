@@ -12,6 +12,8 @@
 //                           -> "n <count> <elapsed us>" (hex count, decimal elapsed)
 //   d AA RR N MS            for MS milliseconds, burst-read N bytes (<= 16) as fast as the bus allows and count
 //                           the reads that differ from the one before -> "d <count> <elapsed us>"
+//   e PIN 00 00 MS          record the level changes of digital pin PIN (hex) for MS ms (decimal), printed
+//                           after: one "<micros> e <level>" line each (at most 100)
 //   W                       the watchdog at 15 ms, then hang: a watchdog reset
 //   c                       bus clear: TWI off, nine SCL pulses and a STOP on the pins, TWI on -> "c"
 #include <Arduino.h>
@@ -117,6 +119,17 @@ static void run(char *s) {
     }
     Serial.print(micros()); Serial.print(" d "); hex(count >> 8); hex(count & 0xFF);
     Serial.write(' '); Serial.print(t - t0); Serial.write('\n');
+  } else if (cmd == 'e' && n == 4) {
+    static uint32_t ts[100];
+    static uint8_t lv[100];
+    uint8_t k = 0, pin = (uint8_t)v[0], last = digitalRead(pin);
+    uint32_t t0 = micros(), t = t0;
+    while ((uint32_t)(t - t0) < v[3] * 1000UL && k < 100) {
+      uint8_t now = digitalRead(pin);
+      t = micros();
+      if (now != last) { ts[k] = t; lv[k++] = now; last = now; }
+    }
+    for (uint8_t i = 0; i < k; i++) report_read("e", ts[i], true, lv + i, 1);
   } else if (cmd == 'W') {
     Serial.print(micros()); Serial.print(" W\n"); Serial.flush();
     wdt_enable(WDTO_15MS);
