@@ -246,6 +246,11 @@ def test_calibrate_when_the_port_goes_away(tmp_path):
     os.close(slave)
     p = subprocess.Popen([sys.executable, "-m", "sphere.cli", "calibrate", "--port", name, "--yes", "--timeout", "30"],
                          stderr=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+    from sphere.serial_link import holders
+
+    deadline = time.monotonic() + 60
+    while p.pid not in [pid for pid, _ in holders(name)] and time.monotonic() < deadline:
+        time.sleep(0.05)  # until it has the port open
     s = ScriptedSphere()
     os.write(master, s.frame(hello_packet()))
     end = time.monotonic() + 2.5

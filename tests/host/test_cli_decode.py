@@ -86,7 +86,11 @@ def test_capture_records_a_real_serial_port(tmp_path):
     import time
 
     sent = b"".join(encode_frame(Orientation(i * 10000, 1, (16384, 0, 0, 0)), i & 0xFF) for i in range(300))
-    time.sleep(1.0)  # let it open the port
+    from sphere.serial_link import holders
+
+    deadline = time.time() + 60
+    while proc.pid not in [pid for pid, _ in holders(name)] and time.time() < deadline:
+        time.sleep(0.05)  # until it has the port open (a busy machine takes a while to start Python)
     for i in range(0, len(sent), 100):
         os.write(master, sent[i : i + 100])
         time.sleep(0.005)

@@ -60,7 +60,8 @@ class FrameDecoder:
         self._buf = bytearray()
         self._discarding = False  # inside an oversize chunk: drop bytes up to the next delimiter
         self._last_seq: int | None = None
-        self._recent: deque = deque(maxlen=DUPLICATE_WINDOW)  # (seq << 16 | crc) of the last frames
+        self._recent: deque = deque()  # (seq << 16 | crc) of the last DUPLICATE_WINDOW frames, oldest first
+        self._recent_set: set = set()  # the same, for the lookup
 
     def restart(self) -> None:
         """A new link: a frame cut off by the old one is dropped without being counted, and the
@@ -69,6 +70,7 @@ class FrameDecoder:
         self._discarding = False
         self._last_seq = None
         self._recent.clear()
+        self._recent_set.clear()
 
     def feed(self, data: bytes) -> list[Packet]:
         stats = self.stats
@@ -138,11 +140,16 @@ class FrameDecoder:
                 stats.restarts += 1
             self._last_seq = None
             self._recent.clear()
+            self._recent_set.clear()
         key = seq << 16 | crc
-        if key in self._recent:
+        recent = self._recent_set
+        if key in recent:
             stats.duplicates += 1
             return
+        recent.add(key)
         self._recent.append(key)
+        if len(self._recent) > DUPLICATE_WINDOW:
+            recent.discard(self._recent.popleft())
         self._count_seq(seq)
         if entry is None:
             stats.unknown_types += 1

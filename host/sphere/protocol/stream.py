@@ -71,5 +71,13 @@ class PacketStream:
         packets = self.decoder.feed(data)
         if not packets:
             return []
-        one = self.packet
-        return [one(p) for p in packets]
+        out = []
+        unwrap = self.unwrap
+        for p in packets:  # :meth:`packet`, inlined: this runs for every frame on the pointer's path
+            if p.TYPE == _HELLO:
+                if p.seq == 0:
+                    unwrap.reset()
+                self.hello = p
+            t = getattr(p, "t_us", None)
+            out.append(DecodedPacket(p, unwrap(t) if t is not None else None))
+        return out
