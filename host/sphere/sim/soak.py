@@ -294,6 +294,23 @@ def schedule(seconds: float, seed: int, kinds=FAULT_KINDS, mag: str = "hmc5883l"
     return {k: v for k, v in kw.items() if v}
 
 
+def board_profile_command(board: str | None, path: Path) -> Path | None:
+    """A SET_BOARD command for the firmware at 0.5 s when the board is not the aligned one (as its owner
+    would send once; the firmware keeps it in EEPROM), so the firmware maps the chips as they are mounted.
+    None when the board is the aligned one or the host's protocol has no SET_BOARD."""
+    from sphere.protocol import packets
+
+    if not board or board == "aligned" or not hasattr(packets, "SetBoard"):
+        return None
+    number = {name: n for n, name in packets.BOARD_PROFILES.items()}.get(board.split("-")[0])
+    if number is None:
+        return None
+    from sphere.protocol import encode_frame
+
+    path.write_text(f"0.5 {encode_frame(packets.SetBoard(board_profile=number), 0).hex(' ')}\n")
+    return path
+
+
 @dataclass
 class SoakResult:
     report: dict
@@ -334,6 +351,9 @@ def run_soak(elf, seconds: float, seed: int, board: str | None = None, kinds=FAU
         motion, trials = soak_motion(seconds)
         trace = T.to_chips(motion).write(tmp / "trace.bin")
         common = dict(board=board, noise=True, seed=seed, clocks_random=True, build=build)
+        send = board_profile_command(board, tmp / "send.txt")
+        if send:
+            common["send"] = send
         faults = schedule(seconds, seed, kinds)
 
         def one(name, kw):
