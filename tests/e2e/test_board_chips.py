@@ -161,6 +161,15 @@ def test_hmc_continuous_mode_first_sample_after_two_periods():
     assert all(abs(d - 1e6 / 15) < 2500 for d in np.diff(changes)), np.diff(changes)
 
 
+def test_hmc_noise_floor():
+    """Table 1, noise floor: 2 milli-gauss standard deviation (100 samples, no averaging), with --noise."""
+    cmds = [(0.1, "w 1e 00 18"), (0.11, "w 1e 01 a0"), (0.12, "w 1e 02 00"), (0.2, "p 1e 03 6 13334 100")]
+    r = probe(cmds, T.still(1.6), 1.6, noise=True, seed=4)
+    xyz = np.array([_hmc_xyz(p.data) for p in r.tagged("p")], float) / 390.0 * 1000.0  # milli-gauss at gain 5
+    sd = xyz.std(axis=0)
+    assert np.all((2.0 * 0.6 <= sd) & (sd <= 2.0 * 1.5)), sd  # 1-LSB steps of 2.6 mG at this gain
+
+
 # ---------------------------------------------------------------- ITG-3200
 
 def test_itg_start_up_time():
@@ -274,6 +283,18 @@ def test_qmc5883l_variant_register_map():
     assert abs(x - 0.20 * 3000) <= 3 and y == 0 and abs(z + 0.45 * 3000) <= 3  # the trace's gain-1 rounding
     assert not data[6] & 5  # status read in the same burst, after the data: DRDY and DOR cleared
     assert st2[0] & 1 and st2[0] & 4  # 90 ms later: new data, and the samples in between were skipped
+
+
+def test_qmc5883l_soft_reset_and_pointer_roll_over():
+    """Control 2 (0AH): SOFT_RST restores every register's default (control 1 back to 0: standby);
+    ROL_PNT makes the pointer roll over from 06H to 00H in a burst read."""
+    cmds = [(0.1, "w 0d 09 15"), (0.11, "w 0d 0a 40"), (0.2, "r 0d 00 6"), (0.201, "r 0d 05 3"),
+            (0.21, "w 0d 0a 80"), (0.22, "r 0d 09 2")]
+    r = probe(cmds, T.still(0.3), 0.3, board="gy85-qmc")
+    data, burst, after_reset = (x.data for x in r.tagged("r"))
+    assert data[0] == 0x58  # X = 600 (0.2 gauss at 3000 LSB/G): its LSB, distinct from 07H's (0 at 25 degC)
+    assert burst[2] == data[0]  # 05H, 06H, then 00H again instead of 07H
+    assert after_reset == [0x00, 0x00]
 
 
 # ---------------------------------------------------------------- board variants
