@@ -318,3 +318,47 @@ def test_udev_rule_for_a_port():
     assert 'ATTRS{idVendor}=="0403", ATTRS{idProduct}=="6001", ATTRS{serial}=="A50285BI"' in \
         udev_rule("/dev/ttyUSB0", lambda: [ftdi, ch340])
     assert 'KERNELS=="1-1.2:1.0"' in udev_rule("/dev/ttyUSB1", lambda: [ftdi, ch340])
+
+
+def test_a_connection_flood_does_not_cost_the_sphere(tmp_path):
+    """The daemon with its 3-D server and a sphere on a serial port: 2,000 connection attempts (200 held open)
+    while the sphere is unplugged and plugged in again; the port reopens and the pointer moves on (1,100 held
+    connections used to exhaust the descriptors so that the port could not reopen)."""
+    from test_mouse_serial import LEFT, RIGHT, FakeSphere, fast_serial, wait_for
+
+    from sphere.daemon.stream3d import OrientationStream
+
+    link = tmp_path / "sphere"
+    dev = FakeSphere(link, LEFT)
+    source = fast_serial(str(link), link_timeout_s=30.0)
+    stream = OrientationStream("127.0.0.1", 0, rate_hz=60, max_clients=16)
+    stream.start()
+    cfg = Config().with_overrides({"gyro": {"still_time_s": 0.3}}, "t")
+    backend = RecordingBackend()
+    daemon = SphereMouse(cfg, source, backend, stream=stream, log=lambda m: None)
+    thread = threading.Thread(target=daemon.run, daemon=True)
+    thread.start()
+    held = []
+    try:
+        assert wait_for(lambda: backend.x <= -238)
+        dev.unplug()
+        for i in range(2000):
+            try:
+                c = socket.create_connection(("127.0.0.1", stream.port), timeout=2)
+            except OSError:
+                continue
+            if len(held) < 200:
+                held.append(c)
+            else:
+                c.close()
+        dev = FakeSphere(link, RIGHT)
+        assert wait_for(lambda: source.connects == 2)
+        assert wait_for(lambda: backend.x >= -2), backend.x
+        assert stream.refused >= 1000  # beyond max_clients, refused at once
+    finally:
+        for c in held:
+            c.close()
+        daemon.stop()
+        thread.join(5)
+        stream.stop()
+        dev._stop.set()
