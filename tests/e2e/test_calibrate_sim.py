@@ -55,27 +55,27 @@ def _stop(proc):
 
 
 def _ask(port_path: str, packet, want=("REPLY",), timeout_s: float = 3.0):
-    """Send one command on the pty (pyserial, as `sphere calibrate` does); return its REPLY and the
+    """Send one command on the pty through DeviceLink (as `sphere calibrate` does); return its REPLY and the
     packets that came with it until ``want`` were all seen."""
-    from sphere.protocol import FrameDecoder, encode_frame
+    from sphere.device_link import DeviceLink
     from sphere.serial_link import open_port
 
-    port = open_port(port_path, reset_on_open=False)
-    dec = FrameDecoder("device")
+    link = DeviceLink(open_port(port_path, reset_on_open=False))
     seen, reply = [], None
     try:
-        port.write(encode_frame(packet, 0x5A))
+        seq = link.send(packet)
         end = time.monotonic() + timeout_s
         while time.monotonic() < end:
-            for p in dec.feed(port.read(max(1, port.in_waiting))):
-                if p.NAME == "REPLY" and p.cmd_seq == 0x5A and p.cmd_type == packet.TYPE:
+            for dp in link.read():
+                p = dp.packet
+                if p.NAME == "REPLY" and p.cmd_seq == seq and p.cmd_type == packet.TYPE:
                     reply = p
                 if reply is not None or p.NAME != "REPLY":
                     seen.append(p)
             if reply is not None and all(any(p.NAME == w for p in seen) for w in want):
                 break
     finally:
-        port.close()
+        link.port.close()
     return reply, seen
 
 
