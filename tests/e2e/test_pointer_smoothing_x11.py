@@ -201,18 +201,20 @@ CLEAN_TURNS = [("rest", 3.0, "", 0.0, ""), ("turn", 1.0, "slow", -10.0, "yaw"), 
                ("turn", 0.1, "fast", -150.0, "yaw"), ("rest", 1.5, "", 0.0, ""),
                ("turn", 0.15, "medium", 80.0, "yaw"), ("rest", 1.5, "", 0.0, ""),
                ("turn", 0.5, "slow", 20.0, "pitch"), ("rest", 1.5, "", 0.0, ""),
-               ("turn", 0.1, "fast", -100.0, "pitch"), ("rest", 1.5, "", 0.0, "")]
+               ("turn", 0.1, "fast", -100.0, "pitch"), ("rest", 1.5, "", 0.0, ""),
+               ("turn", 1.0, "fine", 3.0, "yaw"), ("rest", 1.5, "", 0.0, "")]  # and slow aiming: 3 °/s for 1 s
 
 
 def test_steady_turns_travel_overshoot_drift_from_the_x_pointer(xvfb, tmp_path):
     """Issue 20's targets for a sphere lying still and turning at 10–150 °/s, read from the X pointer (replayed
-    at 3× speed, pointer sampled at ~1 kHz): median travel within 1 % and every turn within 3 %, overshoot
-    ≤ 1 px and drift ≤ 1 px/s after every stop, jitter lying still ≤ 0.3 px."""
+    at 2× speed, pointer sampled at up to ~1 kHz): median travel within 1 % and every turn within 3 %, overshoot
+    ≤ 1 px and drift ≤ 1 px/s after every stop, jitter lying still ≤ 0.3 px; after the 1-s turn at 3 °/s
+    (slow aiming, once learnt as gyro bias): travel within 5 % and drift ≤ 1 px/s."""
     from sphere.sim.hold import with_params
 
     capture = tmp_path / "turns.bin"
     h = hold_capture(capture, CLEAN_TURNS, 4, with_params(tremor_rms_deg=0.0, wander_rms_deg=0.0))
-    speed = 3.0
+    speed = 2.0
     xdotool(xvfb, "mousemove", "160", "200")
     with PointerSampler(xvfb) as s:
         r = run_mouse(xvfb, capture, "--speed", str(speed), "--set", "output.screen_width_px=1920", timeout=120)
@@ -220,9 +222,15 @@ def test_steady_turns_travel_overshoot_drift_from_the_x_pointer(xvfb, tmp_path):
     a = np.array(s.samples, dtype=float)
     t, xy = a[:, 0], a[:, 1:]
     turns = [p for p in h.phases if p.kind == "turn"]
-    first = np.flatnonzero(np.abs(xy - xy[0]).max(axis=1) >= 3)[0]
-    t0 = t[first] - turns[0].start_s / speed  # device time 0 in the X trace (to a sample period)
-    dev = (t - t0) * speed
+    # device time 0 in the X trace: the first turn (10 °/s = 480 px/s) is 48 px along 0.1 s after it starts
+    # (plus half its 20-ms ramp); the bias learnt at start-up may move the pointer a pixel or two before
+    first = np.flatnonzero(np.abs(xy - xy[0]).max(axis=1) >= 48)[0]
+    t0 = t[first] - (turns[0].start_s + 0.11) / speed
+    # on a regular grid of device time (the pointer's last sampled position: the sampler slows when the
+    # machine is busy, and a short window must not come out empty)
+    measured = (t - t0) * speed
+    dev = np.arange(0.0, measured[-1], 0.005)
+    xy = xy[np.clip(np.searchsorted(measured, dev, side="right") - 1, 0, len(xy) - 1)]
     rests = [(1.5, turns[0].start_s - 0.05)] + [(p.end_s + 0.45, p.end_s + 1.45) for p in turns]
     sq, n = 0.0, 0
     for a_s, b_s in rests:  # jitter lying still: RMS distance from a line fit over each rest
@@ -237,15 +245,18 @@ def test_steady_turns_travel_overshoot_drift_from_the_x_pointer(xvfb, tmp_path):
         u = np.array([-np.sign(ph.rate_dps), 0.0]) if ph.axis == "yaw" else np.array([0.0, np.sign(ph.rate_dps)])
         pre = xy[(dev > ph.start_s - 0.5) & (dev < ph.start_s - 0.05)].mean(axis=0) @ u
         early = xy[(dev > ph.end_s + 0.4) & (dev < ph.end_s + 0.5)].mean(axis=0)
-        late = xy[(dev > ph.end_s + 1.3) & (dev < ph.end_s + 1.4)].mean(axis=0)
+        late = xy[(dev > ph.end_s + 1.4) & (dev < ph.end_s + 1.5)].mean(axis=0)  # drift: over the second after 0.45 s
         travel = early @ u - pre
         truth = abs(ph.rate_dps) * (ph.end_s - ph.start_s) * PX_PER_DEG
         errors.append(abs(travel / truth - 1.0))
         overs.append(max(0.0, float((xy[(dev >= ph.end_s) & (dev < ph.end_s + 0.4)] @ u).max() - early @ u)))
-        drifts.append(float(np.linalg.norm(late - early) / 0.9))
+        drifts.append(float(np.linalg.norm(late - early)))
     print(f"travel errors {[f'{e:.2%}' for e in errors]}, overshoot {overs} px, drift {[round(d, 2) for d in drifts]} px/s, "
           f"jitter at rest {jitter:.3f} px")
     assert jitter <= 0.3
+    fine = [k for k, p in enumerate(turns) if p.band == "fine"]
+    assert all(errors[k] <= 0.05 for k in fine)
+    errors = [e for k, e in enumerate(errors) if k not in fine]
     assert np.median(errors) <= 0.01 and max(errors) <= 0.03
     assert max(overs) <= 1.0 and max(drifts) <= 1.0
 
