@@ -174,20 +174,25 @@ def test_foreign_origin_and_host_are_refused(server):
     assert _http(p, {"Host": f"evil.example:{p}"}, path="/") == 403
 
 
-def test_connection_flood_is_refused_and_the_server_keeps_serving(server):
-    """2,000 connection attempts, many held open: beyond max_clients they are refused at once; afterwards a
-    client still connects, and the log has a few lines, not a traceback per connection."""
+def _flood(port, attempts=2000, hold=200) -> list:
+    """``attempts`` TCP connections to the server, the first ``hold`` kept open (returned), the rest closed."""
     held = []
-    for _ in range(2000):
+    for _ in range(attempts):
         try:
-            c = socket.create_connection(("127.0.0.1", server.port), timeout=2)
+            c = socket.create_connection(("127.0.0.1", port), timeout=2)
         except OSError:
             continue
-        if len(held) < 200:
+        if len(held) < hold:
             held.append(c)
         else:
             c.close()
-    for c in held:
+    return held
+
+
+def test_connection_flood_is_refused_and_the_server_keeps_serving(server):
+    """2,000 connection attempts, many held open: beyond max_clients they are refused at once; afterwards a
+    client still connects, and the log has a few lines, not a traceback per connection."""
+    for c in _flood(server.port):
         c.close()
     time.sleep(0.3)
     assert server.refused >= 1000
@@ -342,15 +347,7 @@ def test_a_connection_flood_does_not_cost_the_sphere(tmp_path):
     try:
         assert wait_for(lambda: backend.x <= -238)
         dev.unplug()
-        for i in range(2000):
-            try:
-                c = socket.create_connection(("127.0.0.1", stream.port), timeout=2)
-            except OSError:
-                continue
-            if len(held) < 200:
-                held.append(c)
-            else:
-                c.close()
+        held = _flood(stream.port)
         dev = FakeSphere(link, RIGHT)
         assert wait_for(lambda: source.connects == 2)
         assert wait_for(lambda: backend.x >= -2), backend.x
