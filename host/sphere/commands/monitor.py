@@ -20,6 +20,8 @@ def add_arguments(p) -> None:
     p.add_argument("--port", required=True, help="the sphere's serial port (/dev/ttyUSB0, /dev/rfcomm0, /dev/sphere)")
     p.add_argument("--baud", type=int, default=115200)
     p.add_argument("--seconds", type=float, default=None, help="stop after this long (default: until Ctrl-C)")
+    p.add_argument("--events", type=int, default=None, metavar="N",
+                   help="stop after N events (taps, free falls): e.g. to try a tap setting")
     p.add_argument("--plot", action="store_true", help="live curves: accelerometer, gyroscope, magnetometer, orientation")
     p.add_argument("--plot-out", metavar="PNG", help="with --plot: also write the last view to this image at the end")
     p.add_argument("--refresh", type=float, default=0.5, metavar="SECONDS", help="how often the view is redrawn")
@@ -104,9 +106,12 @@ def run(args) -> int:
                 line = mon.packet(dp, time.monotonic())
                 if line and not tty:
                     print(line, flush=True)
+            if args.events is not None and mon.counts["EVENT"] >= args.events and (
+                    mon.hello is not None or time.monotonic() - start > 2.0):
+                break
             now = time.monotonic()
-            if mon.hello is None and not asked and now - start > 0.5:
-                link.send(GetHello())  # the version and sensors (a USB Nano sends HELLO when the open resets it)
+            if mon.hello is None and not asked:
+                link.send(GetHello())  # the version and sensors (a USB Nano also sends HELLO when the open resets it)
                 asked = True
             if now >= next_draw:
                 next_draw = now + args.refresh
