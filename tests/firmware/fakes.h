@@ -6,6 +6,13 @@
 #include "framing.h"
 #include "sphere_device.h"
 
+// One framed packet as the host would send it (type, seq, body).
+inline std::vector<uint8_t> frameOf(uint8_t type, uint8_t seq, std::vector<uint8_t> body) {
+    uint8_t out[sphere::MAX_FRAME];
+    size_t n = sphere::FrameEncoder::encodeWithSeq(type, seq, body.data(), (uint8_t)body.size(), out);
+    return std::vector<uint8_t>(out, out + n);
+}
+
 struct FakeChip {
     uint8_t addr = 0;
     bool present = true;

@@ -12,12 +12,6 @@ using namespace sphere;
 
 namespace {
 
-std::vector<uint8_t> frameOf(uint8_t type, uint8_t seq, std::vector<uint8_t> body) {
-    uint8_t out[MAX_FRAME];
-    size_t n = FrameEncoder::encodeWithSeq(type, seq, body.data(), (uint8_t)body.size(), out);
-    return std::vector<uint8_t>(out, out + n);
-}
-
 struct Rig {
     FakeBus bus;
     FakeHal hal;

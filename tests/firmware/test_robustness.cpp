@@ -13,12 +13,6 @@ namespace {
 
 typedef std::vector<std::vector<uint8_t>> Frames;
 
-std::vector<uint8_t> cmd(uint8_t type, uint8_t seq, std::vector<uint8_t> body) {
-    uint8_t out[MAX_FRAME];
-    size_t n = FrameEncoder::encodeWithSeq(type, seq, body.data(), (uint8_t)body.size(), out);
-    return std::vector<uint8_t>(out, out + n);
-}
-
 struct Bench {
     FakeBus bus;
     FakeHal hal;
@@ -106,7 +100,7 @@ TEST_CASE("a failed read holds the last sample (stale); 10 in a row make the sen
     CHECK(b.dev.status().probe_failures == 3);
     // STATUS carries the counters
     b.dev.receive(0);
-    for (uint8_t x : cmd(CMD_GET_STATUS, 1, {})) b.dev.receive(x);
+    for (uint8_t x : frameOf(CMD_GET_STATUS, 1, {})) b.dev.receive(x);
     f = b.frames();
     const auto* st = lastOf(f, PKT_STATUS);
     REQUIRE(st);
@@ -166,7 +160,7 @@ TEST_CASE("ten GET_CALIBRATION back to back get ten replies, in order, none drop
     b.frames();
     std::vector<uint8_t> burst;
     for (uint8_t s = 0; s < 10; ++s) {
-        auto c = cmd(CMD_GET_CALIBRATION, s, {});
+        auto c = frameOf(CMD_GET_CALIBRATION, s, {});
         burst.insert(burst.end(), c.begin(), c.end());
     }
     CHECK(burst.size() <= 64);  // they all fit the UART's receive buffer
@@ -203,7 +197,7 @@ TEST_CASE("SET_BOARD maps each chip's axes into the body frame and is kept in EE
     b.bus.setAccel(1, 2, 256);
     b.bus.setGyro(10, 20, 30);
     b.run(3);
-    for (uint8_t x : cmd(CMD_SET_BOARD, 1, {BOARD_GY85})) b.dev.receive(x);
+    for (uint8_t x : frameOf(CMD_SET_BOARD, 1, {BOARD_GY85})) b.dev.receive(x);
     auto f = b.frames();
     REQUIRE(lastOf(f, PKT_REPLY));
     CHECK((*lastOf(f, PKT_REPLY))[4] == RESULT_OK);
@@ -230,14 +224,14 @@ TEST_CASE("SET_BOARD maps each chip's axes into the body frame and is kept in EE
     REQUIRE(lastOf(f, PKT_HELLO));
     CHECK((*lastOf(f, PKT_HELLO))[2 + 21] == BOARD_GY85);
     // SEN-10724: the magnetometer turned 90° about z
-    for (uint8_t x : cmd(CMD_SET_BOARD, 2, {BOARD_SEN10724})) b2.dev.receive(x);
+    for (uint8_t x : frameOf(CMD_SET_BOARD, 2, {BOARD_SEN10724})) b2.dev.receive(x);
     b2.run(2);
     f = b2.frames();
     r = lastOf(f, PKT_RAW_SAMPLE)->data() + 2 + 5;
     CHECK(getI16(r + 12) == 0);     // +y
     CHECK(getI16(r + 14) == -300);  // −x
     // out of range: bad_value; a damaged EEPROM byte pair: aligned
-    for (uint8_t x : cmd(CMD_SET_BOARD, 3, {3})) b2.dev.receive(x);
+    for (uint8_t x : frameOf(CMD_SET_BOARD, 3, {3})) b2.dev.receive(x);
     f = b2.frames();
     CHECK((*lastOf(f, PKT_REPLY))[4] == RESULT_BAD_VALUE);
     CHECK(b2.dev.boardProfile() == BOARD_SEN10724);
@@ -248,7 +242,7 @@ TEST_CASE("SET_BOARD maps each chip's axes into the body frame and is kept in EE
     CHECK(b3.dev.boardProfile() == BOARD_ALIGNED);
     // a failing EEPROM: storage_error, profile unchanged
     b3.hal.eeprom_fails = true;
-    for (uint8_t x : cmd(CMD_SET_BOARD, 4, {BOARD_GY85})) b3.dev.receive(x);
+    for (uint8_t x : frameOf(CMD_SET_BOARD, 4, {BOARD_GY85})) b3.dev.receive(x);
     f = b3.frames();
     CHECK((*lastOf(f, PKT_REPLY))[4] == RESULT_STORAGE_ERROR);
     CHECK(b3.dev.boardProfile() == BOARD_ALIGNED);
