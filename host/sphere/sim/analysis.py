@@ -96,6 +96,47 @@ STARTUP_BIAS_TRIES = 10
 GYRO_SPAN_LSB, ACCEL_SPAN_LSB, MAG_SPAN_LSB = 58, 24, 16
 
 
+def _moved_at(raw: list, idx) -> int | None:
+    """The firmware's stillness test (gyro_bias.cpp) over the readings raw[i] for i in idx: every gyro,
+    accelerometer and (when present) magnetometer reading within ±span/2 of the window's first. Returns
+    the position in idx of the first reading that moved, or None when the window was still."""
+    half = (GYRO_SPAN_LSB // 2, ACCEL_SPAN_LSB // 2, MAG_SPAN_LSB // 2)
+
+    def near(v, ref, h):
+        return all(-h <= int(a) - int(b) <= h for a, b in zip(v, ref))
+
+    first = raw[idx[0]]
+    mag_ref = first.mag if first.flags & 0x04 else (0, 0, 0)
+    for j, i in enumerate(idx):
+        p = raw[i]
+        if not (near(p.gyro, first.gyro, half[0]) and near(p.accel, first.accel, half[1])
+                and (not p.flags & 0x04 or near(p.mag, mag_ref, half[2]))):
+            return j
+    return None
+
+
+def _mean_lsb(raw: list, idx) -> list[int]:
+    """The firmware's rounding of a window's mean: half away from zero, then C division."""
+    total = np.sum([raw[i].gyro for i in idx], axis=0)
+    n = len(idx)
+    return [int((t + n // 2 if t >= 0 else t - n // 2) / n) for t in total.tolist()]
+
+
+def _startup_windows(raw: list):
+    """The power-up windows: (index from which the estimate applies, bias) or (None, index after the last
+    window) when all STARTUP_BIAS_TRIES moved or the readings ran out."""
+    i, tries = 0, 1
+    while i + STARTUP_BIAS_SAMPLES <= len(raw):
+        moved = _moved_at(raw, range(i, i + STARTUP_BIAS_SAMPLES))
+        if moved is None:
+            return i + STARTUP_BIAS_SAMPLES - 1, _mean_lsb(raw, range(i, i + STARTUP_BIAS_SAMPLES))
+        i += moved + 1
+        if tries >= STARTUP_BIAS_TRIES:
+            return None, i
+        tries += 1
+    return None, len(raw)
+
+
 def firmware_startup_bias(raw: list):
     """The firmware's power-up gyro bias estimate replayed on the RAW_SAMPLEs it sent (gyro_bias.cpp and
     SphereDevice::tick): windows of STARTUP_BIAS_SAMPLES readings, still when every gyro, accelerometer and
@@ -103,32 +144,8 @@ def firmware_startup_bias(raw: list):
     ends at the moving reading and the next starts at the reading after it, STARTUP_BIAS_TRIES windows at
     most. Returns (index of the reading from which the firmware applies it, bias in LSB rounded half away
     from zero) or None. Assumes a device without a stored calibration (the simulator's blank EEPROM)."""
-    half = (GYRO_SPAN_LSB // 2, ACCEL_SPAN_LSB // 2, MAG_SPAN_LSB // 2)
-
-    def near(v, ref, h):
-        return all(-h <= int(a) - int(b) <= h for a, b in zip(v, ref))
-
-    i, tries = 0, 1
-    while i + STARTUP_BIAS_SAMPLES <= len(raw):
-        first = raw[i]
-        mag_ref = first.mag if first.flags & 0x04 else (0, 0, 0)
-        moved = None
-        for j in range(i, i + STARTUP_BIAS_SAMPLES):
-            p = raw[j]
-            if not (near(p.gyro, first.gyro, half[0]) and near(p.accel, first.accel, half[1])
-                    and (not p.flags & 0x04 or near(p.mag, mag_ref, half[2]))):
-                moved = j
-                break
-        if moved is None:
-            total = np.sum([p.gyro for p in raw[i:i + STARTUP_BIAS_SAMPLES]], axis=0)
-            n, h = STARTUP_BIAS_SAMPLES, STARTUP_BIAS_SAMPLES // 2
-            bias = [int((t + h if t >= 0 else t - h) / n) for t in total.tolist()]  # C division: toward 0
-            return i + STARTUP_BIAS_SAMPLES - 1, bias
-        if tries >= STARTUP_BIAS_TRIES:
-            return None
-        tries += 1
-        i = moved + 1
-    return None
+    k, bias = _startup_windows(raw)
+    return None if k is None else (k, bias)
 
 
 TRACK_SAMPLES, TRACK_STEP_LSB = 400, 2  # the firmware's bias tracking (SphereDevice::trackBias)
@@ -142,60 +159,23 @@ def firmware_bias_schedule(raw: list) -> list[tuple[int, list[int]]]:
     a window that moves ends at the moving reading and the next starts after it. Readings with the gyro
     missing or stale (flags bit 1 clear, or bit 5/6 set) are skipped as the firmware skips them.
     Returns [(index of the reading from which a bias applies, bias in LSB)], in order."""
-    half = (GYRO_SPAN_LSB // 2, ACCEL_SPAN_LSB // 2, MAG_SPAN_LSB // 2)
-
-    def near(v, ref, h):
-        return all(-h <= int(a) - int(b) <= h for a, b in zip(v, ref))
-
-    out = []
-    found = firmware_startup_bias(raw)
-    if found is not None:
-        out.append(found)
-        start, bias = found[0] + 1, list(found[1])
-    else:  # the power-up windows all moved: tracking starts after the last of them
-        start, bias = _startup_end(raw), None
+    k, found = _startup_windows(raw)
+    out = [] if k is None else [(k, found)]
+    start, bias = (k + 1, list(found)) if k is not None else (found, None)
     n = TRACK_SAMPLES
     usable = [i for i in range(start, len(raw)) if raw[i].flags & 0x02 and not raw[i].flags & 0x60]
-    k = 0
-    while k + n <= len(usable):
-        first = raw[usable[k]]
-        mag_ref = first.mag if first.flags & 0x04 else (0, 0, 0)
-        moved = None
-        for j in range(k, k + n):
-            p = raw[usable[j]]
-            if not (near(p.gyro, first.gyro, half[0]) and near(p.accel, first.accel, half[1])
-                    and (not p.flags & 0x04 or near(p.mag, mag_ref, half[2]))):
-                moved = j
-                break
+    j = 0
+    while j + n <= len(usable):
+        window = usable[j:j + n]
+        moved = _moved_at(raw, window)
         if moved is not None:
-            k = moved + 1
+            j += moved + 1
             continue
-        total = np.sum([raw[usable[j]].gyro for j in range(k, k + n)], axis=0)
-        est = [int((t + n // 2 if t >= 0 else t - n // 2) / n) for t in total.tolist()]
+        est = _mean_lsb(raw, window)
         bias = est if bias is None else [b + max(-TRACK_STEP_LSB, min(TRACK_STEP_LSB, e - b)) for b, e in zip(bias, est)]
-        out.append((usable[k + n - 1], list(bias)))
-        k += n
+        out.append((window[-1], list(bias)))
+        j += n
     return out
-
-
-def _startup_end(raw: list) -> int:
-    """The reading after the last power-up window when all STARTUP_BIAS_TRIES windows moved."""
-    half = (GYRO_SPAN_LSB // 2, ACCEL_SPAN_LSB // 2, MAG_SPAN_LSB // 2)
-    i = 0
-    for _ in range(STARTUP_BIAS_TRIES):
-        if i + STARTUP_BIAS_SAMPLES > len(raw):
-            return len(raw)
-        first = raw[i]
-        mag_ref = first.mag if first.flags & 0x04 else (0, 0, 0)
-        for j in range(i, i + STARTUP_BIAS_SAMPLES):
-            p = raw[j]
-            if not (all(-half[0] <= int(a) - int(b) <= half[0] for a, b in zip(p.gyro, first.gyro))
-                    and all(-half[1] <= int(a) - int(b) <= half[1] for a, b in zip(p.accel, first.accel))
-                    and (not p.flags & 0x04 or all(-half[2] <= int(a) - int(b) <= half[2]
-                                                     for a, b in zip(p.mag, mag_ref)))):
-                i = j + 1
-                break
-    return i
 
 
 def host_madgwick(raw: list, imu_rate_hz: float, beta: float, bias_s: float = 0.0, orientation: list | None = None,
