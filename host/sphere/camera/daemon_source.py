@@ -54,7 +54,9 @@ class CameraPosition:
                               f"pip install -e '.[camera]'") from None
         try:
             cam = Camera.load(s.camera_file) if s.camera_file else None
-            src = CameraSource(s.source, cam, hue_deg=s.hue_deg, latency_s=s.latency_ms / 1000.0).start()
+            # a video file plays as a live camera would: paced at its frame rate, stamped on the host clock
+            src = CameraSource(s.source, cam, hue_deg=s.hue_deg, latency_s=s.latency_ms / 1000.0,
+                               realtime=True).start()
         except (CameraError, CameraFileError) as e:
             raise ConfigError(f"[camera] {e}") from None
         if log:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import logging
 
 from sphere.daemon.actions import Action, EventActions
-from sphere.daemon.motion import GyroBias, MotionTracker
+from sphere.daemon.motion import G_M_S2, GyroBias, MotionTracker
 from sphere.daemon.pointer import PointerMapper, PointerSettings, TiltMapper, TiltSettings
 from sphere.smoothing.pose import pose_filter
 from sphere.protocol import Event, Hello, Orientation, RawSample, Status
@@ -41,8 +41,9 @@ class SphereMouse:
     """Owns the state of one running daemon. ``handle(DecodedPacket)`` is the whole per-packet work;
     ``run()`` drives it from the source until the source ends or :meth:`stop` is called."""
 
-    def __init__(self, cfg, source, backend, stream=None, status=None, log=None):
+    def __init__(self, cfg, source, backend, stream=None, status=None, log=None, camera=None):
         self.cfg = cfg
+        self.camera = camera  # sphere.camera.daemon_source.CameraPosition: the ball's position for the stream
         self.source = source
         self.backend = backend
         self.stream = stream
@@ -176,7 +177,7 @@ class SphereMouse:
                 for a in self.actions.due(t):
                     self.do(a)
             if self.stream is not None and self.motion.uses_host_filter:
-                self.stream.publish_orientation(self.pose.at(self.motion.quat, t), t)
+                self._publish_pose(t)
             if self.paused or self.actions.frozen(t) or flags & (TAP_ACTIVE | GYRO_STALE) or not flags & GYRO_OK:
                 return  # without the gyroscope nothing says how the sphere turns: the pointer holds still
             if self.mode == "pointer":
@@ -207,6 +208,22 @@ class SphereMouse:
         elif typ == Hello.TYPE:
             self.hello = p
             self.motion.reset_time()
+
+    def _publish_pose(self, t_us) -> None:
+        """The filtered pose to the stream and every output; with a camera, the ball's position too (metres, the
+        camera's frame), fused with this sample's orientation and acceleration; None while it is unknown."""
+        if self.camera is None:
+            self.stream.publish_orientation(self.pose.at(self.motion.quat, t_us), t_us)
+            return
+        position = None
+        if self.motion.quat is not None and self.motion.accel_g is not None:
+            position = self.camera.update(self.motion.quat, [v * G_M_S2 for v in self.motion.accel_g])
+        if position is None:
+            q = self.pose.at(self.motion.quat, t_us)
+        else:
+            q, position = self.pose.at(self.motion.quat, t_us, position)
+        self.stream.position = None if position is None else [float(v) for v in position]
+        self.stream.publish_orientation(q, t_us)
 
     def _sensors_changed(self, bits: int) -> None:
         """A sensor stopped or started answering (RAW_SAMPLE flags): said in the log and on the status line."""

@@ -28,6 +28,8 @@ def build_parser() -> argparse.ArgumentParser:
     src.add_argument("--speed", type=float, help="replay speed: 1 = as recorded (default), 0 = as fast as possible")
     src.add_argument("--trace", help="motion trace (.mat) for --simulate")
     src.add_argument("--baud", type=int, help="serial baud rate (default 115200)")
+    src.add_argument("--camera", metavar="INDEX|FILE", help="a webcam (0, 1 ...) or a video file that sees the ball: "
+                     "its position joins the 3-D stream and the outputs ([camera] section; needs the camera extra)")
     out = p.add_argument_group("output")
     out.add_argument("--backend", choices=("auto", "uinput", "x11", "pynput", "log"),
                      help="where pointer motion goes (default auto)")
@@ -94,6 +96,7 @@ def settings_from_args(args) -> config_mod.Config:
     put("source", "speed", args.speed)
     put("source", "sim_trace", args.trace)
     put("source", "baud", args.baud)
+    put("camera", "source", args.camera)
     put("output", "backend", args.backend)
     put("output", "display", args.display)
     put("mode", "start", args.mode)
@@ -204,11 +207,21 @@ def _main(argv=None) -> int:
     except (SourceError, ConfigError) as e:
         logger.error(str(e))
         return 2
+    from sphere.camera.daemon_source import CameraPosition
+
+    try:
+        camera = CameraPosition.from_config(cfg, log)  # None without [camera] source
+    except ConfigError as e:
+        logger.error(str(e))
+        source.close()
+        return 2
     try:
         backend = open_backend(cfg.output.backend, cfg.output.display, warn=logger.warning)
     except BackendUnavailable as e:
         logger.error(f"backend {cfg.output.backend} cannot start: {e}")
         source.close()
+        if camera is not None:
+            camera.close()
         return 2
     stream = None
     if cfg.stream.enabled:
@@ -228,7 +241,7 @@ def _main(argv=None) -> int:
     status = None
     if not args.quiet and (args.status or sys.stderr.isatty()):
         status = StatusLine(sys.stderr, cfg.status.interval_s)
-    daemon = SphereMouse(cfg, source, backend, stream=stream, status=status)
+    daemon = SphereMouse(cfg, source, backend, stream=stream, status=status, camera=camera)
     log(f"source {source.state}, backend {backend.name}, mode {daemon.mode}, "
         f"{cfg.pointer.slow_deg_per_width:g}° per screen width ({daemon.screen_width_px} px)")
 
@@ -249,6 +262,8 @@ def _main(argv=None) -> int:
         signal.signal(signal.SIGINT, signal.SIG_DFL)
         source.close()
         backend.close()
+        if camera is not None:
+            camera.close()
         if stream is not None:
             stream.stop()
     log(f"stopped: {daemon.moves} pointer moves, {daemon.clicks} clicks, modes {daemon.mode_changes or [daemon.mode]}")

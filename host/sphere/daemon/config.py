@@ -62,6 +62,7 @@ CONTRIBUTORS: tuple[str, ...] = (
     "sphere.daemon.outputs",
     "sphere.daemon.paths_config",  # [paths] (read by sphere.paths)  # [outputs.opentrack], [outputs.osc], [outputs.gamepad]
     "sphere.smoothing.config",  # [smoothing.NAME] for every filter of the smoothing registry
+    "sphere.camera.daemon_source",  # [camera]: a webcam or video file giving the ball's position
 )
 
 #: The daemon's own sections, in the order the reference lists them (contributed ones follow).
@@ -617,4 +618,7 @@ def markdown() -> str:
 
 if __name__ == "__main__":  # pragma: no cover
     if "--markdown" in sys.argv:
-        print(markdown())
+        # run as __main__, this file is a second module: the contributed sections register with the real one
+        from sphere.daemon import config as _config
+
+        print(_config.markdown())

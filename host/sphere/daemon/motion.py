@@ -275,6 +275,7 @@ class MotionTracker:
             self.filter = host_filter(filter_name, beta)
         self.quat = None  # (w, x, y, z) sensor-to-NWU, or None until known
         self.up = None  # earth up in sensor axes
+        self.accel_g = None  # the last RAW_SAMPLE's acceleration (g, sensor axes) when the chip answered
         self.gyro_dps = (0.0, 0.0, 0.0)
         self.default_dt_s = 1.0 / imu_rate_hz
         self._last_raw_t = None
@@ -313,6 +314,7 @@ class MotionTracker:
         ax, ay, az = a[0] * ka, a[1] * ka, a[2] * ka
         anorm = math.sqrt(ax * ax + ay * ay + az * az)
         flags = sample.flags
+        self.accel_g = (ax, ay, az) if flags & 0x01 else None
         if flags & 0x42 != 0x02:
             # gyro_ok clear (spec §4.2: the chip did not answer, its values are 0) or gyro_stale set (a value held
             # from the last good read): not a rate. Nothing moves, nothing is learnt, the orientation holds.
