@@ -274,6 +274,7 @@ def test_signal_storm_while_the_pointer_moves(xvfb, tmp_path):
         if p.poll() is None:  # hung (the old handler re-entered python-xlib): do not leave it running
             p.kill()
             p.wait(5)
+    print(f"\n{sent} SIGUSR1 while moving: alive {alive}, exit {p.returncode}, {err.count('recentred')} recentres logged")
     assert alive, (sent, err)
     assert sent >= 2000, sent  # a machine too busy to send them makes this test say so, not pass quietly
     assert p.returncode == 0 and "Traceback" not in err and "RuntimeError" not in err, err

@@ -195,6 +195,7 @@ def test_connection_flood_is_refused_and_the_server_keeps_serving(server):
     for c in _flood(server.port):
         c.close()
     time.sleep(0.3)
+    print(f"\n2000 connection attempts (200 held): {server.refused} refused, log lines {len(server.logs)}")
     assert server.refused >= 1000
     assert _http(server.port, {"Host": f"127.0.0.1:{server.port}"}) == 101
     assert len(server.logs) <= 5 and not any("Traceback" in m for m in server.logs), server.logs
