@@ -25,6 +25,7 @@
 #include <string.h>
 #include <time.h>
 #include <unistd.h>
+#include <limits.h>
 #ifdef __linux__
 #include <sys/prctl.h>
 #endif
@@ -466,6 +467,28 @@ static void usage(FILE *f)
 		"  -v                   log the bus (twice: every byte)\n");
 }
 
+/* simavr's uart_pty_connect() also points the fixed name /tmp/simavr-uart0 at its pty, replacing what another
+   simulator (or anything else) had there. The board says its pty on stdout instead ("UART on /dev/pts/N"), so
+   the name is put back as it was: another run's link restored, ours never left behind. */
+static void pty_connect_without_link(uart_pty_t *pty)
+{
+	static const char link[] = "/tmp/simavr-uart0";
+	char before[PATH_MAX], now[PATH_MAX];
+	ssize_t nb = readlink(link, before, sizeof before - 1);
+	uart_pty_connect(pty, '0');
+	ssize_t nn = readlink(link, now, sizeof now - 1);
+	if (nn > 0) {
+		now[nn] = 0;
+		if (strcmp(now, pty->port[0].slavename) == 0)
+			unlink(link);
+	}
+	if (nb > 0) {
+		before[nb] = 0;
+		if (symlink(before, link) != 0)
+			fprintf(stderr, "sphere-board: could not restore %s -> %s: %s\n", link, before, strerror(errno));
+	}
+}
+
 int main(int argc, char **argv)
 {
 	pid_t parent0 = getppid();
@@ -688,7 +711,7 @@ int main(int argc, char **argv)
 	static uart_pty_t pty;
 	if (use_pty) {
 		uart_pty_init(avr, &pty);
-		uart_pty_connect(&pty, '0');
+		pty_connect_without_link(&pty);
 		if (adapter) { /* the adapter's packets reach the pty, not the UART's bytes one by one */
 			avr_unconnect_irq(avr_io_getirq(avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_OUTPUT), pty.irq + IRQ_UART_PTY_BYTE_IN);
 			uart_out.pty_in = pty.irq + IRQ_UART_PTY_BYTE_IN;

@@ -225,3 +225,40 @@ def test_usb_serial_adapters_deliver_in_packets(tmp_path):
         delay = t - wire
         assert delay.min() >= 0 and delay.max() <= most and delay.mean() >= least, (adapter, delay.max(), delay.mean())
     assert len(np.unique(got["ftdi"][1])) < 0.6 * len(wire)  # frames share packets
+
+
+def test_pty_leaves_the_fixed_simavr_name_alone(tmp_path):
+    """simavr's uart_pty points /tmp/simavr-uart0 at its pty; the board puts back what was there (another
+    run's link) and leaves nothing of its own: a fixed name in /tmp is not ours to rewrite."""
+    import os
+    import subprocess
+
+    from sphere.sim import trace as T
+    from sphere.sim.board import board_command
+    from simscenarios import need_board, need_testfw
+
+    need_board()
+    elf = need_testfw()
+    trace = T.to_chips(T.still(1.0)).write(tmp_path / "still.bin")
+    link = "/tmp/simavr-uart0"
+    saved = os.readlink(link) if os.path.islink(link) else None
+
+    def run_board():
+        out = subprocess.run(board_command(elf, trace, 0.5, pty=True), capture_output=True, text=True, timeout=60)
+        assert "UART on /dev/pts/" in out.stdout, out.stdout + out.stderr
+
+    try:
+        if saved is not None:
+            os.unlink(link)
+        other = str(tmp_path / "another-simulators-pty")
+        os.symlink(other, link)
+        run_board()
+        assert os.path.islink(link) and os.readlink(link) == other
+        os.unlink(link)
+        run_board()
+        assert not os.path.lexists(link)
+    finally:
+        if os.path.islink(link):
+            os.unlink(link)
+        if saved is not None:
+            os.symlink(saved, link)
