@@ -50,6 +50,7 @@ def test_file_values_are_read_and_converted(tmp_path):
     ("[gyro]\nauto_bias = 1\n", "must be true or false"),
     ("pointer = 3\n", "must be a [pointer] table"),
     ("[pointer\n", "not valid TOML"),
+    ("[pointer]\nsmoothing_dps = 8\n", "[pointer] smoothing_dps moved to [smoothing.tiered] smoothing_dps"),
 ])
 def test_bad_values_give_clear_errors(tmp_path, text, message):
     path = write(tmp_path, text)

@@ -69,6 +69,14 @@ CONTRIBUTORS: tuple[str, ...] = (
 CORE_ORDER = ("source", "output", "mode", "pointer", "tilt", "events", "freeze", "gyro", "orientation", "stream",
               "status")
 
+#: Keys of earlier releases that live elsewhere now: (section, key) -> what to write instead.
+MOVED_KEYS = {
+    ("pointer", "smoothing_dps"): "moved to [smoothing.tiered] smoothing_dps (the old smoothing is the filter "
+                                  "`tiered`: [pointer] smoothing = \"tiered\"; the default is now `tremor`)",
+    ("pointer", "smoothing_time_s"): "moved to [smoothing.tiered] smoothing_time_s (the old smoothing is the "
+                                     "filter `tiered`: [pointer] smoothing = \"tiered\"; the default is now `tremor`)",
+}
+
 #: Largest integer a setting may hold (screen sizes, ports, IDs are far below; 2**70 is a typo).
 MAX_INT = 1 << 31
 
@@ -512,6 +520,8 @@ def validate(values: dict, where: str, together: bool = True) -> dict:
     for name, keys in flatten(values, where).items():
         fields = SECTIONS[name].__dataclass_fields__
         for key, value in keys.items():
+            if key not in fields and (name, key) in MOVED_KEYS:
+                raise ConfigError(f"{where}: [{name}] {key} {MOVED_KEYS[name, key]}")
             if key not in fields:
                 raise ConfigError(f"{where}: unknown key [{name}] {key}{_suggest(key, fields)}; keys of [{name}] are "
                                   f"{', '.join(fields)}")
