@@ -59,8 +59,8 @@ class _Notch:
         self._z = [[(b1 - a1 + b2 - a2) * v, (b2 - a2) * v] for v in x]
 
     def update(self, x, dt_s: float):
-        if self._dt is None or abs(dt_s - self._dt) > 1e-9:
-            self._coefficients(dt_s)
+        if self._dt is None or abs(dt_s - self._dt) > 1e-3 * self._dt:
+            self._coefficients(dt_s)  # a live link's intervals jitter by a few µs: follow changes over 0.1 %
         b0, b1, b2 = self._b
         a1, a2 = self._a
         if self._z is None:
