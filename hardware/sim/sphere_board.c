@@ -41,7 +41,8 @@
 #include "parts/uart_pty.h"
 #include "sensors.h"
 
-#define MAX_FAULTS 32
+/* per kind of scheduled fault: a soak puts one fault every 4-7 s, so an hour holds ~130 of each kind */
+#define MAX_FAULTS 1024
 
 typedef struct {
 	int chip;     /* CHIP_* for a NACK, -1 for a bus stall */
@@ -563,7 +564,7 @@ int main(int argc, char **argv)
 			break;
 		}
 		case 'b': case 'm': case 'A':
-			if ((o == 'b' ? n_brownouts : o == 'm' ? n_resets_mid : n_resets_at) >= MAX_FAULTS) { fprintf(stderr, "too many faults\n"); return 2; }
+			if ((o == 'b' ? n_brownouts : o == 'm' ? n_resets_mid : n_resets_at) >= MAX_FAULTS) { fprintf(stderr, "too many faults of one kind (at most %d)\n", MAX_FAULTS); return 2; }
 			if (o == 'b') brownouts[n_brownouts++] = atof(optarg);
 			else if (o == 'm') resets_mid[n_resets_mid++] = atof(optarg);
 			else resets_at[n_resets_at++] = atof(optarg);
@@ -584,7 +585,7 @@ int main(int argc, char **argv)
 			if (parse_pin(optarg, &lpin_port, &lpin_bit)) { fprintf(stderr, "bad pin %s (e.g. B4)\n", optarg); return 2; }
 			break;
 		case 'N': case 'S': {
-			if (n_faults >= MAX_FAULTS) { fprintf(stderr, "too many faults\n"); return 2; }
+			if (n_faults >= MAX_FAULTS) { fprintf(stderr, "too many faults of one kind (at most %d)\n", MAX_FAULTS); return 2; }
 			fault_t *f = &faults[n_faults];
 			char buf[128];
 			snprintf(buf, sizeof buf, "%s", optarg);
