@@ -27,6 +27,7 @@ import numpy as np
 
 from sphere import chips
 from sphere import quaternion as quat
+from sphere.lazy import load
 
 ACCEL_RATE_HZ = 200.0
 GYRO_RATE_HZ = 200.0
@@ -365,10 +366,7 @@ def synthetic(spec: str, seconds: float) -> Motion:
         raise ValueError(f"unknown synthetic source {name!r}; one of {', '.join(SYNTHETIC)}")
     fn = SYNTHETIC[name]
     if isinstance(fn, str):
-        import importlib
-
-        module, _, attr = fn.partition(":")
-        fn = getattr(importlib.import_module(module), attr)
+        fn = load(fn)
     try:
         return fn(seconds, arg)
     except ValueError as e:

@@ -8,8 +8,9 @@ synthetic:hold seeds 1–3 and BROAD trial 05; the figures it prints are on othe
 
 from __future__ import annotations
 
-import importlib
 import itertools
+
+from sphere.lazy import load
 
 #: name → "module:Class" (imported when first used)
 FILTERS = {
@@ -38,8 +39,7 @@ def filter_class(name: str):
         spec = FILTERS[name]
     except KeyError:
         raise UnknownFilter(f"unknown smoothing filter {name!r}; choose from {', '.join(FILTERS)}") from None
-    module, _, attr = spec.partition(":")
-    return getattr(importlib.import_module(module), attr)
+    return load(spec)
 
 
 def params(name: str) -> dict:

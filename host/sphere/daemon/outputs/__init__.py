@@ -16,7 +16,7 @@ each call on to the WebSocket stream (if any) and to every enabled output.
 
 from __future__ import annotations
 
-import importlib
+from sphere.lazy import load
 
 #: ``[outputs.NAME]`` → "module:Class". One line per output.
 REGISTRY = {
@@ -27,8 +27,7 @@ REGISTRY = {
 
 
 def output_class(name: str):
-    module, _, cls = REGISTRY[name].partition(":")
-    return getattr(importlib.import_module(module), cls)
+    return load(REGISTRY[name])
 
 
 for _name in REGISTRY:  # each module declares its [outputs.NAME] section

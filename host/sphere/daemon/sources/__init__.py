@@ -14,8 +14,6 @@ line in :data:`REGISTRY`; its settings, if it needs its own, are a config sectio
 
 from __future__ import annotations
 
-import importlib
-
 from sphere.daemon.sources.base import LinkLost, Source, SourceEnded, SourceError, version_problem
 from sphere.daemon.sources.hid import HidSource, hid_report_bytes
 from sphere.daemon.sources.replay import ReplaySource
@@ -23,6 +21,7 @@ from sphere.daemon.sources.scripted import ScriptedSource
 from sphere.daemon.sources.serial import SerialSource, candidate_ports, expand_candidates, usb_ports
 from sphere.daemon.sources.simulated import (DEFAULT_SIM_TRACE, PTY_RE, SimulatorSource, simulator_available,
                                              simulator_command, start_simulator)
+from sphere.lazy import load
 
 #: ``[source] kind`` → "module:Class". One line per source.
 REGISTRY = {
@@ -35,8 +34,7 @@ REGISTRY = {
 
 
 def source_class(kind: str):
-    module, _, name = REGISTRY[kind].partition(":")
-    return getattr(importlib.import_module(module), name)
+    return load(REGISTRY[kind])
 
 
 def kind_of(cfg) -> str:
