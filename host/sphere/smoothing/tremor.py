@@ -30,6 +30,8 @@ import math
 
 from sphere.smoothing.params import Param, resolve
 
+_TWO_PI = 2.0 * math.pi
+
 
 class _Notch:
     """One biquad notch (Audio EQ Cookbook, R. Bristow-Johnson) per component, transposed direct form II."""
@@ -63,11 +65,11 @@ class _Notch:
             self._coefficients(dt_s)  # a live link's intervals jitter by a few µs: follow changes over 0.1 %
         b0, b1, b2 = self._b
         a1, a2 = self._a
-        if self._z is None:
-            self._z = [[(b1 - a1 + b2 - a2) * v, (b2 - a2) * v] for v in x]
+        zs = self._z
+        if zs is None:
+            zs = self._z = [[(b1 - a1 + b2 - a2) * v, (b2 - a2) * v] for v in x]
         out = []
-        for i, v in enumerate(x):
-            z = self._z[i]
+        for v, z in zip(x, zs):
             y = b0 * v + z[0]
             z[0] = b1 * v - a1 * y + z[1]
             z[1] = b2 * v - a2 * y
@@ -114,24 +116,30 @@ class TremorFilter:
         y = x
         for n in self._notches:
             y = n.update(y, dt_s)
-        if self._last is None:
+        last = self._last
+        if last is None:
             self._v = [0.0] * len(y)
             self._z = list(y)
         else:
             k = dt_s / (self.speed_tau_s + dt_s)
             v = self._v
-            for i, (a, b) in enumerate(zip(y, self._last)):
-                v[i] += k * ((a - b) / dt_s - v[i])
-            self.speed = math.sqrt(sum(c * c for c in v))
-            tau = 1.0 / (2.0 * math.pi * (self.min_cutoff_hz + self.beta * self.speed))
+            s2 = 0
+            for i in range(len(y)):
+                vi = v[i] + k * ((y[i] - last[i]) / dt_s - v[i])
+                v[i] = vi
+                s2 += vi * vi
+            speed = self.speed = math.sqrt(s2)
+            tau = 1.0 / (_TWO_PI * (self.min_cutoff_hz + self.beta * speed))
             alpha = dt_s / (tau + dt_s)
             z = self._z
-            for i, a in enumerate(y):
-                z[i] += alpha * (a - z[i])
+            for i in range(len(y)):
+                zi = z[i]
+                z[i] = zi + alpha * (y[i] - zi)
         self._last = y
         z = self._z
-        if self.pass_dps > 0:
-            half = 0.5 * self.pass_dps
+        pass_dps = self.pass_dps
+        if pass_dps > 0:
+            half = 0.5 * pass_dps
             a = (self.speed - half) / half
             if a >= 1.0:
                 for n in self._notches:
@@ -140,5 +148,5 @@ class TremorFilter:
                 self._last = list(x)
                 return tuple(x)
             if a > 0.0:
-                return tuple(f + a * (r - f) for f, r in zip(z, x))
+                return tuple([f + a * (r - f) for f, r in zip(z, x)])
         return tuple(z)
