@@ -39,6 +39,7 @@ chose, leave one trial out (host/docs/fusion.md); the rest are VQF's published d
 from __future__ import annotations
 
 import math
+from math import cos as _cos, sin as _sin, sqrt as _sqrt
 
 import numpy as np
 
@@ -150,9 +151,21 @@ class SphereFilter:
         return np.array(self._quat())
 
     def _quat(self):
+        # _norm4(_qmul(qz, _qmul(q_inc, q_gyr))) with qz = (cos h, 0, 0, sin h), written out (every sample)
         h = 0.5 * self.delta
-        qz = (math.cos(h), 0.0, 0.0, math.sin(h))
-        return _norm4(_qmul(qz, _qmul(self.q_inc, self.q_gyr)))
+        p0, p1, p2, p3 = self.q_inc
+        q0, q1, q2, q3 = self.q_gyr
+        r0 = p0 * q0 - p1 * q1 - p2 * q2 - p3 * q3
+        r1 = p0 * q1 + p1 * q0 + p2 * q3 - p3 * q2
+        r2 = p0 * q2 - p1 * q3 + p2 * q0 + p3 * q1
+        r3 = p0 * q3 + p1 * q2 - p2 * q1 + p3 * q0
+        p0, p3 = _cos(h), _sin(h)
+        q0 = p0 * r0 - 0.0 * r1 - 0.0 * r2 - p3 * r3
+        q1 = p0 * r1 + 0.0 * r0 + 0.0 * r3 - p3 * r2
+        q2 = p0 * r2 - 0.0 * r3 + 0.0 * r0 + p3 * r1
+        q3 = p0 * r3 + 0.0 * r2 - 0.0 * r1 + p3 * r0
+        n = 1.0 / _sqrt(q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3)
+        return (q0 * n, q1 * n, q2 * n, q3 * n)
 
     def _coeffs(self, dt):
         c = self.cfg
@@ -219,6 +232,8 @@ class SphereFilter:
 
     # -- the filter ---------------------------------------------------------------------------------
     def _step(self, gx, gy, gz, ax, ay, az, m, dt, acc_valid):
+        # the quaternion products, rotations and normalisations of _qmul, _rot and _norm4 are written out here
+        # (the same operations in the same order: the same bits), as this runs at every sample
         if self._dt is None or abs(dt - self._dt) > 1e-3 * self._dt:
             self._coeffs(dt)  # a live link's intervals jitter by a few µs: the gains follow changes over 0.1 %
         self._rest(gx, gy, gz, ax, ay, az, dt)
@@ -226,42 +241,64 @@ class SphereFilter:
         wx, wy, wz = gx - b[0], gy - b[1], gz - b[2]
 
         # 1. strapdown: q_gyr ← q_gyr ⊗ exp(½ ω dt)
-        wn = math.sqrt(wx * wx + wy * wy + wz * wz)
+        wn = _sqrt(wx * wx + wy * wy + wz * wz)
         if wn > 1e-12:
             ang = 0.5 * wn * dt
-            s = math.sin(ang) / wn
-            qg = _qmul(self.q_gyr, (math.cos(ang), wx * s, wy * s, wz * s))
-            self.q_gyr = _norm4(qg)
+            s = _sin(ang) / wn
+            q0, q1, q2, q3 = _cos(ang), wx * s, wy * s, wz * s
+            p0, p1, p2, p3 = self.q_gyr
+            r0 = p0 * q0 - p1 * q1 - p2 * q2 - p3 * q3
+            r1 = p0 * q1 + p1 * q0 + p2 * q3 - p3 * q2
+            r2 = p0 * q2 - p1 * q3 + p2 * q0 + p3 * q1
+            r3 = p0 * q3 + p1 * q2 - p2 * q1 + p3 * q0
+            n = 1.0 / _sqrt(r0 * r0 + r1 * r1 + r2 * r2 + r3 * r3)
+            self.q_gyr = (r0 * n, r1 * n, r2 * n, r3 * n)
 
         # 2. inclination from the accelerometer low-passed in frame I
         if acc_valid and (ax or ay or az):
-            ix, iy, iz = _rot(self.q_gyr, ax, ay, az)
-            self.n_acc += 1
-            k = max(self._k_acc, 1.0 / self.n_acc)
+            q0, q1, q2, q3 = self.q_gyr
+            ix = 2.0 * (ax * (0.5 - q2 * q2 - q3 * q3) + ay * (q1 * q2 - q0 * q3) + az * (q1 * q3 + q0 * q2))
+            iy = 2.0 * (ax * (q1 * q2 + q0 * q3) + ay * (0.5 - q1 * q1 - q3 * q3) + az * (q2 * q3 - q0 * q1))
+            iz = 2.0 * (ax * (q1 * q3 - q0 * q2) + ay * (q2 * q3 + q0 * q1) + az * (0.5 - q1 * q1 - q2 * q2))
+            n_acc = self.n_acc = self.n_acc + 1
+            k = self._k_acc
+            kn = 1.0 / n_acc
+            if kn > k:
+                k = kn
             # second-order low-pass: two first-order stages of τ/2 each (critically damped)
             l1 = self.acc_lp1
-            l1[0] += k * (ix - l1[0])
-            l1[1] += k * (iy - l1[1])
-            l1[2] += k * (iz - l1[2])
+            l0 = l1[0] + k * (ix - l1[0])
+            l1_ = l1[1] + k * (iy - l1[1])
+            l2 = l1[2] + k * (iz - l1[2])
+            l1[0], l1[1], l1[2] = l0, l1_, l2
             lp = self.acc_lp
-            lp[0] += k * (l1[0] - lp[0])
-            lp[1] += k * (l1[1] - lp[1])
-            lp[2] += k * (l1[2] - lp[2])
-            vx, vy, vz = _rot(self.q_inc, lp[0], lp[1], lp[2])
-            vn = math.sqrt(vx * vx + vy * vy + vz * vz)
+            x_ = lp[0] + k * (l0 - lp[0])
+            y_ = lp[1] + k * (l1_ - lp[1])
+            z_ = lp[2] + k * (l2 - lp[2])
+            lp[0], lp[1], lp[2] = x_, y_, z_
+            q0, q1, q2, q3 = self.q_inc
+            vx = 2.0 * (x_ * (0.5 - q2 * q2 - q3 * q3) + y_ * (q1 * q2 - q0 * q3) + z_ * (q1 * q3 + q0 * q2))
+            vy = 2.0 * (x_ * (q1 * q2 + q0 * q3) + y_ * (0.5 - q1 * q1 - q3 * q3) + z_ * (q2 * q3 - q0 * q1))
+            vz = 2.0 * (x_ * (q1 * q3 - q0 * q2) + y_ * (q2 * q3 + q0 * q1) + z_ * (0.5 - q1 * q1 - q2 * q2))
+            vn = _sqrt(vx * vx + vy * vy + vz * vz)
             if vn > 0.0:
                 vx, vy, vz = vx / vn, vy / vn, vz / vn
                 # smallest rotation taking v to +z: axis v × z = (vy, −vx, 0)
                 w = 1.0 + vz
                 if w > 1e-9:
-                    rn = 1.0 / math.sqrt(w * w + vx * vx + vy * vy)
-                    r = (w * rn, vy * rn, -vx * rn, 0.0)
+                    rn = 1.0 / _sqrt(w * w + vx * vx + vy * vy)
+                    p0, p1, p2, p3 = w * rn, vy * rn, -vx * rn, 0.0
                 else:
-                    r = (0.0, 1.0, 0.0, 0.0)
-                self.q_inc = _norm4(_qmul(r, self.q_inc))
-                if self.n_acc > 1:  # the first sample's alignment is not a drift
-                    self._cx += 2.0 * r[1]
-                    self._cy += 2.0 * r[2]
+                    p0, p1, p2, p3 = 0.0, 1.0, 0.0, 0.0
+                r0 = p0 * q0 - p1 * q1 - p2 * q2 - p3 * q3
+                r1 = p0 * q1 + p1 * q0 + p2 * q3 - p3 * q2
+                r2 = p0 * q2 - p1 * q3 + p2 * q0 + p3 * q1
+                r3 = p0 * q3 + p1 * q2 - p2 * q1 + p3 * q0
+                n = 1.0 / _sqrt(r0 * r0 + r1 * r1 + r2 * r2 + r3 * r3)
+                self.q_inc = (r0 * n, r1 * n, r2 * n, r3 * n)
+                if n_acc > 1:  # the first sample's alignment is not a drift
+                    self._cx += 2.0 * p1
+                    self._cy += 2.0 * p2
 
         # 3. heading from the magnetometer, with disturbance detection
         if m is not None:
