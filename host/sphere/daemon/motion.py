@@ -14,6 +14,9 @@ from sphere import chips
 
 G_M_S2 = chips.STANDARD_GRAVITY_M_S2
 DEG = math.pi / 180.0
+_GYRO_DPS_PER_LSB = 1.0 / chips.ITG3200_LSB_PER_DPS
+_ACCEL_G_PER_LSB = 1.0 / chips.ADXL345_LSB_PER_G
+_MAG_UT_PER_LSB = 1.0 / chips.HMC5883L_LSB_PER_UT
 MAG_STILL_UT = 0.2  # µT per still window: the compass trend test's floor (HMC5883L noise ≈ 0.2 µT, 1 LSB 0.09 µT)
 
 
@@ -32,20 +35,27 @@ class _Trend:
         self.last = None
 
     def add(self, t: float, v) -> None:
-        if self.t0 is None:
-            self.t0 = t
-        t -= self.t0
+        t0 = self.t0
+        if t0 is None:
+            t0 = self.t0 = t
+        t -= t0
         self.n += 1
         if v != self.last:
             self.fresh += 1
             self.last = v
         self.st += t
         self.stt += t * t
-        for i in range(3):
-            x = v[i]
-            self.sx[i] += x
-            self.stx[i] += t * x
-            self.sxx[i] += x * x
+        x0, x1, x2 = v  # written out: this runs twice per sample
+        sx, stx, sxx = self.sx, self.stx, self.sxx
+        sx[0] += x0
+        stx[0] += t * x0
+        sxx[0] += x0 * x0
+        sx[1] += x1
+        stx[1] += t * x1
+        sxx[1] += x1 * x1
+        sx[2] += x2
+        stx[2] += t * x2
+        sxx[2] += x2 * x2
 
     def moved(self, floor: float, k_sigma: float = 4.0) -> bool:
         """Whether the vector changed over the window by more than ``k_sigma`` standard errors of the fitted
@@ -127,29 +137,48 @@ class GyroBias:
     def add(self, gyro_dps, accel_g_norm: float, dt_s: float, mag_uT=None, accel_g=None) -> None:
         if not self.enabled:
             return
-        self._clock += dt_s
-        for i in range(3):
-            v = gyro_dps[i]
-            self._sum[i] += v
-            if v < self._lo[i]:
-                self._lo[i] = v
-            if v > self._hi[i]:
-                self._hi[i] = v
+        clock = self._clock = self._clock + dt_s
+        g0, g1, g2 = gyro_dps  # written out (runs at every sample): the same sums and comparisons as a loop
+        sm, lo, hi = self._sum, self._lo, self._hi
+        sm[0] += g0
+        sm[1] += g1
+        sm[2] += g2
+        if g0 < lo[0]:
+            lo[0] = g0
+        if g0 > hi[0]:
+            hi[0] = g0
+        if g1 < lo[1]:
+            lo[1] = g1
+        if g1 > hi[1]:
+            hi[1] = g1
+        if g2 < lo[2]:
+            lo[2] = g2
+        if g2 > hi[2]:
+            hi[2] = g2
         if abs(accel_g_norm - 1.0) > 0.15:
             self._accel_ok = False
         self._n += 1
         self._t += dt_s
-        spread = max(self._hi[i] - self._lo[i] for i in range(3))
+        spread = hi[0] - lo[0]  # max() of the three
+        d = hi[1] - lo[1]
+        if d > spread:
+            spread = d
+        d = hi[2] - lo[2]
+        if d > spread:
+            spread = d
         if spread > 2.0 * self.still_dps or not self._accel_ok:
             self._start()
             self._pending = self._long = None
             return
-        trends = ((self._acc, self._mag), self._long) if self._long is not None else ((self._acc, self._mag),)
-        for acc, mag in trends:
+        if accel_g is not None and type(accel_g) is not tuple:
+            accel_g = tuple(accel_g)
+        if mag_uT is not None and type(mag_uT) is not tuple:
+            mag_uT = tuple(mag_uT)
+        for acc, mag in ((self._acc, self._mag), self._long) if self._long is not None else ((self._acc, self._mag),):
             if accel_g is not None:
-                acc.add(self._clock, tuple(accel_g))
+                acc.add(clock, accel_g)
             if mag_uT is not None:
-                mag.add(self._clock, tuple(mag_uT))
+                mag.add(clock, mag_uT)
         if self._t >= self.still_time_s:
             self._end_window()
 
@@ -234,7 +263,9 @@ class _NwuFilter:
 
     def update(self, *args, **kwargs):
         q = self.inner.update(*args, **kwargs)
-        return _qmul(_ENU_TO_NWU, tuple(float(v) for v in q))
+        if type(q) is not tuple or type(q[0]) is not float:  # SphereFilter's own: a tuple of floats
+            q = tuple(float(v) for v in q)
+        return _qmul(_ENU_TO_NWU, q)
 
     @property
     def quat(self):
@@ -306,11 +337,11 @@ class MotionTracker:
         self.raw_seen = True
         dt = self._dt(t_us, self._last_raw_t)
         self._last_raw_t = t_us
-        s = 1.0 / chips.ITG3200_LSB_PER_DPS
+        s = _GYRO_DPS_PER_LSB
         g = sample.gyro
         gyro = (g[0] * s, g[1] * s, g[2] * s)
         a = sample.accel
-        ka = 1.0 / chips.ADXL345_LSB_PER_G
+        ka = _ACCEL_G_PER_LSB
         ax, ay, az = a[0] * ka, a[1] * ka, a[2] * ka
         anorm = math.sqrt(ax * ax + ay * ay + az * az)
         flags = sample.flags
@@ -322,7 +353,7 @@ class MotionTracker:
             return dt
         tap_active = bool(flags & 0x10)
         accel_ok = bool(flags & 0x01) and anorm > 0.0
-        km = 1.0 / chips.HMC5883L_LSB_PER_UT
+        km = _MAG_UT_PER_LSB
         m = sample.mag
         mag_ok = bool(flags & 0x04) and -4096 not in m
         mag = (m[0] * km, m[1] * km, m[2] * km) if mag_ok else None
@@ -346,7 +377,8 @@ class MotionTracker:
             gd = self.gyro_dps
             q = self.filter.update((gd[0] * DEG, gd[1] * DEG, gd[2] * DEG), (ax * G_M_S2, ay * G_M_S2, az * G_M_S2),
                                    mag, dt, acc_valid=accel_ok and not tap_active)
-            self.quat = tuple(float(v) for v in q)
+            # _NwuFilter gives a tuple of floats (_qmul's); another filter's output is made one
+            self.quat = q if type(q) is tuple and type(q[0]) is float else tuple(float(v) for v in q)
             self.up = up_from_quat(self.quat)
         elif self.quat is None:
             self.up = self._accel_up
