@@ -329,8 +329,7 @@ class SphereFilter:
         x = (r00, r01, r02, r10, r11, r12,
              r00 * b[0] + r01 * b[1] + r02 * b[2], r10 * b[0] + r11 * b[1] + r12 * b[2])
         it = self._int
-        for i in range(8):
-            it[i] += x[i] * tb
+        it[:8] = [a + c * tb for a, c in zip(it, x)]
         it[8] += self._cx
         it[9] += self._cy
         self._cx = self._cy = 0.0
@@ -338,18 +337,16 @@ class SphereFilter:
         self._n_bias += 1
         k = max(self._k_blp, 1.0 / self._n_bias)
         l1, lp = self._blp1, self._blp
-        for i in range(8):
-            l1[i] += k * (it[i] - l1[i])
-            lp[i] += k * (l1[i] - lp[i])
+        l1[:] = [a + k * (c - a) for a, c in zip(l1, it)]
+        lp[:] = [a + k * (c - a) for a, c in zip(lp, l1)]
         k3 = self._k_blp3
         l3, prev = self._blp3, self._blp3_prev
         prev[:] = l3
-        for i in range(8):
-            l3[i] += k3 * (lp[i] - l3[i])
+        l3[:8] = [a + k3 * (c - a) for a, c in zip(l3, lp)]
         l3[8] += k3 * (it[8] - l3[8])
         l3[9] += k3 * (it[9] - l3[9])
         g = 1.0 / tb
-        d = [(l3[i] - prev[i]) * g for i in range(10)]
+        d = [(a - c) * g for a, c in zip(l3, prev)]
         P = self.bias_P
         v, p0 = self._b_v, self._b_p0
         for i in range(3):
@@ -359,7 +356,8 @@ class SphereFilter:
             w = self._b_wrest
             S = [[P[i][j] + (w if i == j else 0.0) for j in range(3)] for i in range(3)]
             Si = _inv3(S)
-            K = [[sum(P[i][m] * Si[m][j] for m in range(3)) for j in range(3)] for i in range(3)]
+            S0, S1, S2 = Si
+            K = [[sum((Pi[0] * S0[j], Pi[1] * S1[j], Pi[2] * S2[j])) for j in range(3)] for Pi in P]
             rg = self.rest_gyr
             y = (rg[0] - b[0], rg[1] - b[1], rg[2] - b[2])
             H = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
@@ -381,15 +379,33 @@ class SphereFilter:
             K = [[PH[i][0] * i00 + PH[i][1] * i01, PH[i][0] * i01 + PH[i][1] * i11] for i in range(3)]
         else:
             return
-        nm = len(y)
+        # the sums below are sum() over tuples written out (no generators; the same additions in the same order)
         clip = self._bias_clip
+        if len(y) == 2:
+            y0, y1 = y
+            H0, H1 = H
+            Ky = [sum((Ki[0] * y0, Ki[1] * y1)) for Ki in K]
+            KH = [[sum((Ki[0] * H0[0], Ki[1] * H1[0])), sum((Ki[0] * H0[1], Ki[1] * H1[1])),
+                   sum((Ki[0] * H0[2], Ki[1] * H1[2]))] for Ki in K]
+        else:
+            y0, y1, y2 = y
+            H0, H1, H2 = H
+            Ky = [sum((Ki[0] * y0, Ki[1] * y1, Ki[2] * y2)) for Ki in K]
+            KH = [[sum((Ki[0] * H0[0], Ki[1] * H1[0], Ki[2] * H2[0])),
+                   sum((Ki[0] * H0[1], Ki[1] * H1[1], Ki[2] * H2[1])),
+                   sum((Ki[0] * H0[2], Ki[1] * H1[2], Ki[2] * H2[2]))] for Ki in K]
         for i in range(3):
-            v_ = b[i] + sum(K[i][j] * y[j] for j in range(nm))
+            v_ = b[i] + Ky[i]
             b[i] = clip if v_ > clip else (-clip if v_ < -clip else v_)
         # P ← (I − K H) P, kept symmetric
-        KH = [[sum(K[i][j] * H[j][m] for j in range(nm)) for m in range(3)] for i in range(3)]
-        Pn = [[P[i][j] - sum(KH[i][m] * P[m][j] for m in range(3)) for j in range(3)] for i in range(3)]
-        self.bias_P = [[0.5 * (Pn[i][j] + Pn[j][i]) for j in range(3)] for i in range(3)]
+        P0, P1, P2 = P
+        (n00, n01, n02), (n10, n11, n12), (n20, n21, n22) = [
+            [Pi[0] - sum((KHi[0] * P0[0], KHi[1] * P1[0], KHi[2] * P2[0])),
+             Pi[1] - sum((KHi[0] * P0[1], KHi[1] * P1[1], KHi[2] * P2[1])),
+             Pi[2] - sum((KHi[0] * P0[2], KHi[1] * P1[2], KHi[2] * P2[2]))] for Pi, KHi in zip(P, KH)]
+        self.bias_P = [[0.5 * (n00 + n00), 0.5 * (n01 + n10), 0.5 * (n02 + n20)],
+                       [0.5 * (n10 + n01), 0.5 * (n11 + n11), 0.5 * (n12 + n21)],
+                       [0.5 * (n20 + n02), 0.5 * (n21 + n12), 0.5 * (n22 + n22)]]
 
     def _mag(self, mx, my, mz, gx, gy, gz, dt):
         q6 = _qmul(self.q_inc, self.q_gyr)
