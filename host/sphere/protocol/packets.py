@@ -89,11 +89,14 @@ class Packet:
     _struct: ClassVar[struct.Struct]
     _v1_struct: ClassVar[struct.Struct | None]
     _plan: ClassVar[tuple[tuple[str, int], ...]]
+    _unpack_plan: ClassVar[tuple[tuple[str, int, int], ...]]  # (name, index in the unpacked tuple, count)
 
     def __init_subclass__(cls, **kwargs):
         super().__init_subclass__(**kwargs)
         cls._struct = struct.Struct("<" + "".join(f"{f.count}{f.code}" for f in cls.FIELDS))
         cls._plan = tuple((f.name, f.count) for f in cls.FIELDS)
+        starts = [sum(f.count for f in cls.FIELDS[:k]) for k in range(len(cls.FIELDS))]
+        cls._unpack_plan = tuple((f.name, i, f.count) for f, i in zip(cls.FIELDS, starts))
         cls._v1_struct = None
         if cls.V1_FIELDS is not None:
             cls._v1_struct = struct.Struct("<" + "".join(f"{f.count}{f.code}" for f in cls.FIELDS[: cls.V1_FIELDS]))
@@ -143,6 +146,11 @@ class Packet:
         v1 = cls._v1_struct is not None and len(body) == cls._v1_struct.size
         flat = (cls._v1_struct if v1 else cls._struct).unpack(body)
         obj = cls.__new__(cls)
+        if not v1:  # the current version (every frame of a live link): one pass over a precomputed plan
+            for name, i, count in cls._unpack_plan:
+                setattr(obj, name, flat[i] if count == 1 else flat[i : i + count])
+            obj.seq = seq
+            return obj
         i = 0
         for k, (name, count) in enumerate(cls._plan):
             if v1 and k >= cls.V1_FIELDS:
