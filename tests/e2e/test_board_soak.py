@@ -129,3 +129,34 @@ def test_a_short_soak_of_the_firmware(tmp_path, capsys):
     assert "sda_held_at_power_up" in kinds and ({"nack_start", "stall_start", "brownout", "reset_mid_read",
                                                  "host_stall"} & kinds)
     assert r["recoveries"] and r["speed"] > 0
+
+
+def test_a_frame_cut_by_a_reset_is_injected_until_the_rebooted_firmware_speaks():
+    """A reset mid-frame (here during a host stall, with the bus held after it): the cut frame is judged only
+    when the rebooted firmware's first delimiter arrives, 300 ms later and 100 ms after the host reads again; it
+    is the injected fault, not a CRC error. A damaged frame after the firmware is heard again counts."""
+    bad = b"\x03\x11\x22\x00"
+    items = [(0.0, _hello(), 0), (1.0, _raw(1000000), 1), (1.30, bad), (1.31, _hello(), 0), (1.5, bad)]
+    frames = S.read_frames(*_stream(items))
+    log = [{"t": 0.9, "kind": "host_stall"}, {"t": 1.0, "kind": "reset_mid_read"}, {"t": 1.2, "kind": "host_reads"}]
+    line, stalls = S.line_fault_windows(log, frames)
+    assert stalls == [(0.9, 1.2)]
+    s = S.stream_checks(frames, line, [1.0])
+    assert s["crc_errors"].count == 1 and s["crc_errors"].first_s == 1.5
+
+
+def test_an_orientation_check_while_the_host_does_not_read_waits_for_it():
+    """2 s after a fault the host is in a stall: nothing the device sends reaches it, so the check is made at the
+    first ORIENTATION after the stall, not reported as 'no orientation'."""
+    def q(t, quat, seq):
+        return (t, Orientation(t_us=int(t * 1e6), flags=0, quat=quat), seq)
+    one = (16384, 0, 0, 0)
+    dev = [(0.0, _hello(), 0), q(1.9, one, 1), q(3.55, one, 2)]
+    ref = [(0.0, _hello(), 0)] + [q(1.9 + 0.05 * i, one, i + 1) for i in range(40)]
+    ends = [{"kind": "nack", "t_start": 0.9, "t_end": 1.0, "chips": ["itg3200"]}]
+    a, b = S.read_frames(*_stream(dev)), S.read_frames(*_stream(ref))
+    worst, rows = S.orientation_excess(a, b, ends, [])
+    assert rows[0]["excess_deg"] is None or rows[0]["excess_deg"] == float("inf")  # without the stall: none there
+    worst, rows = S.orientation_excess(a, b, ends, [], host_stalls=[(2.5, 3.5)])
+    assert rows[0]["t"] == pytest.approx(3.55) and rows[0]["excess_deg"] == pytest.approx(0.0, abs=1e-6)
+    assert worst.first_s is None

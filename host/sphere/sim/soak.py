@@ -9,6 +9,7 @@ and ORIENTATION quaternions. The invariants (issue 11) and their limits are in :
 
 from __future__ import annotations
 
+import bisect
 import json
 import math
 import struct
@@ -204,11 +205,37 @@ def _quats(frames):
     return t, q
 
 
+def line_fault_windows(log: list[dict], frames: list[Frame]) -> tuple[list, list]:
+    """The windows in which a damaged frame is an injected fault, and the host stalls, from the board's log.
+    A reset cuts the frame on the wire, and the cut frame is judged when the next delimiter comes: the rebooted
+    firmware's first byte, which may wait for the bus (a chip holding SDA after a reset mid-read) and for the host
+    to read again. A host stall drops bytes until it ends."""
+    good_t = [f.t_s for f in frames if f.ok]
+    line = [(e["t"], _first_good_after(good_t, e["t"]) + LINE_WINDOW_S) for e in log if e["kind"] in RESET_KINDS]
+    stall_t, host_stalls = None, []
+    for e in log:
+        if e["kind"] == "host_stall":
+            stall_t = e["t"]
+        elif e["kind"] == "host_reads" and stall_t is not None:
+            line.append((stall_t, e["t"] + LINE_WINDOW_S))
+            host_stalls.append((stall_t, e["t"]))
+            stall_t = None
+    return line, host_stalls
+
+
+def _first_good_after(good_t: list[float], t: float) -> float:
+    """The first of the intact frames' times ``good_t`` (ascending) after ``t`` (``t`` itself when none is)."""
+    i = bisect.bisect_right(good_t, t)
+    return good_t[i] if i < len(good_t) else t
+
+
 def orientation_excess(frames: list[Frame], ref: list[Frame], ends: list[dict], resets_t: list[float],
-                       after_s: float = 2.0, settle_after_reset_s: float = 2.5) -> tuple[Invariant, list]:
+                       host_stalls=(), after_s: float = 2.0,
+                       settle_after_reset_s: float = 2.5) -> tuple[Invariant, list]:
     """orientation_excess_deg: the device's ORIENTATION against the reference run's (the same motion and
     resets, no other faults), ``after_s`` after each fault ends; not within ``settle_after_reset_s`` of a
-    reset (the firmware's start-up is not the same to the millisecond in both runs)."""
+    reset (the firmware's start-up is not the same to the millisecond in both runs). A check that falls while
+    the host is not reading is made when it reads again (nothing the device sent in between reaches it)."""
     ta, qa = _quats(frames)
     tb, qb = _quats(ref)
     worst = Invariant()
@@ -217,6 +244,7 @@ def orientation_excess(frames: list[Frame], ref: list[Frame], ends: list[dict], 
         if e["kind"] in RESET_KINDS or e["kind"] == "sda_held_at_power_up":
             continue
         t = e["t_end"] + after_s
+        t = max([t] + [b + 0.05 for a, b in host_stalls if a <= t <= b + 0.05])
         if not len(ta) or not len(tb) or t > min(ta[-1], tb[-1]):
             continue  # the run ended first
         if any(r - 0.1 <= t <= r + settle_after_reset_s for r in resets_t):
@@ -384,18 +412,10 @@ def run_soak(elf, seconds: float, seed: int, board: str | None = None, kinds=FAU
             e["chip"] = mag
     ends = fault_ends(log, chips)
     resets_t = [e["t"] for e in log if e["kind"] in RESET_KINDS]
-    line = [(e["t"], e["t"] + LINE_WINDOW_S) for e in log if e["kind"] in RESET_KINDS]
-    stall_t, host_stalls = None, []
-    for e in log:
-        if e["kind"] == "host_stall":
-            stall_t = e["t"]
-        elif e["kind"] == "host_reads" and stall_t is not None:
-            line.append((stall_t, e["t"] + LINE_WINDOW_S))
-            host_stalls.append((stall_t, e["t"]))
-            stall_t = None
+    line, host_stalls = line_fault_windows(log, frames)
     s = stream_checks(frames, line, resets_t)
     rec, rec_rows = recovery(frames, ends, host_stalls)
-    ori, ori_rows = orientation_excess(frames, ref, ends, resets_t)
+    ori, ori_rows = orientation_excess(frames, ref, ends, resets_t, host_stalls)
     resets = max(0, s["hellos"] + s["hellos_lost"] - 1)
     injected = len(resets_t)
     inv = {
