@@ -8,7 +8,11 @@ Wall time: the board runs about 1.2 to 2.5 simulated seconds per wall second on 
 from __future__ import annotations
 
 import functools
+import os
 import shutil
+import signal
+import subprocess
+import time
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
@@ -210,3 +214,45 @@ def s16be(hi: int, lo: int) -> int:
 
 def s16le(lo: int, hi: int) -> int:
     return s16be(hi, lo)
+
+
+# -- processes the tests start --------------------------------------------------------------------------------
+
+def children(pid: int) -> list[int]:
+    """The process ids of ``pid``'s children (Linux /proc)."""
+    try:
+        with open(f"/proc/{pid}/task/{pid}/children") as f:
+            return [int(p) for p in f.read().split()]
+    except OSError:
+        return []
+
+
+def running(pid: int) -> bool:
+    """``pid`` exists and is neither a zombie nor dead."""
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().rsplit(")", 1)[1].split()[0] not in ("Z", "X")
+    except OSError:
+        return False
+
+
+def survivors(pids, within_s: float = 10.0) -> list[int]:
+    """Wait up to ``within_s`` for ``pids`` to end; those still running are killed and returned."""
+    deadline = time.monotonic() + within_s
+    while any(running(p) for p in pids) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    left = [p for p in pids if running(p)]
+    for p in left:
+        os.kill(p, signal.SIGKILL)
+    return left
+
+
+def stop_simulator(proc) -> None:
+    """Stop `sphere sim`; its board stops with it (PR_SET_PDEATHSIG, test_sim_board.py checks that)."""
+    if proc.poll() is None:
+        proc.terminate()
+    try:
+        proc.wait(10)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.wait(5)

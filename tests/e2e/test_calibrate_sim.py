@@ -17,13 +17,12 @@ Tolerances, from the chips' quantisation and the simulated noise (datasheet-like
 from __future__ import annotations
 
 import json
-import subprocess
 import time
 
 import numpy as np
 import pytest
 
-from simscenarios import need_board, need_firmware
+from simscenarios import need_board, need_firmware, stop_simulator
 
 from sphere import chips
 from sphere.sim import trace as T
@@ -43,15 +42,6 @@ def _start(trace: str, seconds: float):
         pytest.fail(str(e))
 
 
-def _stop(proc):
-    """Stop `sphere sim`; its board stops with it (PR_SET_PDEATHSIG, test_sim_board.py checks that)."""
-    if proc.poll() is None:
-        proc.terminate()
-    try:
-        proc.wait(10)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        proc.wait(5)
 
 
 def _ask(port_path: str, packet, want=("REPLY",), timeout_s: float = 3.0):
@@ -133,7 +123,7 @@ def test_guided_calibration_on_the_virtual_sphere(tmp_path, capsys):
         held, state = _held(_ask(pty, GetCalibration())[0])
         assert held == block and "from_eeprom" in state and "eeprom_invalid" not in state, (held, state)
     finally:
-        _stop(proc)
+        stop_simulator(proc)
     print(f"guided session on the virtual sphere: {took:.1f} s wall")
     # the session's bytes, kept with --save-capture, give the same result offline (same detection)
     assert main(["calibrate", "--capture", str(cap), "--json", str(tmp_path / "offline.json")]) == 0
@@ -161,7 +151,7 @@ def test_a_face_that_never_comes_times_out_and_sends_nothing(tmp_path, capsys):
         assert not out.exists()
         held, state = _held(_ask(pty, GetCalibration())[0])
     finally:
-        _stop(proc)
+        stop_simulator(proc)
     # the device still has the defaults (its own power-up gyro bias estimate aside): nothing was set or saved
     assert held["accel_offset"] == (0, 0, 0) and held["accel_scale"] == (16384,) * 3, held
     assert held["mag_offset"] == (0, 0, 0) and held["mag_soft_iron"] == (16384, 0, 0, 0, 16384, 0, 0, 0, 16384), held

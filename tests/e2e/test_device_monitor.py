@@ -3,14 +3,13 @@ settings reach the firmware and change what it does (a 4 g knock is no tap with 
 one with 2 g), the stream settings come back in its HELLO, identify and reboot are answered; the monitor
 shows the packets, rates, flags, values, link quality and the events as they happen."""
 
-import subprocess
 
 import pytest
 
 from sphere.cli import main
 from sphere.sim import trace as T
 
-from simscenarios import need_board, need_firmware
+from simscenarios import need_board, need_firmware, stop_simulator
 
 pytestmark = pytest.mark.slow
 
@@ -33,12 +32,7 @@ def board(tmp_path_factory):
     except SourceError as e:
         pytest.fail(str(e))
     yield pty
-    if proc.poll() is None:
-        proc.terminate()
-    try:
-        proc.wait(10)
-    except subprocess.TimeoutExpired:
-        proc.kill()
+    stop_simulator(proc)
 
 
 def _events_for(pty, seconds):

@@ -10,23 +10,7 @@ import subprocess
 import sys
 import time
 
-from simscenarios import need_board, need_firmware
-
-
-def _children(pid: int) -> list[int]:
-    try:
-        with open(f"/proc/{pid}/task/{pid}/children") as f:
-            return [int(p) for p in f.read().split()]
-    except OSError:
-        return []
-
-
-def _running(pid: int) -> bool:
-    try:
-        with open(f"/proc/{pid}/stat") as f:
-            return f.read().rsplit(")", 1)[1].split()[0] not in ("Z", "X")
-    except OSError:
-        return False
+from simscenarios import children, need_board, need_firmware, survivors
 
 
 def test_sigkill_of_the_daemon_stops_the_virtual_board(tmp_path):
@@ -39,8 +23,8 @@ def test_sigkill_of_the_daemon_stops_the_virtual_board(tmp_path):
     try:
         deadline = time.monotonic() + 120  # the first run may build the board
         while time.monotonic() < deadline:
-            sim = _children(daemon.pid)
-            family = sim + [g for s in sim for g in _children(s)]
+            sim = children(daemon.pid)
+            family = sim + [g for s in sim for g in children(s)]
             if len(family) >= 2:  # `sphere sim` and its board
                 break
             assert daemon.poll() is None, daemon.stderr.read()
@@ -48,12 +32,7 @@ def test_sigkill_of_the_daemon_stops_the_virtual_board(tmp_path):
         assert len(family) >= 2, "the daemon did not start `sphere sim` and its board"
         daemon.send_signal(signal.SIGKILL)  # no chance to clean up
         daemon.wait(5)
-        deadline = time.monotonic() + 10
-        while any(_running(p) for p in family) and time.monotonic() < deadline:
-            time.sleep(0.1)
-        left = [p for p in family if _running(p)]
-        for p in left:
-            os.kill(p, signal.SIGKILL)
+        left = survivors(family)
         assert not left, "the virtual board outlived the daemon"
     finally:
         if daemon.poll() is None:

@@ -160,11 +160,9 @@ def test_the_board_stops_when_sphere_sim_is_killed():
     """`sphere sim --pty` runs the board as its child; killing `sphere sim` (or the daemon that started
     it) must not leave the board holding the pty and a core until its --seconds are over: the board
     asks the kernel for SIGTERM when its parent goes (PR_SET_PDEATHSIG) and stops as on SIGTERM."""
-    import os
     import signal
-    import time
 
-    from simscenarios import need_board, need_firmware
+    from simscenarios import children, need_board, need_firmware, survivors
     from sphere.daemon.sources import SourceError, start_simulator
 
     need_board()
@@ -174,24 +172,12 @@ def test_the_board_stops_when_sphere_sim_is_killed():
     except SourceError as e:
         pytest.fail(str(e))
     try:
-        kids = [int(p) for p in open(f"/proc/{proc.pid}/task/{proc.pid}/children").read().split()]
+        kids = children(proc.pid)
         assert kids, "sphere sim started no board"
         proc.send_signal(signal.SIGKILL)  # no chance to clean up: only the kernel can tell the board
         proc.wait(5)
 
-        def running(pid):
-            try:
-                with open(f"/proc/{pid}/stat") as f:
-                    return f.read().rsplit(")", 1)[1].split()[0] not in ("Z", "X")
-            except OSError:
-                return False
-
-        deadline = time.monotonic() + 10
-        while any(running(k) for k in kids) and time.monotonic() < deadline:
-            time.sleep(0.1)
-        left = [k for k in kids if running(k)]
-        for k in left:
-            os.kill(k, signal.SIGKILL)
+        left = survivors(kids)
         assert not left, "the board kept running after sphere sim was killed"
     finally:
         if proc.poll() is None:
