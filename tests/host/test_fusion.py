@@ -200,6 +200,39 @@ def test_sphere_filter_holds_heading_through_a_magnet():
     assert e.total < 6.0, e
 
 
+def _deferred_equals_plain(gyr, acc, mag, dt, every=1):
+    """update(defer_bias=True), with run_deferred after every ``every``-th sample, against plain update."""
+    from sphere.fusion import registry
+
+    plain, split = registry.make("sphere", dt), registry.make("sphere", dt)
+    ran = 0
+    for i, (g, a, m) in enumerate(zip(gyr.tolist(), acc.tolist(), mag.tolist())):
+        q = plain.update(g, a, m, dt)
+        assert split.update(g, a, m, dt, defer_bias=True) == q, i  # this sample's orientation: before the step
+        if i % every == 0:
+            ran += split.run_deferred()
+            assert plain.bias == split.bias and plain.bias_P == split.bias_P, i
+    if every == 1:
+        assert not split.bias_pending
+    return ran
+
+
+def test_deferred_bias_step_is_bit_identical_on_a_real_trial():
+    """The daemon emits the pointer move, then runs the bias step (issue 14's latency): the same bits as update."""
+    t = _trial("09", 30.0, 30.0)  # fast rotation with breaks: rest and motion measurements both
+    n = len(t.gyr_rad_s)
+    assert _deferred_equals_plain(t.gyr_rad_s, t.acc_m_s2, t.mag_uT, t.dt_s) > 0.9 * n * t.dt_s / 0.05
+
+
+def test_deferred_bias_step_pending_runs_at_the_next_update():
+    from sphere.fusion import synthetic
+
+    tr = synthetic.trace("step", seconds=12.0, seed=2)
+    # run_deferred only on every 7th sample: a step left pending is run first thing in the next update
+    _deferred_equals_plain(tr.gyr_rad_s, tr.acc_m_s2, tr.mag_uT, tr.dt_s, every=7)
+    _deferred_equals_plain(tr.gyr_rad_s, tr.acc_m_s2, tr.mag_uT, tr.dt_s)
+
+
 def test_sphere_filter_is_fast_enough_for_live_use():
     gyr, acc, mag, dt = _synthetic(3000)
     f = SphereFilter()

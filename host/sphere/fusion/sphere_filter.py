@@ -141,6 +141,8 @@ class SphereFilter:
         self._blp = [0.0] * 8
         self._blp3 = [0.0] * 10
         self._blp3_prev = [0.0] * 10
+        #: a bias step is due and was deferred (``update(..., defer_bias=True)``); ``run_deferred`` runs it
+        self.bias_pending = False
 
     @property
     def settings(self) -> dict:
@@ -192,12 +194,28 @@ class SphereFilter:
         self._new_min_gyr2 = math.radians(c["mag_new_min_gyr_dps"]) ** 2
         self._dip_th = math.radians(c["mag_dip_th_deg"])
 
-    def update(self, gyr_rad_s, acc_m_s2, mag_uT, dt_s: float, *, acc_valid: bool = True, mag_valid: bool = True):
+    def update(self, gyr_rad_s, acc_m_s2, mag_uT, dt_s: float, *, acc_valid: bool = True, mag_valid: bool = True,
+               defer_bias: bool = False):
+        """One sample; returns the orientation (a tuple of floats, sensor → ENU).
+
+        ``defer_bias=True`` leaves the bias step that falls due on this sample (every ``bias_step_s``, the one
+        costly part) pending, so a live caller can emit the sample's orientation first and then call
+        :meth:`run_deferred`. The step does not change this sample's orientation, only the next samples'; a
+        step still pending when the next ``update`` comes is run first thing there. Either way the results are
+        bit-identical to ``update`` without deferring."""
         gx, gy, gz = gyr_rad_s
         ax, ay, az = acc_m_s2
         m = None if (mag_uT is None or not mag_valid) else mag_uT
-        self._step(float(gx), float(gy), float(gz), float(ax), float(ay), float(az), m, float(dt_s), acc_valid)
+        self._step(float(gx), float(gy), float(gz), float(ax), float(ay), float(az), m, float(dt_s), acc_valid,
+                   defer_bias)
         return self._quat()
+
+    def run_deferred(self) -> bool:
+        """Run the bias step an ``update(..., defer_bias=True)`` left pending; True if there was one."""
+        if self.bias_pending:
+            self._bias_step()
+            return True
+        return False
 
     def update_batch(self, gyr, acc, mag, dt_s: float, *, acc_valid=None, mag_valid=None, diagnostics: bool = False):
         """Run the per-sample step over (N, 3) arrays; returns (N, 4). ``mag`` may be None.
@@ -231,9 +249,11 @@ class SphereFilter:
         return {"quat": out, "rest": rest, "bias_rad_s": bias, "mag_disturbed": dist}
 
     # -- the filter ---------------------------------------------------------------------------------
-    def _step(self, gx, gy, gz, ax, ay, az, m, dt, acc_valid):
+    def _step(self, gx, gy, gz, ax, ay, az, m, dt, acc_valid, defer_bias=False):
         # the quaternion products, rotations and normalisations of _qmul, _rot and _norm4 are written out here
         # (the same operations in the same order: the same bits), as this runs at every sample
+        if self.bias_pending:  # deferred by the previous update and not run since: its state is still as it was
+            self._bias_step()
         if self._dt is None or abs(dt - self._dt) > 1e-3 * self._dt:
             self._coeffs(dt)  # a live link's intervals jitter by a few µs: the gains follow changes over 0.1 %
         self._rest(gx, gy, gz, ax, ay, az, dt)
@@ -310,7 +330,10 @@ class SphereFilter:
         # 4. gyro bias, every bias_step_s
         self._nb += 1
         if self._nb >= self._nb_step:
-            self._bias_step()
+            if defer_bias:
+                self.bias_pending = True
+            else:
+                self._bias_step()
 
     def _bias_step(self):
         """One step of the bias Kalman filter (see the module docstring).
@@ -321,6 +344,7 @@ class SphereFilter:
         start): C = F[Ψ] − F[Φ]·b_true, exactly also while F is still averaging. Per step the differences
         over the step, divided by its length, are the measurement; a third low-pass stage (``bias_lp_s``)
         on both sides takes out the hand's oscillations."""
+        self.bias_pending = False
         tb = self._tb
         b = self.bias
         q0, q1, q2, q3 = _qmul(self.q_inc, self.q_gyr)  # sensor → E′
