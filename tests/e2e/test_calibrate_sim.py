@@ -1,6 +1,9 @@
 """`sphere calibrate --port` against the virtual sphere: the real firmware image on the simulated board
 (hardware/sim), its UART on a pseudo-terminal read by pyserial, turned as the guided steps ask by
-`synthetic:calibration` (still, six faces, tumbling) with known sensor imperfections.
+`synthetic:calibration` (still, turns about each axis, six faces, tumbling) with known sensor imperfections.
+The board is a GY-85 or a SparkFun sensor stick (`--board`: the chips mounted as on those boards); the
+firmware's board profile is the right one (SET_BOARD at 0.5 s, as the owner sends it once) or left at
+`aligned`, and the axis check must tell which chip is mounted how.
 
 Tolerances, from the chips' quantisation and the simulated noise (datasheet-like, sphere.sim.trace):
 - gyro bias: the mean of a 3 s still window, 600 samples of 5.5 LSB RMS noise → σ 0.2 LSB, then rounded
@@ -27,15 +30,29 @@ from simscenarios import need_board, need_firmware, stop_simulator
 from sphere import chips
 from sphere.sim import trace as T
 
-CAL_SIM_S = 75  # simulated seconds: the session needs about 40, the rest is room for a slow machine
+CAL_SIM_S = 90  # simulated seconds: the session needs about 60, the rest is room for a slow machine
+AXES_SIM_S = 30  # the session stops at the axis check, about 16 s in
 TIMEOUT_S = 90  # per step, wall time (the board runs 0.7–2.5 simulated s per wall s, paced to ≤ 1)
 
 
-def _start(trace: str, seconds: float):
+def _start(trace: str, seconds: float, board: str | None = None, profile: str | None = None, tmp=None,
+           monkeypatch=None):
+    """The virtual sphere on a pty (as sphere-mouse --simulate starts it), on ``board`` with the firmware
+    told ``profile`` by SET_BOARD at 0.5 s (none: the firmware's default, aligned)."""
     from sphere.daemon.sources import SourceError, start_simulator
+    from sphere.daemon.sources import simulated
+    from sphere.sim.soak import board_profile_command
 
     need_board()
     need_firmware()
+    extra = ["--board", board] if board else []
+    if profile:
+        send = board_profile_command(profile, tmp / "set_board.txt")
+        assert send is not None, profile
+        extra += ["--send", str(send)]
+    if extra:
+        command = simulated.simulator_command
+        monkeypatch.setattr(simulated, "simulator_command", lambda trace, seconds: command(trace, seconds) + extra)
     try:
         return start_simulator(trace, seconds=seconds)
     except SourceError as e:
@@ -93,13 +110,14 @@ def _check_recovered(block):
     assert np.allclose(W / np.cbrt(np.linalg.det(W)), np.eye(3), atol=0.01), W
 
 
-def test_guided_calibration_on_the_virtual_sphere(tmp_path, capsys):
+def test_guided_calibration_on_the_virtual_sphere(tmp_path, capsys, monkeypatch):
+    """A GY-85 with its profile set: the axis check passes, the calibration is recovered in the body frame."""
     from sphere.cli import main
     from sphere.protocol import GetCalibration, Reboot
     from sphere.protocol.packets import REBOOT_MAGIC
 
     out, cap = tmp_path / "cal.json", tmp_path / "session.cap"
-    proc, pty = _start("synthetic:calibration", CAL_SIM_S)
+    proc, pty = _start("synthetic:calibration", CAL_SIM_S, "gy85", "gy85", tmp_path, monkeypatch)
     try:
         t0 = time.monotonic()
         rc = main(["calibrate", "--port", pty, "--yes", "--timeout", str(TIMEOUT_S), "--json", str(out),
@@ -107,7 +125,8 @@ def test_guided_calibration_on_the_virtual_sphere(tmp_path, capsys):
         took = time.monotonic() - t0
         err = capsys.readouterr().err
         assert rc == 0, err
-        for step in ("1/3 gyro bias", "2/3 accelerometer", "3/3 magnetometer", "+x up seen", "−z up (upside down) seen",
+        for step in ("1/4 gyro bias", "2/4 axis check", "axes agree", "(board profile gy85)", "3/4 accelerometer",
+                     "4/4 magnetometer", "+x up seen", "−z up (upside down) seen",
                      "sent to the sphere", "saved to EEPROM", "read back: the sphere holds it"):
             assert step in err, (step, err)
         block = {k: tuple(v) for k, v in json.loads(out.read_text())["block"].items()}
@@ -133,7 +152,8 @@ def test_guided_calibration_on_the_virtual_sphere(tmp_path, capsys):
 
 def test_a_face_that_never_comes_times_out_and_sends_nothing(tmp_path, capsys):
     """`synthetic:still` lies z up: the gyro step passes, the accelerometer step never sees the other
-    five faces; with a short --timeout the session stops, says which faces are missing, sends nothing."""
+    five faces; with a short --timeout the session stops, says which faces are missing, sends nothing.
+    (--no-axis-check: a still sphere never turns.)"""
     from sphere.cli import main
     from sphere.protocol import GetCalibration
 
@@ -141,11 +161,12 @@ def test_a_face_that_never_comes_times_out_and_sends_nothing(tmp_path, capsys):
     proc, pty = _start("synthetic:still", 60)
     try:
         # 15 s: the gyro step needs 3 simulated s, and the board may run at 0.7 simulated s per wall s or less
-        rc = main(["calibrate", "--port", pty, "--yes", "--timeout", "15", "--json", str(out)])
+        rc = main(["calibrate", "--port", pty, "--yes", "--timeout", "15", "--json", str(out), "--no-axis-check"])
         err = capsys.readouterr().err
         assert rc == 1, err
         assert "+z up (upright) seen (1/6)" in err, err
-        assert ("step 2/3 (accelerometer) timed out after 15 s: faces not seen: +x up, −x up, +y up, −y up, "
+        assert "2/4 axis check: skipped (--no-axis-check)" in err, err
+        assert ("step 3/4 (accelerometer) timed out after 15 s: faces not seen: +x up, −x up, +y up, −y up, "
                 "−z up (upside down)") in err, err
         assert "Nothing was sent" in err and "SET_CALIBRATION block" not in err, err
         assert not out.exists()
@@ -156,3 +177,38 @@ def test_a_face_that_never_comes_times_out_and_sends_nothing(tmp_path, capsys):
     assert held["accel_offset"] == (0, 0, 0) and held["accel_scale"] == (16384,) * 3, held
     assert held["mag_offset"] == (0, 0, 0) and held["mag_soft_iron"] == (16384, 0, 0, 0, 16384, 0, 0, 0, 16384), held
     assert not state & {"accel_calibrated", "mag_calibrated", "from_eeprom"}, state
+
+
+#: The mismatches: the board, what the verdict must say of each chip (None: it agrees), and the profile it
+#: must suggest. The mountings are hardware/sim/README.md's (chip axis i reads ± body axis k).
+WRONG_PROFILE = {
+    "sen10724": ({"gyroscope": None, "magnetometer": "turned 90° about −z (its x axis along the body’s −y, y along +x; z "
+                  "agrees)"}, "SparkFun 9DoF Sensor Stick"),
+    "gy85": ({"gyroscope": "turned 180° about +z (its x axis along the body’s −x, y along −y; z agrees)",
+              "magnetometer": "turned 90° about +z (its x axis along the body’s +y, y along −x; z agrees)"}, "GY-85"),
+}
+
+
+@pytest.mark.parametrize("board", sorted(WRONG_PROFILE))
+def test_the_axis_check_names_the_chip_a_wrong_profile_mounts_wrongly(tmp_path, capsys, monkeypatch, board):
+    """The firmware left at `aligned` on another board: step 2/4 names each chip mounted otherwise, says which
+    profile fits and how to set it, and stops before anything is sent."""
+    from sphere.cli import main
+    from sphere.protocol import GetCalibration
+
+    out = tmp_path / "cal.json"
+    proc, pty = _start("synthetic:calibration", AXES_SIM_S, board, None, tmp_path, monkeypatch)
+    try:
+        rc = main(["calibrate", "--port", pty, "--yes", "--timeout", "25", "--json", str(out)])
+        err = capsys.readouterr().err
+        held, state = _held(_ask(pty, GetCalibration())[0])
+    finally:
+        stop_simulator(proc)
+    assert rc == 1, err
+    assert "axes disagree with the board profile aligned" in err, err
+    chips_said, title = WRONG_PROFILE[board]
+    for name, how in chips_said.items():
+        assert (f"the {name}: its chip is {how}" in err) if how else (f"the {name}:" not in err), (name, err)
+    assert f"the board looks like a {title}" in err and f"`sphere device --port {pty} set board={board}`" in err, err
+    assert "Nothing was sent" in err and "3/4 accelerometer" not in err and not out.exists(), err
+    assert held["accel_scale"] == (16384,) * 3 and not state & {"accel_calibrated", "mag_calibrated"}, (held, state)

@@ -266,11 +266,15 @@ def test_field_coverage_and_the_turn_step():
 
 def test_the_virtual_spheres_script_through_the_guided_steps():
     """synthetic:calibration in chip units (no board), fed to the steps as the samples would arrive:
-    each step ends where the script says, and the fits recover the injected imperfections."""
+    each step ends where the script says, the axis check passes (an aligned board), and the fits recover
+    the injected imperfections."""
+    from sphere import axis_check
     from sphere.sim import trace as T
 
-    ct = T.to_chips(T.calibration(45.0))
-    _, timeline = T.calibration_script(45.0)
+    ct = T.to_chips(T.calibration(70.0))
+    _, timeline = T.calibration_script(70.0)
+    ends = {name: t1 for name, _, t1 in timeline}
+    starts = {name: t0 for name, t0, _ in timeline}
     t = np.arange(len(ct.accel_lsb)) / ct.accel_rate_hz
     mag_t = np.arange(len(ct.mag_lsb)) / ct.mag_rate_hz
     full = session.Series(t, ct.accel_lsb.astype(float), ct.gyro_lsb.astype(float), mag_t, ct.mag_lsb.astype(float))
@@ -285,15 +289,22 @@ def test_the_virtual_spheres_script_through_the_guided_steps():
         span = session.trailing_still(upto(now).since(0.5))
     gyro_still = full.gyro[span.start + np.searchsorted(full.t, 0.5):][: span.stop - span.start]
     assert now < timeline[0][2]  # within the first still phase
+    start, bias = now, gyro_still.mean(axis=0)
+    while not (f := axis_check.fit(upto(now).since(start), bias, full=False)).done:
+        now += 0.5
+        assert now < ends["+x"], f
+    assert now >= starts["turn z"] + T.CAL_SWING_S  # not before the third axis has turned a quarter turn
+    v = axis_check.verdict(f, "aligned")
+    assert v.ok and v.lines[0].startswith("axes agree"), v.lines
     start, seen = now, {}
     while len(seen) < 6:
         now += 0.1
         seen, _ = session.update_faces(seen, upto(now).since(start))
-        assert now < timeline[-1][1] + 1.0, session.missing_faces(seen)
+        assert now < starts["tumble"] + 1.0, session.missing_faces(seen)
     start = now
     while not (st := session.turn_status(upto(now).since(start))).done:
         now += 0.1
-    assert st.reason == "coverage" and now < 44.0
+    assert st.reason == "coverage" and now < 69.0
     cal = session.calibrate(gyro_still, {k: v.mean for k, v in seen.items()}, upto(now).mag)
     assert not cal.notes
     assert np.allclose(cal.gyro.bias_lsb, T.CAL_GYRO_BIAS_DPS * chips.ITG3200_LSB_PER_DPS, atol=0.7)

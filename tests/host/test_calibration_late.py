@@ -1,16 +1,17 @@
-"""`sphere calibrate` against `synthetic:calibration` however late it joins: the script repeats (still, six
-faces held longer than the 3 s still the gyro step needs, tumbling), so each guided step finds what it asks
-for within one round. The steps are fed the script in chip units as the samples would arrive (no board;
-tests/e2e/test_calibrate_sim.py runs the real session on the virtual sphere)."""
+"""`sphere calibrate` against `synthetic:calibration` however late it joins: the script repeats (still,
+turns about each axis, six faces held longer than the 3 s still the gyro step needs, tumbling), so each
+guided step finds what it asks for within one round. The steps are fed the script in chip units as the
+samples would arrive (no board; tests/e2e/test_calibrate_sim.py runs the real session on the virtual sphere)."""
 
 import numpy as np
 import pytest
 
+from sphere import axis_check
 from sphere import calibration_session as session
 from sphere import chips
 from sphere.sim import trace as T
 
-ROUND_S = T.calibration_script(200.0)[1][8][1]  # the second round's still starts here
+ROUND_S = T.calibration_script(200.0)[1][11][1]  # the second round's still starts here
 
 
 @pytest.fixture(scope="module")
@@ -30,8 +31,9 @@ def _window(full, t0, t1):
 def test_the_script_repeats():
     _, timeline = T.calibration_script(200.0)
     names = [n for n, _, _ in timeline]
-    assert names[:8] == ["still", "+x", "+y", "-x", "-y", "-z", "+z", "tumble"] == names[8:16]
-    assert all(t1 - t0 >= session.STILL_S + 0.5 for n, t0, t1 in timeline[:16] if n not in ("tumble",))
+    assert names[:11] == ["still", "turn x", "turn y", "turn z", "+x", "+y", "-x", "-y", "-z", "+z", "tumble"]
+    assert names[:11] == names[11:22]
+    assert all(t1 - t0 >= session.STILL_S + 0.5 for n, t0, t1 in timeline[:22] if n[0] in "+-s")
 
 
 @pytest.mark.parametrize("join_s", [0.5, 7.0, 20.0, 40.0, 60.0])
@@ -44,6 +46,11 @@ def test_every_step_finishes_within_a_round_of_joining(full, join_s):
     assert now - join_s < ROUND_S, "gyro step"
     sel = (full.t >= span.t0) & (full.t < span.t1)  # the span's samples, by device time (as calibrate does)
     gyro = full.gyro[sel]
+    start = now
+    while not (f := axis_check.fit(_window(full, start, now), gyro.mean(axis=0), full=False)).done:
+        now += 0.5
+        assert now - start < ROUND_S, "axis step"
+    assert axis_check.verdict(f, "aligned").ok
     start, seen = now, {}
     while len(seen) < 6:
         now += step

@@ -12,6 +12,7 @@ import numpy as np
 from sphere.argtypes import seconds
 
 from sphere import chips
+from sphere.axis_check import TURN_DEG
 from sphere.calibration_session import COVERAGE_BINS, COVERAGE_TARGET, FACE_S, STILL_S, TURN_MIN_S, TURN_S
 from sphere.calibration_session import FACES as _FACES
 from sphere.calibration_session import SeriesBuilder
@@ -27,12 +28,17 @@ accelerometer offset and scale from six still poses (each face of the sphere up)
 soft iron from an ellipsoid fit over readings taken while turning the sphere every way. Prints the
 result with the fit residual and the field norm before and after.
 
---port PORT guides you through three steps, each waiting for what it asks for, judged from the
+--port PORT guides you through four steps, each waiting for what it asks for, judged from the
 sphere's RAW_SAMPLE stream in the sphere's own time (so a slow link does not matter):
-  1/3 gyro bias: put the sphere down and do not touch it; done once it has been still for {STILL_S:g} s.
-  2/3 accelerometer: lay it on each of its six faces, still, in any order; a face counts once it has
+  1/4 gyro bias: put the sphere down and do not touch it; done once it has been still for {STILL_S:g} s.
+  2/4 axis check: turn it back and forth about each of its marked axes in turn (x, then y, then z, a
+      quarter turn each way, its centre kept in place); done once each axis has turned {TURN_DEG:g}° and the
+      three sensors' maps are told apart. A turn about one body axis must show on the same axis in the
+      gyroscope, accelerometer and magnetometer; if not, it says which chip is mounted how and which
+      board profile to set (`sphere device --port PORT set board=NAME`), and stops: nothing is sent.
+  3/4 accelerometer: lay it on each of its six faces, still, in any order; a face counts once it has
       lain still for {FACE_S:g} s with that axis up; the progress line shows the faces still missing.
-  3/3 magnetometer: turn it slowly through every direction; done once the field directions cover
+  4/4 magnetometer: turn it slowly through every direction; done once the field directions cover
       {round(COVERAGE_TARGET * COVERAGE_BINS)} of {COVERAGE_BINS} direction bins (after at least {TURN_MIN_S:g} s), or after {TURN_S:g} s.
 Without --yes you press Enter before each step. A step not done within --timeout seconds (default
 {DEFAULT_TIMEOUT_S:g}) stops the session with what was not seen and what to do; nothing is sent then. Otherwise the
@@ -41,7 +47,7 @@ back (GET_CALIBRATION) to check that the sphere holds it.
 
 --capture FILE does the same offline from a capture recorded with `sphere capture` (lay the sphere
 still on six faces, a few seconds each, and turn it through every direction for ~30 s), with the same
-still and face detection; nothing is sent."""
+still and face detection, and the axis check when the capture turns about every axis; nothing is sent."""
 
 
 def add_arguments(p) -> None:
@@ -57,6 +63,8 @@ def add_arguments(p) -> None:
     p.add_argument("--save-capture", metavar="FILE", help="with --port: also keep the session's bytes as a capture")
     p.add_argument("--no-save", action="store_true", help="with --port: apply on the device but do not save to EEPROM")
     p.add_argument("--yes", action="store_true", help="with --port: do not wait for Enter before each step")
+    p.add_argument("--no-axis-check", action="store_true",
+                   help="with --port: skip step 2/4 (a board no profile fits, or a sphere without marked axes)")
     p.add_argument("--timeout", type=seconds, default=DEFAULT_TIMEOUT_S, metavar="SECONDS",
                    help=f"with --port: give up a step not done within this many seconds (default {DEFAULT_TIMEOUT_S:g})")
 
@@ -159,8 +167,24 @@ def _run_capture(args) -> int:
     cal, faces = session.from_series(s)
     seen = [FACES[k] for k in sorted(faces)]
     print(f"faces seen still for {FACE_S:g} s: {', '.join(seen) or 'none'}", file=sys.stderr)
+    _capture_axis_check(s, cap)
     _finish(args, cal, s.mag)
     return 0 if (cal.gyro or cal.accel or cal.mag) else 1
+
+
+def _capture_axis_check(s, cap) -> None:
+    """The axis check on a whole capture (said, never fatal: nothing is sent offline)."""
+    from sphere import axis_check
+
+    hellos = [p for p in (getattr(d, "packet", d) for d in cap.packets()) if p.NAME == "HELLO"]
+    profile = axis_check.profile_name(hellos[-1].board_profile if hellos else None)  # the newest: in use
+    f = axis_check.fit(s)
+    if not f.done:
+        print("axis check: not made (the capture does not turn about every axis on its own, "
+              f"{TURN_DEG:g}° each, or the sensors' maps are not told apart)", file=sys.stderr)
+        return
+    for line in axis_check.verdict(f, profile).lines:
+        print(line, file=sys.stderr)
 
 
 class _Link:
@@ -274,7 +298,7 @@ def _step_gyro(link, progress, timeout_s):
     def on_timeout(s):
         spans = session.still_spans(s)
         best = max((sp.seconds for sp in spans), default=0.0)
-        return (f"step 1/3 (gyro bias) timed out after {timeout_s:g} s: the sphere was never still for {STILL_S:g} s "
+        return (f"step 1/4 (gyro bias) timed out after {timeout_s:g} s: the sphere was never still for {STILL_S:g} s "
                 f"(longest still {best:.2f} s in {s.duration:.0f} s of samples). Put it down on a table, do not touch "
                 "it, and run `sphere calibrate` again. Nothing was sent.")
 
@@ -282,6 +306,52 @@ def _step_gyro(link, progress, timeout_s):
     s = link.series()
     sel = (s.t >= span.t0) & (s.t < span.t1)  # the span's samples, by device time
     return s.gyro[sel]
+
+
+def _step_axes(link, progress, timeout_s, bias, port):
+    """Step 2/4: the sphere turned about each of its axes; the three sensors must agree (sphere.axis_check)."""
+    from sphere import axis_check
+
+    state = {"fit": None, "wall": 0.0}
+
+    def poll(s):
+        now = time.monotonic()
+        turned = axis_check.turned_deg(s.t, s.gyro, bias)
+        ticks = "  ".join(f"{'xyz'[i]} {'✓' if d >= TURN_DEG else f'{d:3.0f}°'}" for i, d in enumerate(turned))
+        if all(turned >= TURN_DEG) and now - state["wall"] >= 1.0:  # the fit takes a while: once a second
+            state["wall"] = now
+            state["fit"] = axis_check.fit(s, bias)
+            if state["fit"].done:
+                progress.done(f"turned about  {ticks}")
+                return state["fit"]
+        doing = "comparing the three sensors (keep turning)" if all(turned >= TURN_DEG) else "keep turning"
+        progress.show(f"turned about  {ticks}   {doing}", key=tuple(turned >= TURN_DEG))
+        return None
+
+    def on_timeout(s):
+        turned = axis_check.turned_deg(s.t, s.gyro, bias)
+        missing = [("xyz"[i]) for i, d in enumerate(turned) if d < TURN_DEG]
+        if missing:
+            what = (f"the gyroscope saw too little turning about {', '.join(missing)} on its own ("
+                    + ", ".join(f"{'xyz'[i]} {d:.0f}°" for i, d in enumerate(turned)) + f"; {TURN_DEG:g}° each needed). "
+                    "Turn the sphere back and forth about each marked axis in turn, a quarter turn each way")
+        else:
+            f = state["fit"] or axis_check.fit(s, bias)
+            share = max(f.gyro.unexplained if f.gyro else 1.0, f.mag.unexplained if f.mag else 1.0)
+            what = (f"the sensors' axes could not be told apart ({100 * share:.0f} % of the accelerometer's or "
+                    "magnetometer's change unexplained). Turn the sphere in your hands about its centre, without "
+                    "swinging or shaking it, away from magnets and iron")
+        return (f"step 2/4 (axis check) timed out after {timeout_s:g} s: {what}; run `sphere calibrate` again "
+                "(--no-axis-check skips this step). Nothing was sent.")
+
+    f = _follow(link, timeout_s, poll, on_timeout)
+    hello = link.device.hello(timeout_s=2.0, ask_after_s=0.2) or link.hello  # the profile in use now
+    v = axis_check.verdict(f, axis_check.profile_name(getattr(hello, "board_profile", None)), port)
+    for line in v.lines:
+        print(("  " if v.ok else "") + line, file=sys.stderr)
+    if not v.ok:
+        raise _StepFailed("the board profile does not fit this board (above). Nothing was sent.")
+    return v
 
 
 def _step_faces(link, progress, timeout_s):
@@ -317,7 +387,7 @@ def _step_faces(link, progress, timeout_s):
     def on_timeout(s):
         missing = session.missing_faces(state["seen"])
         seen = [FACES[k] for k in sorted(state["seen"])]
-        return (f"step 2/3 (accelerometer) timed out after {timeout_s:g} s: faces not seen: {', '.join(missing)} "
+        return (f"step 3/4 (accelerometer) timed out after {timeout_s:g} s: faces not seen: {', '.join(missing)} "
                 f"(seen: {', '.join(seen) or 'none'}). Lay the sphere on each missing face (that side up) and leave it "
                 f"still for {FACE_S:g} s, then the next; run `sphere calibrate` again. Nothing was sent.")
 
@@ -345,7 +415,7 @@ def _step_turn(link, progress, timeout_s):
 
     def on_timeout(s):
         st = session.turn_status(s)
-        return (f"step 3/3 (magnetometer) timed out after {timeout_s:g} s: {st.seconds:.1f} s of samples arrived, "
+        return (f"step 4/4 (magnetometer) timed out after {timeout_s:g} s: {st.seconds:.1f} s of samples arrived, "
                 f"field directions covered {st.coverage.bins_hit} of {COVERAGE_BINS} (needs {need}, or {TURN_S:g} s of "
                 "samples). Keep turning the sphere slowly through every direction — figure eights about every "
                 "axis — and run `sphere calibrate` again. Nothing was sent.")
@@ -429,14 +499,23 @@ def _session(args, link) -> int:
     base = block_of(CalibrationBlock.unpack(reply.data[:CalibrationBlock.SIZE])) if (
         reply is not None and reply.ok and len(reply.data) >= CalibrationBlock.SIZE) else None
     try:
-        print(f"1/3 gyro bias: put the sphere down and do not touch it (still for {STILL_S:g} s).", file=sys.stderr)
+        print(f"1/4 gyro bias: put the sphere down and do not touch it (still for {STILL_S:g} s).", file=sys.stderr)
         wait("   ready?")
         gyro_still = _step_gyro(link, progress, args.timeout)
-        print(f"2/3 accelerometer: lay the sphere on each of its six faces, still for {FACE_S:g} s each, in any "
+        if args.no_axis_check:
+            print("2/4 axis check: skipped (--no-axis-check)", file=sys.stderr)
+        else:
+            print("2/4 axis check: hold the sphere and turn it back and forth about each of its marked axes in "
+                  "turn — about x, then y, then z — a quarter turn each way, keeping its centre in place.",
+                  file=sys.stderr)
+            wait("   ready?")
+            bias = gyro_still.mean(axis=0) if len(gyro_still) else None
+            _step_axes(link, progress, args.timeout, bias, args.port)
+        print(f"3/4 accelerometer: lay the sphere on each of its six faces, still for {FACE_S:g} s each, in any "
               "order.", file=sys.stderr)
         wait("   ready?")
         faces = _step_faces(link, progress, args.timeout)
-        print("3/3 magnetometer: turn the sphere slowly through every direction (figure eights, all axes).",
+        print("4/4 magnetometer: turn the sphere slowly through every direction (figure eights, all axes).",
               file=sys.stderr)
         wait("   ready?")
         _step_turn(link, progress, args.timeout)

@@ -243,12 +243,16 @@ CAL_NOISE_ACCEL_G = np.array([1.0, 1.0, 1.5]) / chips.ADXL345_LSB_PER_G
 CAL_NOISE_MAG_UT = 0.2
 CAL_SEED = 20261122
 
-#: The script: still (z up), then each face up in turn (a smooth rotation, then held still), then
-#: slow tumbling through every direction for CAL_TUMBLE_S, back to z up, and again from the start, so
-#: `sphere calibrate` started at any time finds every pose it asks for within one round. Each hold is
-#: longer than the calibration's 3 s still (sphere.calibration_session.STILL_S), with room for its
-#: 0.25 s stillness blocks, so a session that joins after the first still phase can use a face's hold.
+#: The script: still (z up), then turned back and forth about each body axis in turn (x, y, z: a quarter
+#: turn each way, as the axis check of `sphere calibrate` asks), then each face up in turn (a smooth
+#: rotation, then held still), then slow tumbling through every direction for CAL_TUMBLE_S, back to z up,
+#: and again from the start, so `sphere calibrate` started at any time finds every pose it asks for within
+#: one round. Each hold is longer than the calibration's 3 s still (sphere.calibration_session.STILL_S),
+#: with room for its 0.25 s stillness blocks, so a session that joins after the first still phase can use
+#: a face's hold.
 CAL_STILL_S = 5.0
+CAL_SWING_DEG = 90.0  # each axis: 0 → +90° → 0 → −90° → 0 ...
+CAL_SWING_S = 0.9  # ... each quarter turn in this long (smoothstep: at most about 150 °/s)
 CAL_MOVE_S = 1.0
 CAL_HOLD_S = 3.5
 CAL_TUMBLE_S = 30.0
@@ -287,7 +291,8 @@ def _body_rates(q: np.ndarray, rate_hz: float) -> np.ndarray:
 
 def calibration_script(seconds: float, rate_hz: float = SYNTH_RATE_HZ):
     """The orientation history of ``synthetic:calibration`` (sensor-to-ENU) and its timeline
-    [(name, start_s, end_s)]: "still", each face's hold ("+x" …), "tumble"."""
+    [(name, start_s, end_s)]: "still", the swings about each axis ("turn x" …), each face's hold ("+x" …),
+    "tumble"."""
     n = int(round(seconds * rate_hz))
     qs, timeline = [], []
     upright = np.array([1.0, 0.0, 0.0, 0.0])
@@ -308,11 +313,21 @@ def calibration_script(seconds: float, rate_hz: float = SYNTH_RATE_HZ):
         u = np.arange(int(round(move * rate_hz))) / (move * rate_hz)
         add(_slerp(cur, q, u * u * (3 - 2 * u)))  # smoothstep: starts and stops gently
 
+    def swings(axis):
+        m = int(round(CAL_SWING_S * rate_hz))
+        u = np.arange(m) / m
+        u = u * u * (3 - 2 * u)
+        a = np.radians(CAL_SWING_DEG)
+        angle = np.concatenate([a * u, a * (1 - u), -a * u, -a * (1 - u)])
+        return quat.multiply(cur, quat.from_axis_angle(axis, angle))  # about the sensor's own axis
+
     while have < n:
         if have:  # a new round: back to z up
             move_to(upright)
             cur = upright
         add(np.tile(cur, (int(round(CAL_STILL_S * rate_hz)), 1)), "still")
+        for k, axis in enumerate(np.eye(3)):
+            add(swings(axis), "turn " + "xyz"[k])
         for name, q in _face_orientations():
             move_to(q)
             add(np.tile(q, (int(round(CAL_HOLD_S * rate_hz)), 1)), name)
@@ -331,7 +346,7 @@ def calibration_script(seconds: float, rate_hz: float = SYNTH_RATE_HZ):
 
 
 def calibration(seconds: float = 45.0, rate_hz: float = SYNTH_RATE_HZ, seed: int = CAL_SEED) -> Motion:
-    """A sphere that needs calibrating, turned as `sphere calibrate` asks: still, six faces, tumbling —
+    """A sphere that needs calibrating, turned as `sphere calibrate` asks: still, about each axis, six faces, tumbling —
     with the CAL_* imperfections and chip-like noise applied in physical units."""
     q, _ = calibration_script(seconds, rate_hz)
     n = len(q)
