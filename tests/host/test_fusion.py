@@ -214,23 +214,23 @@ def _deferred_equals_plain(gyr, acc, mag, dt, every=1):
             assert plain.bias == split.bias and plain.bias_P == split.bias_P, i
     if every == 1:
         assert not split.bias_pending
-    return ran
+    return ran, split
 
 
 def test_deferred_bias_step_is_bit_identical_on_a_real_trial():
     """The daemon emits the pointer move, then runs the bias step (issue 14's latency): the same bits as update."""
     t = _trial("09", 30.0, 30.0)  # fast rotation with breaks: rest and motion measurements both
     n = len(t.gyr_rad_s)
-    assert _deferred_equals_plain(t.gyr_rad_s, t.acc_m_s2, t.mag_uT, t.dt_s) > 0.9 * n * t.dt_s / 0.05
+    assert _deferred_equals_plain(t.gyr_rad_s, t.acc_m_s2, t.mag_uT, t.dt_s)[0] > 0.9 * n * t.dt_s / 0.05
 
 
 def test_deferred_bias_step_pending_runs_at_the_next_update():
     from sphere.fusion import synthetic
 
-    tr = synthetic.trace("step", seconds=12.0, seed=2)
+    tr = synthetic.trace("step", seconds=27.0)  # long enough for the change test to catch the step (at 8 s)
     # run_deferred only on every 7th sample: a step left pending is run first thing in the next update
     _deferred_equals_plain(tr.gyr_rad_s, tr.acc_m_s2, tr.mag_uT, tr.dt_s, every=7)
-    _deferred_equals_plain(tr.gyr_rad_s, tr.acc_m_s2, tr.mag_uT, tr.dt_s)
+    assert _deferred_equals_plain(tr.gyr_rad_s, tr.acc_m_s2, tr.mag_uT, tr.dt_s)[1].bias_changes == 1
 
 
 def test_sphere_filter_is_fast_enough_for_live_use():

@@ -4,8 +4,8 @@
 
 For each scenario of :mod:`sphere.fusion.synthetic` (rest 2 s, then continuous motion) and each seed, the
 gyro bias estimate's error (norm of the vector, °/s) at ``--at`` seconds (default 30) for SphereFilter as the
-registry builds it (the same settings as `sphere eval` and the daemon) and for VQF with its defaults, and the
-ratio; then the microseconds per sample of the per-sample ``SphereFilter.update`` (best of 3 passes over 20 s
+registry builds it (the same settings as `sphere eval` and the daemon) and for VQF with its defaults, the
+ratio, and how many bias changes SphereFilter's change test detected (and applied) before then; then the microseconds per sample of the per-sample ``SphereFilter.update`` (best of 3 passes over 20 s
 of the "motion" trace, one process; wall clock, and the process's CPU time, which other jobs on a shared
 machine do not inflate) beside VQF's batch (C++).
 """
@@ -25,8 +25,10 @@ DEG = np.pi / 180.0
 def bias_errors(scenario: str, seed: int, at_s: float, rest_s: float = synthetic.REST_S) -> dict:
     tr = synthetic.trace(scenario, seconds=at_s + 1.0, seed=seed, rest_s=rest_s)
     i = int(round(at_s / tr.dt_s)) - 1
-    d = registry.make("sphere", tr.dt_s).update_batch(tr.gyr_rad_s, tr.acc_m_s2, tr.mag_uT, tr.dt_s, diagnostics=True)
-    out = {"sphere": float(np.linalg.norm(d["bias_rad_s"][i] - tr.bias_rad_s[i]) / DEG)}
+    f = registry.make("sphere", tr.dt_s)
+    d = f.update_batch(tr.gyr_rad_s, tr.acc_m_s2, tr.mag_uT, tr.dt_s, diagnostics=True)
+    out = {"sphere": float(np.linalg.norm(d["bias_rad_s"][i] - tr.bias_rad_s[i]) / DEG),
+           "changes": f.bias_changes}
     try:
         v = registry.make("vqf", tr.dt_s).update_batch(tr.gyr_rad_s, tr.acc_m_s2, tr.mag_uT, tr.dt_s, diagnostics=True)
         out["vqf"] = float(np.linalg.norm(v["bias_rad_s"][i] - tr.bias_rad_s[i]) / DEG)
@@ -67,14 +69,15 @@ def main(argv=None) -> int:
     p.add_argument("--scenarios", default=",".join(synthetic.SCENARIOS), help="comma-separated (default: all)")
     args = p.parse_args(argv)
     print(f"gyro bias error at {args.at:g} s (°/s, norm), rest only the first {args.rest:g} s; target < 0.05")
-    print(f"{'scenario':<10}{'seed':>5}{'sphere':>10}{'vqf':>10}{'sphere/vqf':>12}")
+    print(f"{'scenario':<10}{'seed':>5}{'sphere':>10}{'vqf':>10}{'sphere/vqf':>12}{'changes':>9}")
     worst = {}
     for sc in args.scenarios.split(","):
         for seed in range(args.seeds):
             e = bias_errors(sc, seed, args.at, args.rest)
             v = e.get("vqf")
             ratio = f"{e['sphere'] / v:12.2f}" if v else f"{'—':>12}"
-            print(f"{sc:<10}{seed:>5}{e['sphere']:10.3f}{(v if v is not None else float('nan')):10.3f}{ratio}")
+            print(f"{sc:<10}{seed:>5}{e['sphere']:10.3f}{(v if v is not None else float('nan')):10.3f}{ratio}"
+                  f"{e['changes']:>9}")
             worst[sc] = max(worst.get(sc, 0.0), e["sphere"])
     print("worst over seeds (sphere): " + ", ".join(f"{k} {v:.3f}" for k, v in worst.items()))
     print()

@@ -32,12 +32,21 @@ Laidig & Seel 2023, §3.5): correction rate c ≈ LP(R·b) − LP(R)·b_true, ho
 ``bias_sigma_motion_dps``, the rate's noise over 1 s); the vertical component becomes observable as the
 sensor turns. b is clipped to ``bias_clip_dps``, each diagonal of P to its initial value.
 
+That prior (σ_motion) makes the filter slow in motion on purpose: real hand motion leaves bias-like errors in
+the measurement (lever arm, scale factors) that a fast filter would follow. A bias that really changes (a step)
+is caught by a **change test** on the same measurements (``_change_test``): an F-test of a constant bias error
+fitted over K = ``bias_change_blocks`` one-second blocks, significant at ``bias_change_alpha`` in two consecutive
+windows that agree. Then b restarts from the latest window's estimate with P = P₀, and for 2K blocks the filter
+uses the measurement noise that window showed (no process noise), so it settles in seconds. Its threshold is a
+quantile of the F distribution, not a tuned value.
+
 The free settings (``tau_acc_s``, ``bias_sigma_motion_dps``, ``bias_forget_s``) are the ones ``sphere eval --cv``
 chose, leave one trial out (host/docs/fusion.md); the rest are VQF's published defaults where VQF has one.
 """
 
 from __future__ import annotations
 
+import functools
 import math
 from math import cos as _cos, sin as _sin, sqrt as _sqrt
 
@@ -93,6 +102,10 @@ DEFAULTS = dict(
     bias_sigma_motion_dps=0.3,
     bias_lp_s=1.0,
     bias_clip_dps=2.0,
+    bias_change_test=True,
+    bias_change_block_s=1.0,
+    bias_change_blocks=6,
+    bias_change_alpha=1e-3,
 )
 
 
@@ -108,6 +121,9 @@ class SphereFilter:
         if unknown:
             raise TypeError(f"unknown SphereFilter settings: {', '.join(sorted(unknown))}")
         self.cfg = dict(DEFAULTS, **settings)
+        self._ct_k = int(self.cfg["bias_change_blocks"])
+        # the change test's threshold: the F(3, 2K − 3) quantile at 1 − α (needs K ≥ 3)
+        self._ct_f = _f_quantile(3, 2 * self._ct_k - 3, 1.0 - self.cfg["bias_change_alpha"]) if self._ct_k >= 3 else None
         self.reset()
 
     def reset(self) -> None:
@@ -141,6 +157,14 @@ class SphereFilter:
         self._blp = [0.0] * 8
         self._blp3 = [0.0] * 10
         self._blp3_prev = [0.0] * 10
+        # the change test (see _change_test): sums over the current block, the finished blocks' means
+        self._ct_sum = [0.0] * 8
+        self._ct_n = 0
+        self._ct_blocks = []
+        #: bias changes the change test has detected (and applied)
+        self.bias_changes = 0
+        self._track_w = 0.0  # after a detected change: the measurement noise the blocks showed (per step) ...
+        self._track_left = 0  # ... for this many more bias steps
         #: a bias step is due and was deferred (``update(..., defer_bias=True)``); ``run_deferred`` runs it
         self.bias_pending = False
 
@@ -189,6 +213,7 @@ class SphereFilter:
         # the sigma is for the rate over 1 s; the mean over tb is noisier by 1/tb
         self._b_wmot = c["bias_sigma_motion_dps"] ** 2 * d2 / tb if c["bias_sigma_motion_dps"] > 0 else 0.0
         self._bias_clip = math.radians(c["bias_clip_dps"])
+        self._ct_block = max(1, int(round(c["bias_change_block_s"] / tb)))
         self._rest_gyr2 = math.radians(c["rest_th_gyr_dps"]) ** 2
         self._rest_acc2 = c["rest_th_acc_m_s2"] ** 2
         self._new_min_gyr2 = math.radians(c["mag_new_min_gyr_dps"]) ** 2
@@ -373,9 +398,14 @@ class SphereFilter:
         d = [(a - c) * g for a, c in zip(l3, prev)]
         P = self.bias_P
         v, p0 = self._b_v, self._b_p0
+        if self._track_left:
+            v = 0.0  # after a detected change the bias is taken as constant while the data pin it down
         for i in range(3):
             P[i][i] = min(P[i][i] + v, p0)
         if self.at_rest:
+            if self._ct_n or self._ct_blocks:
+                self._ct_clear()
+            self._track_left = 0
             # measurement: the low-passed gyro at rest, H = I
             w = self._b_wrest
             S = [[P[i][j] + (w if i == j else 0.0) for j in range(3)] for i in range(3)]
@@ -392,6 +422,9 @@ class SphereFilter:
                  d[7] - d[9] - (d[3] * b[0] + d[4] * b[1] + d[5] * b[2]))
             PH = [[P[i][0] * h[0] + P[i][1] * h[1] + P[i][2] * h[2] for h in H] for i in range(3)]  # P Hᵀ, 3×2
             w = self._b_wmot
+            if self._track_left:
+                self._track_left -= 1
+                w = self._track_w
             if self.n_acc * self._k_acc < 1.0:
                 # the accelerometer low-pass still averages (gain 1/n > k): c is noisier by about 1/(n·k)
                 w /= max(self.n_acc * self._k_acc, 1e-3) ** 2
@@ -401,6 +434,8 @@ class SphereFilter:
             det = s00 * s11 - s01 * s01
             i00, i01, i11 = s11 / det, -s01 / det, s00 / det
             K = [[PH[i][0] * i00 + PH[i][1] * i01, PH[i][0] * i01 + PH[i][1] * i11] for i in range(3)]
+            if self._ct_f is not None and self.cfg["bias_change_test"] and self._change_test(H, y):
+                return
         else:
             return
         # the sums below are sum() over tuples written out (no generators; the same additions in the same order)
@@ -430,6 +465,79 @@ class SphereFilter:
         self.bias_P = [[0.5 * (n00 + n00), 0.5 * (n01 + n10), 0.5 * (n02 + n20)],
                        [0.5 * (n10 + n01), 0.5 * (n11 + n11), 0.5 * (n12 + n21)],
                        [0.5 * (n20 + n02), 0.5 * (n21 + n12), 0.5 * (n22 + n22)]]
+
+    def _ct_clear(self):
+        self._ct_sum[:] = [0.0] * 8
+        self._ct_n = 0
+        self._ct_blocks.clear()
+
+    def _change_test(self, H, y) -> bool:
+        """Has the bias changed? A test on the motion measurements' innovations y = H·e + noise (e = b_true − b).
+
+        The innovations of the bias steps are averaged over blocks of ``bias_change_block_s`` (1 s: the hand's
+        oscillations and the third low-pass stage make neighbouring steps strongly correlated, the block means
+        much less so), H alike. Over a window of K = ``bias_change_blocks`` blocks (2K rows) a constant error e
+        is fitted by least squares; with the noise variance estimated from the fit's own residuals, the statistic
+        F = (explained / 3) / (residual / (2K − 3)) is F-distributed with (3, 2K − 3) degrees of freedom when
+        e = 0 (the F-test of a linear regression): the threshold is its 1 − ``bias_change_alpha`` quantile, a
+        statistic of the noise, not a tuned value. A bias change must show in two consecutive windows (the last
+        2K blocks), each significant, and the two estimates of the bias (b + e, each at its window's end) must
+        agree (the same F quantile on their difference): real hand motion produces bias-like errors too (on BROAD's
+        fast rotations, flipping every few seconds), a changed bias stays. What follows a change is described
+        below; the blocks start afresh. Returns True when it did so (the Kalman update of this step is skipped)."""
+        s = self._ct_sum
+        s[0] += y[0]
+        s[1] += y[1]
+        (h0, h1, h2), (h3, h4, h5) = H
+        s[2] += h0
+        s[3] += h1
+        s[4] += h2
+        s[5] += h3
+        s[6] += h4
+        s[7] += h5
+        self._ct_n += 1
+        if self._ct_n < self._ct_block:
+            return False
+        blocks = self._ct_blocks
+        g = 1.0 / self._ct_n
+        b = self.bias
+        blocks.append([v * g for v in s] + b)
+        s[:] = [0.0] * 8
+        self._ct_n = 0
+        k = self._ct_k
+        if len(blocks) > 2 * k:
+            del blocks[0]
+        if len(blocks) < 2 * k:
+            return False
+        cur = _fit(blocks[k:])
+        if cur is None or cur[3] < self._ct_f:
+            return False
+        prev = _fit(blocks[:k])
+        if prev is None or prev[3] < self._ct_f:
+            return False
+        # the two windows' estimates of the bias itself (b at the window's end + e), each with covariance var·A⁻¹
+        bp = [blocks[k - 1][8 + i] + prev[0][i] for i in range(3)]
+        bc = [b[i] + cur[0][i] for i in range(3)]
+        vp = [[prev[2] * a for a in row] for row in prev[1]]
+        vc = [[cur[2] * a for a in row] for row in cur[1]]
+        d = [bc[i] - bp[i] for i in range(3)]
+        si = _inv3([[vp[i][j] + vc[i][j] for j in range(3)] for i in range(3)])
+        if sum(d[i] * si[i][j] * d[j] for i in range(3) for j in range(3)) / 3.0 > self._ct_f:
+            return False  # both significant, but not the same bias: motion, not a change
+        # the change: b starts again from the latest window's estimate with the initial uncertainty P₀, and for
+        # the next 2K blocks the Kalman filter takes the measurement noise the latest window showed (the residual
+        # variance of its 1 s means, per step as _b_wmot is) and no process noise: the new, constant bias is
+        # pinned down at the rate the data allow, not at the slow rate the prior σ_motion sets
+        clip = self._bias_clip
+        for i in range(3):
+            v_ = bc[i]
+            b[i] = clip if v_ > clip else (-clip if v_ < -clip else v_)
+        self.bias_P = [[self._b_p0 if i == j else 0.0 for j in range(3)] for i in range(3)]
+        self._track_w = cur[2] / self._tb
+        self._track_left = 2 * k * self._ct_block
+        self.bias_changes += 1
+        self._ct_clear()
+        return True
 
     def _mag(self, mx, my, mz, gx, gy, gz, dt):
         q6 = _qmul(self.q_inc, self.q_gyr)
@@ -495,6 +603,44 @@ class SphereFilter:
         else:
             self.rest_time = 0.0
         self.at_rest = self.rest_time >= self.cfg["rest_min_s"]
+
+
+def _fit(blocks):
+    """Least-squares fit of a constant e to block means (y0, y1, h0..h5, ...): (y0, y1) = [h0 h1 h2; h3 h4 h5]·e.
+
+    Returns (e, A⁻¹, residual variance, F) with A = Σ hᵀh, the residual variance over 2n − 3 degrees of freedom
+    and F = (explained / 3) / residual variance, the regression's F statistic for e = 0; or None when the rows
+    do not determine all three axes."""
+    a00 = a01 = a02 = a11 = a12 = a22 = r0 = r1 = r2 = yy = 0.0
+    for y0, y1, h0, h1, h2, h3, h4, h5, *_ in blocks:
+        a00 += h0 * h0 + h3 * h3
+        a01 += h0 * h1 + h3 * h4
+        a02 += h0 * h2 + h3 * h5
+        a11 += h1 * h1 + h4 * h4
+        a12 += h1 * h2 + h4 * h5
+        a22 += h2 * h2 + h5 * h5
+        r0 += h0 * y0 + h3 * y1
+        r1 += h1 * y0 + h4 * y1
+        r2 += h2 * y0 + h5 * y1
+        yy += y0 * y0 + y1 * y1
+    det = a00 * (a11 * a22 - a12 * a12) - a01 * (a01 * a22 - a12 * a02) + a02 * (a01 * a12 - a11 * a02)
+    if det <= 1e-9 * ((a00 + a11 + a22) / 3.0) ** 3:
+        return None  # the turns in the window do not make all three axes observable
+    ai = _inv3(((a00, a01, a02), (a01, a11, a12), (a02, a12, a22)))
+    e = [ai[i][0] * r0 + ai[i][1] * r1 + ai[i][2] * r2 for i in range(3)]
+    explained = e[0] * r0 + e[1] * r1 + e[2] * r2
+    var = (yy - explained) / (2 * len(blocks) - 3)
+    if var <= 0.0:
+        return None
+    return e, ai, var, explained / 3.0 / var
+
+
+@functools.lru_cache(maxsize=None)
+def _f_quantile(dfn: int, dfd: int, p: float) -> float:
+    """The p-quantile of the F distribution with (dfn, dfd) degrees of freedom."""
+    from scipy.special import fdtri
+
+    return float(fdtri(dfn, dfd, p))
 
 
 def _inv3(a):
