@@ -76,7 +76,8 @@ def test_block_fit_is_least_squares_and_its_f_test_holds_its_level():
 
     rng = np.random.default_rng(5)
     k = 6
-    assert np.isclose(_f_quantile(3, 2 * k - 3, 0.999), f_dist.ppf(0.999, 3, 2 * k - 3))
+    assert np.isclose(_f_quantile(3, 2 * k - 3, 0.999), f_dist.ppf(0.999, 3, 2 * k - 3))  # the defaults' (written out)
+    assert np.isclose(_f_quantile(3, 13, 0.999), f_dist.ppf(0.999, 3, 13))  # computed
     e_true = np.array([0.3, -0.2, 0.1])
     blocks = [list(np.r_[h @ e_true + rng.normal(0.0, 0.05, 2), h.ravel()]) for h in rng.normal(0.0, 1.0, (k, 2, 3))]
     e, ai, var, fstat = _fit(blocks)

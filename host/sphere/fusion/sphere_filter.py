@@ -46,7 +46,6 @@ chose, leave one trial out (host/docs/fusion.md); the rest are VQF's published d
 
 from __future__ import annotations
 
-import functools
 import math
 from math import cos as _cos, sin as _sin, sqrt as _sqrt
 
@@ -635,12 +634,19 @@ def _fit(blocks):
     return e, ai, var, explained / 3.0 / var
 
 
-@functools.lru_cache(maxsize=None)
+#: F quantiles (dfn, dfd, p) → value; the one the defaults need is written here so that the daemon does not import
+#: scipy (half a second) when it builds its filter (tests/host/test_bias.py checks it against scipy)
+_F_QUANTILES = {(3, 9, 0.999): 13.901803191033137}
+
+
 def _f_quantile(dfn: int, dfd: int, p: float) -> float:
     """The p-quantile of the F distribution with (dfn, dfd) degrees of freedom."""
-    from scipy.special import fdtri
+    q = _F_QUANTILES.get((dfn, dfd, p))
+    if q is None:
+        from scipy.special import fdtri
 
-    return float(fdtri(dfn, dfd, p))
+        q = _F_QUANTILES[(dfn, dfd, p)] = float(fdtri(dfn, dfd, p))
+    return q
 
 
 def _inv3(a):
