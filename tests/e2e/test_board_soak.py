@@ -7,6 +7,7 @@ from __future__ import annotations
 import json
 import struct
 
+import numpy as np
 import pytest
 
 from sphere.protocol import encode_frame
@@ -160,3 +161,51 @@ def test_an_orientation_check_while_the_host_does_not_read_waits_for_it():
     worst, rows = S.orientation_excess(a, b, ends, [], host_stalls=[(2.5, 3.5)])
     assert rows[0]["t"] == pytest.approx(3.55) and rows[0]["excess_deg"] == pytest.approx(0.0, abs=1e-6)
     assert worst.first_s is None
+
+
+def _turning(t0, t1, rate_dps, phase_s=0.0, flags=0, offset_deg=0.0):
+    """ORIENTATIONs at 100 Hz of a sphere turning about z at ``rate_dps`` (the quaternion of the true
+    orientation at each sample's time), sampled ``phase_s`` after the 10 ms grid, turned by ``offset_deg``."""
+    import math
+    items, seq, t = [(0.0, _hello(), 0)], 1, t0 + phase_s
+    while t < t1:
+        half = math.radians(rate_dps * t + offset_deg) / 2
+        quat = (round(16384 * math.cos(half)), 0, 0, round(16384 * math.sin(half)))
+        items.append((t, Orientation(t_us=int(t * 1e6), flags=flags, quat=quat), seq & 0xFF))
+        seq, t = seq + 1, t + 0.01
+    return S.read_frames(*_stream(items))
+
+
+def test_both_runs_are_compared_at_the_same_instant():
+    """The two runs' ORIENTATIONs come 5 ms apart in phase (after a reset the faulty run boots later, e.g. a chip
+    held SDA) while both follow the same fast turn exactly (500 °/s). Taking each run's first sample at or after
+    the check time (the rule before) compares instants 5 ms apart: 2.5°, a false alarm over the 2° limit. Both
+    are taken at the check's instant now: no difference. A real difference still counts."""
+    ends = [{"kind": "clock_stretch", "t_start": 1.0, "t_end": 1.0, "chips": ["itg3200"]}]
+    dev, ref = _turning(0.5, 3.5, 500.0, phase_s=0.005), _turning(0.5, 3.5, 500.0)
+    ta, qa, _ = S._quats(dev)
+    tb, qb, _ = S._quats(ref)
+    ia, ib = np.searchsorted(ta, 3.0), np.searchsorted(tb, 3.0)
+    assert S._angle_deg(qa[ia] / np.linalg.norm(qa[ia]), qb[ib] / np.linalg.norm(qb[ib])) > 2.0  # the rule before
+    worst, rows = S.orientation_excess(dev, ref, ends, [])
+    assert rows[0]["excess_deg"] < 0.1 and worst.first_s is None, rows
+    worst, rows = S.orientation_excess(_turning(0.5, 3.5, 500.0, 0.005, offset_deg=3.0), ref, ends, [])
+    assert rows[0]["excess_deg"] == pytest.approx(3.0, abs=0.1) and worst.first_s == 3.0
+
+
+def test_an_orientation_check_in_a_start_up_is_not_judged():
+    """After a reset the firmware converges with its start-up gain until it has used 2 s of accelerometer samples,
+    saying so in ORIENTATION's `converging` flag; in a fast turn the accelerometer is rejected most of the time
+    and that lasts 4-6 s (the first 100 s of the soak at seed 1 with the image of ad128df: its 6 checks over 2°
+    all fell 3-6 s after a reset in BROAD's fast turns with both runs converging, up to 3.2° apart before the
+    fault they were blamed for). Two start-ups are compared then, not the fault's doing: such a check is listed
+    as skipped. One without the flag, 2.5 s or more after the reset, counts."""
+    ends = [{"kind": "glitch_nack", "t_start": 1.0, "t_end": 1.0, "chips": ["itg3200"]}]
+    ref = _turning(0.5, 3.5, 100.0)
+    for dev, r in ((_turning(0.5, 3.5, 100.0, flags=S.CONVERGING, offset_deg=10.0), ref),
+                   (_turning(0.5, 3.5, 100.0, offset_deg=10.0), _turning(0.5, 3.5, 100.0, flags=S.CONVERGING))):
+        worst, rows = S.orientation_excess(dev, r, ends, [])
+        assert rows[0]["excess_deg"] is None and rows[0]["skipped"].startswith("converging") and worst.first_s is None
+    worst, rows = S.orientation_excess(_turning(0.5, 3.5, 100.0, offset_deg=10.0), ref, ends, [])
+    assert rows[0]["excess_deg"] == pytest.approx(10.0, abs=0.1) and worst.first_s == 3.0
+    assert rows[0]["before_deg"] == pytest.approx(10.0, abs=0.1)  # it was there before the fault: said, not judged

@@ -199,10 +199,37 @@ def recovery(frames: list[Frame], ends: list[dict], host_stalls=()) -> tuple[Inv
     return worst, rows
 
 
+#: ORIENTATION flags bit 3: the firmware's start-up convergence (after power-up, a reset or SET_BOARD)
+CONVERGING = 0x08
+
+
 def _quats(frames):
     t = np.array([f.t_s for f in frames if isinstance(f.packet, Orientation)])
     q = np.array([f.packet.quat_float for f in frames if isinstance(f.packet, Orientation)]).reshape(-1, 4)
-    return t, q
+    flags = np.array([f.packet.flags for f in frames if isinstance(f.packet, Orientation)], dtype=int)
+    return t, q, flags
+
+
+def _at(t: float, tt: np.ndarray, qq: np.ndarray, gap_s: float = 0.03, near_s: float = 0.1):
+    """The orientation at simulated time ``t`` from the ORIENTATIONs on either side (normalised linear
+    interpolation of the quaternions, signs aligned) when they are within ``gap_s`` of each other; else the
+    first within ``near_s`` after ``t`` (frames lost); None when there is none. Both runs are compared at the
+    same instant: their samples are up to a period apart (a reset's boot delay moves one run's phase), and
+    in a fast turn (BROAD's reach 800 °/s) 1 ms is 0.8°."""
+    i = int(np.searchsorted(tt, t))
+    if i < len(tt) and tt[i] == t:
+        return qq[i] / np.linalg.norm(qq[i])
+    if i == 0 or i >= len(tt) or tt[i] - tt[i - 1] > gap_s:
+        return qq[i] / np.linalg.norm(qq[i]) if i < len(tt) and tt[i] - t <= near_s else None
+    u = (t - tt[i - 1]) / (tt[i] - tt[i - 1])
+    p, q = qq[i - 1], qq[i]
+    q = -q if float(np.dot(p, q)) < 0 else q
+    r = (1 - u) * p + u * q
+    return r / np.linalg.norm(r)
+
+
+def _angle_deg(p, q) -> float:
+    return math.degrees(2 * math.acos(min(1.0, abs(float(np.dot(p, q))))))
 
 
 def line_fault_windows(log: list[dict], frames: list[Frame]) -> tuple[list, list]:
@@ -232,12 +259,18 @@ def _first_good_after(good_t: list[float], t: float) -> float:
 def orientation_excess(frames: list[Frame], ref: list[Frame], ends: list[dict], resets_t: list[float],
                        host_stalls=(), after_s: float = 2.0,
                        settle_after_reset_s: float = 2.5) -> tuple[Invariant, list]:
-    """orientation_excess_deg: the device's ORIENTATION against the reference run's (the same motion and
-    resets, no other faults), ``after_s`` after each fault ends; not within ``settle_after_reset_s`` of a
-    reset (the firmware's start-up is not the same to the millisecond in both runs). A check that falls while
-    the host is not reading is made when it reads again (nothing the device sent in between reaches it)."""
-    ta, qa = _quats(frames)
-    tb, qb = _quats(ref)
+    """orientation_excess_deg: the angle between the device's ORIENTATION and the reference run's (the same
+    motion and resets, no other faults) ``after_s`` after each fault ends, both taken at that same instant
+    (:func:`_at`); each row also says the angle just before the fault started (``before_deg``, for reading
+    what the fault did, not judged).
+
+    Not judged: within ``settle_after_reset_s`` of a reset (the firmware's start-up is not the same to the
+    millisecond in both runs), nor while either run says it is still converging (ORIENTATION ``converging``, its
+    start-up gain) between the fault's start and the check: two start-ups are compared then, not the fault's
+    doing (rows with ``skipped``). A check that falls while the host is not reading is made when it reads again
+    (nothing the device sent in between reaches it)."""
+    ta, qa, fa = _quats(frames)
+    tb, qb, fb = _quats(ref)
     worst = Invariant()
     rows = []
     for e in ends:
@@ -249,13 +282,19 @@ def orientation_excess(frames: list[Frame], ref: list[Frame], ends: list[dict], 
             continue  # the run ended first
         if any(r - 0.1 <= t <= r + settle_after_reset_s for r in resets_t):
             continue
-        ia, ib = np.searchsorted(ta, t), np.searchsorted(tb, t)
-        if ia >= len(ta) or ib >= len(tb) or abs(ta[ia] - t) > 0.1 or abs(tb[ib] - t) > 0.1:
-            deg = math.inf  # no orientation from the device 2 s after the fault
-        else:
-            dot = abs(float(np.dot(qa[ia], qb[ib]))) / (np.linalg.norm(qa[ia]) * np.linalg.norm(qb[ib]))
-            deg = math.degrees(2 * math.acos(min(1.0, dot)))
-        rows.append({"kind": e["kind"], "chips": e["chips"], "t": round(t, 4), "excess_deg": round(deg, 2)})
+        row = {"kind": e["kind"], "chips": e["chips"], "t": round(t, 4)}
+        t0 = e.get("t_start", e["t_end"])
+        conv = [bool(np.any(f[(tt >= t0 - 0.1) & (tt <= t + 0.1)] & CONVERGING)) for tt, f in ((ta, fa), (tb, fb))]
+        if any(conv):
+            rows.append({**row, "excess_deg": None, "skipped": "converging ("
+                         + " and ".join(n for n, c in zip(("device", "reference"), conv) if c) + ")"})
+            continue
+        pa, pb = _at(t, ta, qa), _at(t, tb, qb)
+        ba, bb = _at(t0, ta, qa), _at(t0, tb, qb)
+        row["before_deg"] = round(_angle_deg(ba, bb), 2) if ba is not None and bb is not None else None
+        deg = _angle_deg(pa, pb) if pa is not None and pb is not None else math.inf  # no orientation then
+        row["excess_deg"] = round(deg, 2)
+        rows.append(row)
         if deg > LIMITS["orientation_excess_deg"]:
             worst.add(t, 0, f"{deg:.1f} deg {after_s:g} s after {e['kind']} ({','.join(e['chips'])}) ended")
         worst.count = max(worst.count, deg)
@@ -359,7 +398,10 @@ class SoakResult:
             c = "never" if c is None or c == math.inf else (f"{c:.1f}" if isinstance(c, float) and not float(c).is_integer() else int(c))
             return f"{k} {c}{unit}{first}"
         return (f"sphere sim --soak {r['seconds']:g} s seed {r['seed']} board {r['board']}: "
-                + ", ".join([f("stale_frames"), f("crc_errors"), f("sensor_recovery_ms"), f("orientation_excess_deg"),
+                + ", ".join([f("stale_frames"), f("crc_errors"), f("sensor_recovery_ms"),
+                             f("orientation_excess_deg") + (f" ({inv['orientation_excess_deg']['checks']} checks, "
+                                                            f"{inv['orientation_excess_deg']['skipped_converging']} in a "
+                                                            "start-up)" if "checks" in inv["orientation_excess_deg"] else ""),
                              f"resets {inv['resets']['count']} ({inv['resets']['injected']} injected)",
                              f"overruns {inv['overruns']['count']}", f("frames_dropped")])
                 + (" -> FAIL: " + ", ".join(self.failed) if self.failed else " -> PASS")
@@ -398,7 +440,7 @@ def run_soak(elf, seconds: float, seed: int, board: str | None = None, kinds=FAU
         rb, capb, tb = one("reference", {k: v for k, v in ref_kw.items() if v})
         if keep:
             keep.mkdir(parents=True, exist_ok=True)
-            for name in ("faulty.cap", "reference.cap", "trace.bin"):
+            for name in ("faulty.cap", "faulty.times", "reference.cap", "reference.times", "trace.bin"):
                 if (tmp / name).exists():
                     (keep / name).write_bytes((tmp / name).read_bytes())
     for r in (ra, rb):
@@ -422,7 +464,8 @@ def run_soak(elf, seconds: float, seed: int, board: str | None = None, kinds=FAU
         "stale_frames": s["stale_frames"].as_dict(),
         "crc_errors": s["crc_errors"].as_dict(),
         "sensor_recovery_ms": rec.as_dict(),
-        "orientation_excess_deg": ori.as_dict(),
+        "orientation_excess_deg": {**ori.as_dict(), "checks": sum(1 for r in ori_rows if "skipped" not in r),
+                                   "skipped_converging": sum(1 for r in ori_rows if "skipped" in r)},
         "resets": {"count": resets, "injected": injected},
         "overruns": {"count": s["overruns"], "timing_pin": ra.stats.get("overruns")},
         "frames_dropped": s["frames_dropped"].as_dict(),
