@@ -209,3 +209,14 @@ def test_an_orientation_check_in_a_start_up_is_not_judged():
     worst, rows = S.orientation_excess(_turning(0.5, 3.5, 100.0, offset_deg=10.0), ref, ends, [])
     assert rows[0]["excess_deg"] == pytest.approx(10.0, abs=0.1) and worst.first_s == 3.0
     assert rows[0]["before_deg"] == pytest.approx(10.0, abs=0.1)  # it was there before the fault: said, not judged
+
+
+def test_start_ups_say_how_long_the_firmware_converged_after_each_reset():
+    """Beside the skipped checks: from power-up and each reset to the first ORIENTATION without `converging`; a
+    start-up the next reset cuts short has no length (it never ended)."""
+    def q(t, flags, seq):
+        return (t, Orientation(t_us=int(t * 1e6), flags=flags, quat=(16384, 0, 0, 0)), seq)
+    items = [(0.0, _hello(), 0), q(0.5, S.CONVERGING, 1), q(2.7, 0, 2), q(5.2, S.CONVERGING, 3), q(8.0, S.CONVERGING, 4),
+             q(9.5, S.CONVERGING, 5), q(13.1, 0, 6)]
+    ups = S.start_ups(S.read_frames(*_stream(items)), [5.0, 9.0])
+    assert ups == [{"t": 0.0, "seconds": 2.7}, {"t": 5.0, "seconds": None}, {"t": 9.0, "seconds": 4.1}]

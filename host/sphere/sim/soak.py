@@ -301,6 +301,21 @@ def orientation_excess(frames: list[Frame], ref: list[Frame], ends: list[dict], 
     return worst, rows
 
 
+def start_ups(frames: list[Frame], resets_t) -> list[dict]:
+    """How long the firmware says it is converging after power-up and after each reset: from the reset to its
+    first ORIENTATION without ``converging`` ({t, seconds}; seconds None when the next reset or the run's end
+    came first; one that ends while the host is not reading counts to the first ORIENTATION it gets). Reported
+    beside the orientation checks, which skip a start-up, so that a start-up that never ends shows."""
+    t, _, flags = _quats(frames)
+    out = []
+    starts = [0.0] + sorted(resets_t)
+    for k, r in enumerate(starts):
+        nxt = starts[k + 1] if k + 1 < len(starts) else math.inf
+        sel = np.flatnonzero((t > r) & (t < nxt) & ((flags & CONVERGING) == 0))
+        out.append({"t": round(r, 4), "seconds": round(float(t[sel[0]] - r), 3) if len(sel) else None})
+    return out
+
+
 # ---------------------------------------------------------------- the run
 
 
@@ -403,6 +418,8 @@ class SoakResult:
                                                             f"{inv['orientation_excess_deg']['skipped_converging']} in a "
                                                             "start-up)" if "checks" in inv["orientation_excess_deg"] else ""),
                              f"resets {inv['resets']['count']} ({inv['resets']['injected']} injected)",
+                             *([f"start-up longest {inv['start_up_s']['longest']:.2f} s"]
+                               if inv.get("start_up_s", {}).get("longest") is not None else []),
                              f"overruns {inv['overruns']['count']}", f("frames_dropped")])
                 + (" -> FAIL: " + ", ".join(self.failed) if self.failed else " -> PASS")
                 + f" [x{r['speed']:.2f} real time per CPU core]")
@@ -458,6 +475,8 @@ def run_soak(elf, seconds: float, seed: int, board: str | None = None, kinds=FAU
     s = stream_checks(frames, line, resets_t)
     rec, rec_rows = recovery(frames, ends, host_stalls)
     ori, ori_rows = orientation_excess(frames, ref, ends, resets_t, host_stalls)
+    ups = start_ups(frames, resets_t)
+    ended = [u["seconds"] for u in ups if u["seconds"] is not None]
     resets = max(0, s["hellos"] + s["hellos_lost"] - 1)
     injected = len(resets_t)
     inv = {
@@ -469,6 +488,8 @@ def run_soak(elf, seconds: float, seed: int, board: str | None = None, kinds=FAU
         "resets": {"count": resets, "injected": injected},
         "overruns": {"count": s["overruns"], "timing_pin": ra.stats.get("overruns")},
         "frames_dropped": s["frames_dropped"].as_dict(),
+        "start_up_s": {"longest": max(ended) if ended else None, "median": float(np.median(ended)) if ended else None,
+                       "unfinished": sum(1 for u in ups if u["seconds"] is None), "count": len(ups)},
     }
     failed = [k for k in ("stale_frames", "crc_errors") if inv[k]["count"] > 0]
     if rec.first_s is not None or not rec_rows and ends:
@@ -481,7 +502,7 @@ def run_soak(elf, seconds: float, seed: int, board: str | None = None, kinds=FAU
     report = {
         "seconds": seconds, "seed": seed, "board": ra.stats.get("board"), "magnetometer": mag,
         "firmware": str(elf), "trials": trials, "limits": LIMITS, "invariants": inv,
-        "faults_scheduled": faults, "faults": log, "recoveries": rec_rows, "orientation_checks": ori_rows,
+        "faults_scheduled": faults, "faults": log, "recoveries": rec_rows, "orientation_checks": ori_rows, "start_ups": ups,
         "board_stats": {k: ra.stats.get(k) for k in ("clock_ppm", "glitches", "i2c_errors", "host_dropped_bytes",
                                                      "hmc5883l_measurements", "hmc5883l_held_by_lock")},
         "speed": min(speed) if speed else 0.0, "failed": failed,
