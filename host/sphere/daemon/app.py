@@ -168,24 +168,12 @@ class SphereMouse:
         t = dp.t_us
         typ = p.TYPE
         if typ == RawSample.TYPE:
-            flags = p.flags
-            if flags & 0x07 != self.sensor_flags:
-                self._sensors_changed(flags & 0x07)
-            dt = self.motion.raw(p, t)
-            self.now_us = t
-            if self.actions._pending is not None:
-                for a in self.actions.due(t):
-                    self.do(a)
-            if self.stream is not None and self.motion.uses_host_filter:
+            self._raw_sample(p, t)  # the pointer move first: what the hand feels
+            motion = self.motion
+            if self.stream is not None and motion.uses_host_filter:
                 self._publish_pose(t)
-            if self.paused or self.actions.frozen(t) or flags & (TAP_ACTIVE | GYRO_STALE) or not flags & GYRO_OK:
-                return  # without the gyroscope nothing says how the sphere turns: the pointer holds still
-            if self.mode == "pointer":
-                dx, dy = self.mapper.update(self.motion.gyro_dps, dt, self.motion.up)
-                if dx or dy:
-                    self._move(t, dx, dy)
-            elif self.mode == "tilt" and self.motion.uses_host_filter:
-                self._tilt_step(t, dt)
+            if motion.run_deferred is not None:
+                motion.run_deferred()  # the filter's bias step, when one fell due on this sample
         elif typ == Orientation.TYPE:
             dt = self.motion.orientation(p, t)
             if self.motion.uses_host_filter:
@@ -208,6 +196,24 @@ class SphereMouse:
         elif typ == Hello.TYPE:
             self.hello = p
             self.motion.reset_time()
+
+    def _raw_sample(self, p, t) -> None:
+        flags = p.flags
+        if flags & 0x07 != self.sensor_flags:
+            self._sensors_changed(flags & 0x07)
+        dt = self.motion.raw(p, t)
+        self.now_us = t
+        if self.actions._pending is not None:
+            for a in self.actions.due(t):
+                self.do(a)
+        if self.paused or self.actions.frozen(t) or flags & (TAP_ACTIVE | GYRO_STALE) or not flags & GYRO_OK:
+            return  # without the gyroscope nothing says how the sphere turns: the pointer holds still
+        if self.mode == "pointer":
+            dx, dy = self.mapper.update(self.motion.gyro_dps, dt, self.motion.up)
+            if dx or dy:
+                self._move(t, dx, dy)
+        elif self.mode == "tilt" and self.motion.uses_host_filter:
+            self._tilt_step(t, dt)
 
     def _publish_pose(self, t_us) -> None:
         """The filtered pose to the stream and every output; with a camera, the ball's position too (metres, the

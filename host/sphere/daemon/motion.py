@@ -262,7 +262,7 @@ class _NwuFilter:
         self.inner = inner
 
     def update(self, *args, **kwargs):
-        q = self.inner.update(*args, **kwargs)
+        q = self.inner.update(*args, **kwargs)  # defer_bias passes through to SphereFilter
         if type(q) is not tuple or type(q[0]) is not float:  # SphereFilter's own: a tuple of floats
             q = tuple(float(v) for v in q)
         return _qmul(_ENU_TO_NWU, q)
@@ -304,6 +304,12 @@ class MotionTracker:
         self.filter = None
         if orientation_source in ("auto", "host"):
             self.filter = host_filter(filter_name, beta)
+        inner = getattr(self.filter, "inner", self.filter)
+        #: the filter's work that may wait until the sample's pointer move is out (SphereFilter's bias step,
+        #: every 10th sample): ``raw()`` leaves it pending, the daemon calls this after the move (bit-identical
+        #: to running it inside the update); None for a filter without it
+        self.run_deferred = getattr(inner, "run_deferred", None)
+        self._defer = {"defer_bias": True} if self.run_deferred is not None else {}
         self.quat = None  # (w, x, y, z) sensor-to-NWU, or None until known
         self.up = None  # earth up in sensor axes
         self.accel_g = None  # the last RAW_SAMPLE's acceleration (g, sensor axes) when the chip answered
@@ -376,7 +382,7 @@ class MotionTracker:
                 mag = None
             gd = self.gyro_dps
             q = self.filter.update((gd[0] * DEG, gd[1] * DEG, gd[2] * DEG), (ax * G_M_S2, ay * G_M_S2, az * G_M_S2),
-                                   mag, dt, acc_valid=accel_ok and not tap_active)
+                                   mag, dt, acc_valid=accel_ok and not tap_active, **self._defer)
             # _NwuFilter gives a tuple of floats (_qmul's); another filter's output is made one
             self.quat = q if type(q) is tuple and type(q[0]) is float else tuple(float(v) for v in q)
             self.up = up_from_quat(self.quat)

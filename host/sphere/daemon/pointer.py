@@ -117,9 +117,10 @@ class PointerMapper:
         yaw, pitch, self._forward = screen_rates_dps(gyro_dps, up_body, s.axes, self._forward)
         # screen degrees/s: right and down positive
         x, y = -yaw, pitch
-        mag = math.hypot(x, y)
         # 2. smoothing: the filter runs on the pointer's angles; the rate comes back from its output
-        if dt_s > 0:
+        if dt_s <= 0:
+            mag = math.hypot(x, y)
+        else:
             a = self._angle
             a[0] += x * dt_s
             a[1] += y * dt_s

@@ -110,6 +110,8 @@ class TremorFilter:
         self.speed = 0.0
 
     def update(self, x, dt_s: float):
+        if len(x) == 2 and len(self._notches) == 1:
+            return self._update2(x, dt_s)
         x = [float(v) for v in x]
         if dt_s <= 0:
             dt_s = 0.005
@@ -150,3 +152,60 @@ class TremorFilter:
             if a > 0.0:
                 return tuple([f + a * (r - f) for f, r in zip(z, x)])
         return tuple(z)
+
+    def _update2(self, x, dt_s: float):
+        """:meth:`update` for a 2-vector (the pointer's angles) and one notch, written out: the same operations
+        in the same order (the same bits), as the pointer runs it at every sample."""
+        x0 = float(x[0])
+        x1 = float(x[1])
+        if dt_s <= 0:
+            dt_s = 0.005
+        n = self._notches[0]
+        if n._dt is None or abs(dt_s - n._dt) > 1e-3 * n._dt:
+            n._coefficients(dt_s)
+        b0, b1, b2 = n._b
+        a1, a2 = n._a
+        zs = n._z
+        if zs is None:
+            zs = n._z = [[(b1 - a1 + b2 - a2) * v, (b2 - a2) * v] for v in (x0, x1)]
+        z0, z1 = zs
+        y0 = b0 * x0 + z0[0]
+        z0[0] = b1 * x0 - a1 * y0 + z0[1]
+        z0[1] = b2 * x0 - a2 * y0
+        y1 = b0 * x1 + z1[0]
+        z1[0] = b1 * x1 - a1 * y1 + z1[1]
+        z1[1] = b2 * x1 - a2 * y1
+        last = self._last
+        if last is None:
+            self._v = [0.0, 0.0]
+            z = self._z = [y0, y1]
+        else:
+            k = dt_s / (self.speed_tau_s + dt_s)
+            v = self._v
+            v0 = v[0] + k * ((y0 - last[0]) / dt_s - v[0])
+            v1 = v[1] + k * ((y1 - last[1]) / dt_s - v[1])
+            v[0] = v0
+            v[1] = v1
+            speed = self.speed = math.sqrt(v0 * v0 + v1 * v1)
+            tau = 1.0 / (_TWO_PI * (self.min_cutoff_hz + self.beta * speed))
+            alpha = dt_s / (tau + dt_s)
+            z = self._z
+            zi = z[0]
+            z[0] = zi + alpha * (y0 - zi)
+            zi = z[1]
+            z[1] = zi + alpha * (y1 - zi)
+        self._last = [y0, y1]
+        pass_dps = self.pass_dps
+        if pass_dps > 0:
+            half = 0.5 * pass_dps
+            a = (self.speed - half) / half
+            if a >= 1.0:
+                n.hold((x0, x1))
+                self._z = [x0, x1]
+                self._last = [x0, x1]
+                return (x0, x1)
+            if a > 0.0:
+                f = z[0]
+                g = z[1]
+                return (f + a * (x0 - f), g + a * (x1 - g))
+        return (z[0], z[1])
