@@ -33,3 +33,53 @@ def out_file(text: str) -> str:
     if not os.path.isdir(parent):
         raise argparse.ArgumentTypeError(f"{text!r}: the folder {parent} does not exist")
     return text
+
+
+def positive(text: str) -> float:
+    """A finite number greater than 0."""
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not math.isfinite(v) or v <= 0:
+        raise argparse.ArgumentTypeError(f"{text!r}: give a number greater than 0")
+    return v
+
+
+def count(text: str, least: int = 0) -> int:
+    """A whole number of at least ``least`` (0 by default)."""
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
+    if v < least:
+        raise argparse.ArgumentTypeError(f"{text!r}: give a whole number of at least {least}")
+    return v
+
+
+def at_least_one(text: str) -> int:
+    """:func:`count` of at least 1."""
+    return count(text, 1)
+
+
+def baud(text: str) -> int:
+    """A serial baud rate (50 … 4,000,000)."""
+    from sphere.serial_link import check_baud
+
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a baud rate (the sphere uses 115200)") from None
+    problem = check_baud(v)
+    if problem:
+        raise argparse.ArgumentTypeError(problem)
+    return v
+
+
+def in_file(text: str) -> str:
+    """A file to read: it exists and is not a folder."""
+    if os.path.isdir(text):
+        raise argparse.ArgumentTypeError(f"{text!r} is a folder: give a file")
+    if not os.path.exists(text):
+        raise argparse.ArgumentTypeError(f"{text!r}: no such file")
+    return text

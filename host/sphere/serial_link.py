@@ -32,6 +32,29 @@ def check_baud(baud) -> str | None:
     return None
 
 
+def port_problem(port: str) -> str | None:
+    """Why ``port`` cannot be a serial port although it exists (a folder, a file, /dev/null), or None (also
+    for a port that does not exist yet: it may be plugged in)."""
+    import stat
+
+    try:
+        st = os.stat(port)
+    except OSError:
+        return None
+    hint = "name the sphere's port, e.g. /dev/ttyUSB0 (`python3 -m serial.tools.list_ports` lists them)"
+    if stat.S_ISDIR(st.st_mode):
+        return f"{port} is a folder, not a serial port: {hint}"
+    if not stat.S_ISCHR(st.st_mode):
+        return f"{port} is not a serial port (not a character device): {hint}"
+    try:  # a character device of another kind (/dev/null, /dev/zero: class mem); pseudo-terminals have no entry
+        subsystem = os.path.basename(os.path.realpath(f"/sys/dev/char/{os.major(st.st_rdev)}:{os.minor(st.st_rdev)}/subsystem"))
+    except (OSError, ValueError):
+        return None
+    if os.path.exists(f"/sys/dev/char/{os.major(st.st_rdev)}:{os.minor(st.st_rdev)}") and subsystem != "tty":
+        return f"{port} is not a serial port (a {subsystem} device): {hint}"
+    return None
+
+
 def _hint(text: str) -> str:
     if "No such file" in text or "FileNotFound" in text:
         return "is the sphere plugged in (or paired)? list ports with `python3 -m serial.tools.list_ports`"
@@ -155,6 +178,9 @@ def open_port(port: str, baud: int = DEFAULT_BAUD, timeout_s: float = 0.1, *, re
     problem = check_baud(baud)
     if problem:
         raise PortError(f"cannot open {port}: {problem}")
+    problem = port_problem(port)
+    if problem:
+        raise PortError(problem)
     if exclusive:
         held = holders(port, allow_pids)
         if held:

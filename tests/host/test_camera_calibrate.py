@@ -48,14 +48,15 @@ def test_calibrate_recovers_the_intrinsics(tmp_path, capsys):
 
 
 def test_calibrate_says_what_is_wrong(tmp_path, capsys):
-    assert main(["camera", "calibrate", str(tmp_path / "nothing")]) == 1
+    assert main(["camera", "calibrate", str(tmp_path / "nothing")]) == 2
     assert "does not exist" in capsys.readouterr().err
     (tmp_path / "a.png").write_bytes(cv2.imencode(".png", np.zeros((48, 64), np.uint8))[1].tobytes())
     assert main(["camera", "calibrate", str(tmp_path)]) == 1
     err = capsys.readouterr().err
     assert "found in 0 of 1 images" in err and "Traceback" not in err
-    with pytest.raises(SystemExit, match="squares across"):
+    with pytest.raises(SystemExit) as e:  # a usage error: exit 2
         main(["camera", "calibrate", str(tmp_path), "--board", "nine"])
+    assert e.value.code == 2 and "squares across" in capsys.readouterr().err
 
 
 def test_calibrate_with_a_charuco_board(tmp_path, capsys):

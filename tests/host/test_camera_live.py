@@ -59,5 +59,5 @@ def test_live_tracker_with_the_trials_imu(video):
 
 
 def test_a_camera_that_is_not_there(capsys):
-    assert main(["camera", "track", "/nonexistent/video.avi"]) == 1
+    assert main(["camera", "track", "/nonexistent/video.avi"]) == 2
     assert "cannot open video file" in capsys.readouterr().err

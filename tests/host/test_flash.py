@@ -91,13 +91,13 @@ def test_avrdude_command_line_and_its_failure(tmp_path, board, hex_image, capsys
 
 
 def test_bad_input_is_one_line(tmp_path, capsys):
-    assert main(["flash", "--port", "/dev/null", "--image", str(tmp_path / "nope.hex")]) == 1
+    assert main(["flash", "--port", "/dev/null", "--image", str(tmp_path / "nope.hex")]) == 2
     assert "no such image file" in capsys.readouterr().err
     elf = tmp_path / "x.elf"
     elf.write_bytes(b"\x7fELF")
-    assert main(["flash", "--port", "/dev/null", "--image", str(elf)]) == 1
+    assert main(["flash", "--port", "/dev/null", "--image", str(elf)]) == 2
     assert "Intel HEX" in capsys.readouterr().err
-    assert main(["flash", "--port", "/dev/null", "--avrdude", "no-such-avrdude"]) == 1
+    assert main(["flash", "--port", "/dev/null", "--avrdude", "no-such-avrdude"]) == 2
     assert "install avrdude" in capsys.readouterr().err
 
 

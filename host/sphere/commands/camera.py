@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import sys
 
 HELP = "camera tools: intrinsics from chessboard images (calibrate); the virtual webcam (render); the ball in a webcam or video (track); timing (bench)"
@@ -47,7 +48,8 @@ def _board(text: str):
             raise ValueError
         return a, b
     except ValueError:
-        raise SystemExit(f"sphere camera: --board {text!r} must be squares across x down, e.g. 9x6 (each ≥ 3)")
+        print(f"sphere camera: --board {text!r} must be squares across x down, e.g. 9x6 (each ≥ 3)", file=sys.stderr)
+        raise SystemExit(2) from None
 
 
 def run(args) -> int:
@@ -80,7 +82,7 @@ def _track(args) -> int:
         src = CameraSource(args.source, cam, hue_deg=args.hue).start()
     except (CameraError, CameraFileError) as e:
         print(f"sphere camera track: {e}", file=sys.stderr)
-        return 1
+        return 2  # a source or camera file that cannot be used: the command line's fault
     print("frame,t_exposure_s,x_m,y_m,z_m,radius_px")
     t_end = time.monotonic() + args.seconds if args.seconds > 0 else None
     t0 = None
@@ -110,7 +112,7 @@ def _bench(args) -> int:
         r = bench.run(args.trial, args.start, args.seconds, args.distance)
     except (broad.BroadMissing, ValueError) as e:
         print(f"sphere camera bench: {e}", file=sys.stderr)
-        return 1
+        return 2
     print(f"{r['trial']}: {r['frames']} frames at {r['resolution']}, one OpenCV thread; CPU time of this thread")
     for k, label in (("detect_ms", "detection"), ("fusion_ms", "fusion (camera update)"),
                      ("per_frame_ms", "detection + fusion"), ("per_frame_wall_ms", "  wall clock")):
@@ -135,6 +137,10 @@ def _calibrate(args) -> int:
         print("sphere camera: --charuco (the marker size) must be positive and smaller than --square-mm",
               file=sys.stderr)
         return 2
+    for path in args.images:
+        if not os.path.exists(path):  # a typo: a usage error (2), not a calibration that failed (1)
+            print(f"sphere camera calibrate: {path} does not exist", file=sys.stderr)
+            return 2
     try:
         res = calibrate(list(read_views(args.images)), cols, rows, args.square_mm / 1000.0,
                         None if args.charuco is None else args.charuco / 1000.0)

@@ -6,6 +6,7 @@ import json
 import sys
 
 from sphere.capture import CaptureError, CaptureFile
+from sphere.protocol.packets import BY_TYPE
 
 HELP = "decode a serial capture and print its packets"
 DESCRIPTION = (
@@ -36,6 +37,11 @@ def run(args) -> int:
         print(f"sphere decode: {e}", file=sys.stderr)
         return 2
     wanted = {t.lower() for t in args.type} if args.type else None
+    known = {cls.NAME.lower() for cls in BY_TYPE.values()}
+    if wanted and not wanted <= known:
+        print(f"sphere decode: --type {', '.join(sorted(wanted - known))}: no such packet type; known: "
+              f"{', '.join(sorted(known))}", file=sys.stderr)
+        return 2
     out = sys.stdout
     count = 0
     try:

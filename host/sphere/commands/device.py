@@ -6,6 +6,8 @@ from __future__ import annotations
 import argparse
 import sys
 
+from sphere import argtypes
+
 HELP = "read or change the sphere's settings (tap, free fall, stream, filter, board), identify, reboot"
 DESCRIPTION = """\
   sphere device --port P get                       what the sphere reports (firmware, sensors, stream, board)
@@ -23,8 +25,8 @@ output says which."""
 def add_arguments(p) -> None:
     p.formatter_class = argparse.RawDescriptionHelpFormatter
     p.add_argument("--port", help="the sphere's serial port (e.g. /dev/ttyUSB0, /dev/rfcomm0, /dev/sphere)")
-    p.add_argument("--baud", type=int, default=115200)
-    p.add_argument("--timeout", type=float, default=1.0, metavar="SECONDS", help="wait this long for each REPLY")
+    p.add_argument("--baud", type=argtypes.baud, default=115200)
+    p.add_argument("--timeout", type=argtypes.seconds, default=1.0, metavar="SECONDS", help="wait this long for each REPLY")
     p.add_argument("action", choices=("get", "set", "identify", "reboot", "keys"))
     p.add_argument("items", nargs="*", metavar="KEY=VALUE", help="for set: the settings; for identify: seconds")
 
@@ -40,7 +42,12 @@ def _keys() -> str:
 
 
 class _Failed(Exception):
-    pass
+    """What went wrong; ``code`` 2 for a bad command line or port (nothing was sent), 1 for a sphere that did
+    not answer or refused."""
+
+    def __init__(self, message: str, code: int = 2):
+        super().__init__(message)
+        self.code = code
 
 
 def _open(args):
@@ -58,7 +65,7 @@ def _open(args):
     if hello is None:
         ser.close()
         raise _Failed(f"no HELLO from {args.port} within 3 s: is it the sphere (its firmware flashed: `sphere flash`), "
-                      "at 115200 baud?")
+                      "at 115200 baud?", 1)
     from sphere.daemon.sources import version_problem
 
     problem = version_problem(hello)
@@ -100,7 +107,7 @@ def _ask(link, packet, timeout_s: float, after: str = "") -> None:
     """Send a command and wait for its REPLY; _Failed with what went wrong (and ``after``) unless it is OK."""
     problem = _reply_problem(packet, link.command(packet, timeout_s))
     if problem:
-        raise _Failed(problem + after)
+        raise _Failed(problem + after, 1)
 
 
 def run(args) -> int:
@@ -108,7 +115,7 @@ def run(args) -> int:
         return _run(args)
     except _Failed as e:
         print(f"sphere device: {e}", file=sys.stderr)
-        return 1
+        return e.code
 
 
 def _run(args) -> int:

@@ -11,6 +11,8 @@ from pathlib import Path
 
 import numpy as np
 
+from sphere import argtypes
+
 HELP = "evaluate orientation filters on BROAD trials (total/heading/inclination RMSE, µs per sample)"
 DESCRIPTION = """\
 Runs orientation filters on every BROAD trial (.mat) in a folder and prints, per trial and as the mean
@@ -33,10 +35,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    "or SPHERE_BROAD_DIR)")
     p.add_argument("--filters", metavar="NAMES", help="comma-separated filter names (default: all)")
     p.add_argument("--only", metavar="TRIALS", help="comma-separated trial numbers or names to run (default: all)")
-    p.add_argument("--seconds", type=float, metavar="S", help="use only the first S seconds of each trial (quick check)")
-    p.add_argument("--json", metavar="OUT", help="write the results as JSON")
+    p.add_argument("--seconds", type=argtypes.seconds, metavar="S", help="use only the first S seconds of each trial (quick check)")
+    p.add_argument("--json", metavar="OUT", type=argtypes.out_file, help="write the results as JSON")
     p.add_argument("--plot", metavar="DIR", help="write PNG plots (error over time per trial, bar chart per filter)")
-    p.add_argument("--jobs", type=int, default=2, help="trials run in parallel (default: 2)")
+    p.add_argument("--jobs", type=argtypes.at_least_one, default=2, help="trials run in parallel (default: 2)")
     p.add_argument("--quiet", action="store_true", help="print only the mean table")
     p.add_argument("--cv", action="store_true", help="leave-one-trial-out: each filter's free parameters chosen "
                    "from its registry grid on the other trials, scored on the one left out (default filters: "

@@ -21,7 +21,12 @@ HELLO_TIMEOUT_S = 6.0
 
 
 class FlashError(Exception):
-    """Flashing cannot go on; the message says what to do."""
+    """Flashing cannot go on; the message says what to do. ``code`` 2: a bad flag, image or port (nothing was
+    written); 1: the board did not answer or avrdude failed."""
+
+    def __init__(self, message: str, code: int = 2):
+        super().__init__(message)
+        self.code = code
 
 
 def add_arguments(p) -> None:
@@ -39,10 +44,19 @@ def find_image(given: str | None) -> Path:
 
     if given:
         image = Path(given)
+        if image.is_dir():
+            raise FlashError(f"{image} is a folder: give the .hex image file")
         if not image.is_file():
             raise FlashError(f"{image}: no such image file")
         if image.suffix.lower() != ".hex":
             raise FlashError(f"{image}: avrdude is given an Intel HEX file here (.hex); `make -C firmware` makes one")
+        try:
+            with open(image, "rb") as f:
+                head = f.read(1)
+        except OSError as e:
+            raise FlashError(f"{image}: cannot read: {e.strerror}") from None
+        if head != b":":
+            raise FlashError(f"{image}: not an Intel HEX file (its records start with ':'); `make -C firmware` makes one")
         return image
     image = paths.firmware_image(".hex")
     if not image.exists() and paths.in_checkout():
@@ -124,20 +138,20 @@ def flash(args, out=None) -> int:
             ser.close()
         if baud is None:
             raise FlashError(f"no bootloader answered on {port} at 115200 or 57600 baud: is it a Nano? Press its "
-                             "reset button just as you run this again, or give --baud")
+                             "reset button just as you run this again, or give --baud", 1)
     print(f"{port}: {bootloader.bootloader_name(baud)} at {baud} baud; writing {image}", file=out, flush=True)
     cmd = bootloader.avrdude_command(port, baud, image, avrdude=avrdude, verify=not args.no_verify)
     r = subprocess.run(cmd, capture_output=True, text=True)
     if r.returncode != 0:
         tail = "\n".join((r.stderr or r.stdout).strip().splitlines()[-8:])
-        raise FlashError(f"avrdude failed (exit status {r.returncode}):\n{tail}\ncommand: {' '.join(cmd)}")
+        raise FlashError(f"avrdude failed (exit status {r.returncode}):\n{tail}\ncommand: {' '.join(cmd)}", 1)
     print("written" + ("" if args.no_verify else " and verified"), file=out, flush=True)
     if args.no_hello:
         return 0
     hello = wait_for_hello(port)
     if hello is None:
         raise FlashError(f"the image is written but no HELLO came from {port} within {HELLO_TIMEOUT_S:g} s: "
-                         "check the sensors' wiring (hardware/README.md) and watch the port with `sphere monitor`")
+                         "check the sensors' wiring (hardware/README.md) and watch the port with `sphere monitor`", 1)
     j = hello.to_json()
     print(f"firmware {j['firmware_version']} (protocol {hello.protocol_version}); sensors found: "
           f"{', '.join(j['sensors_found']) or 'none'}", file=out)
@@ -149,4 +163,4 @@ def run(args) -> int:
         return flash(args)
     except FlashError as e:
         print(f"sphere flash: {e}", file=sys.stderr)
-        return 1
+        return e.code

@@ -7,6 +7,8 @@ import json
 import sys
 from pathlib import Path
 
+from sphere import argtypes
+
 HELP = "hybrid camera + IMU tracker vs camera-only and IMU-only on rendered BROAD trials"
 DESCRIPTION = """\
 Renders BROAD trials as a 640x480, 30 fps webcam sees the 8 cm ball (the trial's optical positions;
@@ -36,15 +38,15 @@ def add_arguments(p) -> None:
     p.add_argument("--trials", default=DEFAULT_TRIALS,
                    help=f"trial:start_s pairs (default {DEFAULT_TRIALS}: slow translation, slow translation with "
                         f"a rest, fast translation)")
-    p.add_argument("--seconds", type=float, default=12.0, help="length of each stretch (default 12, at least 9)")
-    p.add_argument("--distance", type=float, default=1.0, help="camera to the mean ball position, m (default 1.0)")
+    p.add_argument("--seconds", type=argtypes.seconds, default=12.0, help="length of each stretch (default 12, at least 9)")
+    p.add_argument("--distance", type=argtypes.positive, default=1.0, help="camera to the mean ball position, m (default 1.0)")
     p.add_argument("--hue", type=float, default=120.0, help="the ball's hue in degrees (default 120, green)")
     p.add_argument("--jpeg", type=int, default=85, metavar="Q",
                    help="frames coded as an MJPG webcam sends them, JPEG quality Q (default 85; 0: raw frames)")
     p.add_argument("--marker", action="store_true",
                    help="print an ArUco marker (DICT_4X4_50 id 7, 35 mm) on the shell (on the face of the sensor "
                         "turned to the camera most of the time): the camera corrects the host filter's heading")
-    p.add_argument("--json", metavar="OUT", help="write the results as JSON")
+    p.add_argument("--json", metavar="OUT", type=argtypes.out_file, help="write the results as JSON")
     p.add_argument("--plot", metavar="DIR", help="write PNG plots (error over time per trial, summary bars)")
 
 
@@ -97,7 +99,7 @@ def run(args) -> int:
                                        hue_deg=args.hue, marker=marker, jpeg_quality=args.jpeg or None)
         except (broad.BroadMissing, ValueError) as e:
             print(f"sphere hybrid-eval: {e}", file=sys.stderr)
-            return 1
+            return 2
         r = ev.run(rt, hue_deg=args.hue)
         figs = ev.figures(r, rt)
         dist = np.linalg.norm(r.truth, axis=1)

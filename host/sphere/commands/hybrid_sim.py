@@ -6,6 +6,8 @@ import json
 import sys
 from pathlib import Path
 
+from sphere import argtypes
+
 HELP = "reproduce chapter 3's hybrid CV + sensor-fusion simulation and its Tables 2-3"
 DESCRIPTION = """\
 Runs the hybrid tracker of the dissertation's chapter 3 (orientation filter with the 5 % innovation gate,
@@ -16,8 +18,8 @@ the dissertation's Tables 2-3, with why the numbers differ."""
 
 def add_arguments(p) -> None:
     p.add_argument("--seed", type=int, help="random seed (default: the fixed one, so runs repeat exactly)")
-    p.add_argument("--json", metavar="OUT", help="write the tables as JSON")
-    p.add_argument("--plot", metavar="PNG", help="write the simulated and estimated signals as a PNG")
+    p.add_argument("--json", metavar="OUT", type=argtypes.out_file, help="write the tables as JSON")
+    p.add_argument("--plot", metavar="PNG", type=argtypes.out_file, help="write the simulated and estimated signals as a PNG")
 
 
 EXPLANATION = """\

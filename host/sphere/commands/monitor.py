@@ -5,6 +5,8 @@ from __future__ import annotations
 import sys
 import time
 
+from sphere import argtypes
+
 HELP = "live view of a sphere on a port: packets and rates, sensor flags, latest values, events, link quality"
 DESCRIPTION = (
     "Reads the sphere's port and shows what arrives: packets per type and their rate, the RAW_SAMPLE "
@@ -18,13 +20,13 @@ DESCRIPTION = (
 
 def add_arguments(p) -> None:
     p.add_argument("--port", required=True, help="the sphere's serial port (/dev/ttyUSB0, /dev/rfcomm0, /dev/sphere)")
-    p.add_argument("--baud", type=int, default=115200)
-    p.add_argument("--seconds", type=float, default=None, help="stop after this long (default: until Ctrl-C)")
-    p.add_argument("--events", type=int, default=None, metavar="N",
+    p.add_argument("--baud", type=argtypes.baud, default=115200)
+    p.add_argument("--seconds", type=argtypes.seconds, default=None, help="stop after this long (default: until Ctrl-C)")
+    p.add_argument("--events", type=argtypes.at_least_one, default=None, metavar="N",
                    help="stop after N events (taps, free falls): e.g. to try a tap setting")
     p.add_argument("--plot", action="store_true", help="live curves: accelerometer, gyroscope, magnetometer, orientation")
     p.add_argument("--plot-out", metavar="PNG", help="with --plot: also write the last view to this image at the end")
-    p.add_argument("--refresh", type=float, default=0.5, metavar="SECONDS", help="how often the view is redrawn")
+    p.add_argument("--refresh", type=argtypes.seconds, default=0.5, metavar="SECONDS", help="how often the view is redrawn")
 
 
 class _Plot:
@@ -82,9 +84,9 @@ def run(args) -> int:
 
     try:
         ser = open_port(args.port, args.baud, timeout_s=0.05)
-    except PortError as e:
+    except PortError as e:  # the port named is not there or not usable: a usage error
         print(f"sphere monitor: {e}", file=sys.stderr)
-        return 1
+        return 2
     link = DeviceLink(ser, name=args.port)
     mon = LinkMonitor(link.stream.stats)
     tty = sys.stdout.isatty()

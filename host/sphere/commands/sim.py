@@ -11,6 +11,7 @@ import tempfile
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
+from sphere import argtypes
 from sphere.argtypes import out_file, seconds_up_to
 
 HELP = "run the firmware on the simulated board (simavr) fed by a BROAD trial or a synthetic motion"
@@ -41,12 +42,71 @@ def _span(text: str) -> str:
 
     a, sep, b = text.partition(":")
     try:
-        float(a), float(b)
-        if not sep:
+        t0, t1 = float(a), float(b)
+        if not sep or not (math.isfinite(t0) and 0 <= t0 < t1) or math.isnan(t1):
             raise ValueError
     except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r}: give T0:T1 in seconds, e.g. 3.0:3.5") from None
+        raise argparse.ArgumentTypeError(f"{text!r}: give T0:T1 in seconds with 0 <= T0 < T1, e.g. 3.0:3.5 "
+                                         "(T1 may be inf)") from None
     return text
+
+
+def _nack(text: str) -> str:
+    """CHIP:T0:T1."""
+    import argparse
+
+    chip, sep, span = text.partition(":")
+    if chip not in CHIPS or not sep:
+        raise argparse.ArgumentTypeError(f"{text!r}: give CHIP:T0:T1 with CHIP one of {', '.join(CHIPS)}, "
+                                         "e.g. itg3200:3:5")
+    _span(span)
+    return text
+
+
+def _time(text: str) -> float:
+    """A moment or a length in seconds: finite, 0 or more."""
+    import argparse
+
+    try:
+        v = float(text)
+    except ValueError:
+        v = math.nan
+    if not math.isfinite(v) or v < 0:
+        raise argparse.ArgumentTypeError(f"{text!r}: give a number of seconds, 0 or more")
+    return v
+
+
+def _rate(text: str) -> float:
+    """A rate: finite, 0 or more."""
+    import argparse
+
+    try:
+        v = float(text)
+    except ValueError:
+        v = math.nan
+    if not math.isfinite(v) or v < 0:
+        raise argparse.ArgumentTypeError(f"{text!r}: give a rate, 0 or more")
+    return v
+
+
+def _send_file(text: str) -> str:
+    """A file of lines 'SECONDS HEX HEX ...' (checked before the board starts)."""
+    import argparse
+
+    path = argtypes.in_file(text)
+    try:
+        with open(path, encoding="utf-8") as f:
+            for n, line in enumerate(f, 1):
+                words = line.split()
+                if not words or words[0].startswith("#"):
+                    continue
+                float(words[0])
+                bytes(int(w, 16) for w in words[1:])
+    except (ValueError, UnicodeDecodeError):
+        raise argparse.ArgumentTypeError(f"{text!r} line {n}: expected 'SECONDS HEX HEX ...', e.g. '0.5 7E 01'") from None
+    except OSError as e:
+        raise argparse.ArgumentTypeError(f"{text!r}: cannot read: {e.strerror}") from None
+    return path
 
 
 MAX_SECONDS = 86400.0  # a simulated day: longer runs are a typo (1e9 s would need terabytes of trace)
@@ -76,7 +136,7 @@ def add_arguments(p) -> None:
                    help="start this far into a BROAD trial (s), or 'auto': 10 s before its first movement "
                         "(default 0; with --accuracy auto)")
     p.add_argument("--full", action="store_true", help="play the whole BROAD trial (overrides --seconds and --start)")
-    p.add_argument("--hold", type=float, default=0.0,
+    p.add_argument("--hold", type=_time, default=0.0,
                    help="lead-in: hold the first sample still for this long before the motion (s)")
     p.add_argument("--firmware", default=None,
                    help="firmware image (default firmware/build/sphere.elf, built with `make -C firmware`); "
@@ -85,14 +145,14 @@ def add_arguments(p) -> None:
     p.add_argument("--pty", action="store_true", help="serve the UART on a pseudo-terminal (implies --realtime)")
     p.add_argument("--realtime", action="store_true", help="pace simulated time to the wall clock")
     p.add_argument("--stats", metavar="OUT.json", type=out_file, help="write the figures as JSON")
-    p.add_argument("--nack", action="append", default=[], metavar="CHIP:T0:T1",
+    p.add_argument("--nack", action="append", default=[], metavar="CHIP:T0:T1", type=_nack,
                    help="fault: CHIP (adxl345|itg3200|hmc5883l) stops answering from T0 to T1 s (T1 may be inf)")
     p.add_argument("--stall", action="append", default=[], metavar="T0:T1", type=_span,
                    help="fault: the I2C bus is stalled (clock held) from T0 to T1 s")
-    p.add_argument("--send", metavar="FILE", help="bytes for the device's UART, lines 'SECONDS HEX HEX ...'")
+    p.add_argument("--send", metavar="FILE", type=_send_file, help="bytes for the device's UART, lines 'SECONDS HEX HEX ...'")
     p.add_argument("--timing-pin", default=None, help="pin high during the MARG update (default B5 = D13)")
     p.add_argument("--loop-pin", default=None, help="pin high during a whole period's work, if the firmware has one")
-    p.add_argument("--rate", type=float, default=None, help="the firmware's sample rate in Hz (default 200)")
+    p.add_argument("--rate", type=argtypes.positive, default=None, help="the firmware's sample rate in Hz (default 200)")
     p.add_argument("--i2c-real-timing", action="store_true",
                    help="(the default now) each I2C byte takes 9 SCL periods at the firmware's TWBR rate")
     p.add_argument("--simavr-i2c-timing", action="store_true",
@@ -106,12 +166,12 @@ def add_arguments(p) -> None:
                    help="a chip's oscillator off the Nano's crystal by PPM")
     p.add_argument("--clocks", choices=["random"], default=None,
                    help="every chip's oscillator off by a seeded amount within its datasheet's tolerance")
-    p.add_argument("--glitch", type=float, default=None, metavar="RATE",
+    p.add_argument("--glitch", type=_rate, default=None, metavar="RATE",
                    help="transient I2C faults, RATE a second on average: single NACKs, clock stretching, a reset "
                         "in the middle of a read (the chip then holds SDA low)")
-    p.add_argument("--brownout", action="append", type=float, default=[], metavar="T",
+    p.add_argument("--brownout", action="append", type=_time, default=[], metavar="T",
                    help="the supply dips at T s: the AVR and the chips restart")
-    p.add_argument("--reset-mid-read", action="append", type=float, default=[], metavar="T",
+    p.add_argument("--reset-mid-read", action="append", type=_time, default=[], metavar="T",
                    help="reset the AVR at the first byte a chip sends after T s (the chip holds SDA)")
     p.add_argument("--sda-held", action="store_true", help="at power-up a sensor holds SDA low")
     p.add_argument("--host-stall", action="append", default=[], metavar="T0:T1", type=_span,
@@ -125,11 +185,11 @@ def add_arguments(p) -> None:
     p.add_argument("--host-independent", action="store_true",
                    help="the host Madgwick decides alone (no tap/norm rejections, no start-up gain) instead of "
                         "following the firmware's flags")
-    p.add_argument("--jobs", type=int, default=2, help="boards run at once with several traces (default 2)")
+    p.add_argument("--jobs", type=argtypes.at_least_one, default=2, help="boards run at once with several traces (default 2)")
     p.add_argument("--no-build", action="store_true", help="do not run make; fail with the command instead")
-    p.add_argument("--json", nargs="?", const=True, default=None, metavar="OUT",
+    p.add_argument("--json", nargs="?", const=True, default=None, metavar="OUT", type=out_file,
                    help="print the figures as JSON (with a file name: write them there; the soak's report)")
-    p.add_argument("--soak", type=float, default=None, metavar="SECONDS",
+    p.add_argument("--soak", type=seconds_up_to(MAX_SECONDS), default=None, metavar="SECONDS",
                    help="soak run: the firmware on BROAD motion for SECONDS under a seeded schedule of every fault, "
                         "checked against a fault-free run of the same motion; exit 1 when an invariant fails")
     p.add_argument("--soak-faults", default=None, metavar="KIND,...",
@@ -296,9 +356,14 @@ def run(args) -> int:
             elf = testfw_elf(build=not args.no_build)
         elif args.firmware:
             elf = Path(args.firmware)
-            if not elf.exists():
+            if not elf.is_file():
                 print(f"sphere sim: no firmware image at {elf}", file=sys.stderr)
                 return 2
+            with open(elf, "rb") as f:
+                if f.read(4) != b"\x7fELF":
+                    print(f"sphere sim: {elf} is not an ELF image (the firmware build's firmware/build/sphere.elf)",
+                          file=sys.stderr)
+                    return 2
         else:
             elf = firmware_elf(build=not args.no_build)
         from sphere.sim.board import board_path

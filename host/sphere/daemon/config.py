@@ -283,6 +283,11 @@ class SourceSettings:
     sim_trace: str = option("", "motion the virtual board plays with `--simulate`: a BROAD trial (.mat, name or "
                             "number) or `synthetic:NAME` (see `sphere sim --help`); empty = `synthetic:rotation:15`")
 
+    def check(self):
+        if self.kind == "replay" and not self.replay:
+            return 'kind = "replay" needs a capture file: --replay FILE or [source] replay = "FILE"'
+        return None
+
 
 @section("output")
 class OutputSettings:
@@ -569,6 +574,8 @@ def load(path: Path | str | None = None, required: bool = False) -> Config:
         return Config()
     if path.is_dir():
         raise ConfigError(f"{path} is a folder, not a config file")
+    if not path.is_file() and str(path) != os.devnull:  # a device or a FIFO: reading it might never end
+        raise ConfigError(f"{path} is not a regular file: give a TOML text file (sphere-mouse --print-config writes one)")
     try:
         with open(path, "rb") as f:
             data = tomllib.load(f)

@@ -60,6 +60,12 @@ class ReplaySource(Source):
         except StopIteration:
             self._done = True
             self.state = f"replay {os.path.basename(self.path)}: ended"
+            stats = self.capture.stats
+            if stats.bytes_in == 0:
+                raise SourceError(f"{self.path} is empty: nothing to replay (record a capture with `sphere capture`)") from None
+            if stats.frames_ok == 0:
+                raise SourceError(f"no valid frame in {stats.bytes_in} bytes of {self.path}: this is not a sphere capture, "
+                                  "or it was recorded at the wrong baud rate (the sphere sends 115200 8N1)") from None
             raise SourceEnded() from None
         except CaptureError as e:
             raise SourceError(str(e)) from None

@@ -21,7 +21,7 @@ import time
 
 from sphere.daemon.sources.base import LinkLost, Source, SourceError, version_problem
 from sphere.protocol import GetHello, Hello, PacketStream
-from sphere.serial_link import PortBusy, PortError, open_port
+from sphere.serial_link import PortBusy, PortError, open_port, port_problem
 
 DEFAULT_CANDIDATES = ("/dev/sphere",)
 #: USB-serial chips of the Arduino Nano and its clones: CH340, FT232R, CP2102.
@@ -150,6 +150,7 @@ class SerialSource(Source):
             self._note_once(path, str(e))
             return None
         self._warned.discard(path)
+        self._warned.discard("missing:" + path)
         probe = PacketStream("device")
         link = DeviceLink(ser, probe)
         start = time.monotonic()
@@ -197,7 +198,12 @@ class SerialSource(Source):
             self.state = "looking for the sphere (no sphere port: plug it in, or name it with --port)"
         elif self.port != "auto" and not os.path.exists(self.port):
             self.state = f"waiting for {self.port} to appear"
+            if "missing:" + self.port not in self._warned:
+                self._warned.add("missing:" + self.port)
+                self.log(f"{self.port} is not there (yet): waiting for it (is the sphere plugged in or paired?)")
             return None
+        elif self.port != "auto" and port_problem(self.port):
+            raise SourceError(port_problem(self.port))
         else:
             self.state = f"looking for the sphere (nothing identified itself on {', '.join(p for p, _ in paths)})"
         for path, named in paths:

@@ -80,6 +80,32 @@ def start_simulator(trace: str = "", log=None, timeout_s: float = 120.0, seconds
     raise SourceError(f"`sphere {' '.join(cmd[3:])}` did not open its pty: " + " | ".join(tail[-4:]))
 
 
+def trace_problem(trace: str) -> str | None:
+    """Why `sphere sim` could not play ``trace`` ([source] sim_trace), or None: checked before the board
+    starts, so a typo is one clear line, not a fallback to the scripted sphere."""
+    if not trace:
+        return None
+    from sphere.sim import trace as T
+
+    if trace.endswith(".bin"):
+        return None if os.path.isfile(trace) else f"--trace {trace}: no such trace file"
+    if trace.startswith("synthetic:") or trace in T.SYNTHETIC:
+        name = trace.split(":", 2)[1] if trace.startswith("synthetic:") else trace
+        return None if name in T.SYNTHETIC else (f"--trace {trace}: no synthetic motion {name!r}; one of "
+                                                  f"{', '.join(T.SYNTHETIC)}")
+    from sphere.broad import BroadMissing, find_trial
+
+    try:
+        find_trial(trace)
+    except BroadMissing as e:
+        return f"--trace: {e}"
+    return None
+
+
+class SimulatorRefused(SourceError):
+    """The trace the user named cannot be played: said at once, no fallback to the scripted sphere."""
+
+
 class SimulatorSource(SerialSource):
     """The virtual board's UART through the pty that `sphere sim --pty` exposes."""
 
@@ -98,6 +124,9 @@ class SimulatorSource(SerialSource):
         from sphere.daemon.sources.scripted import ScriptedSource
 
         s = cfg.source
+        problem = trace_problem(s.sim_trace)
+        if problem:
+            raise SimulatorRefused(problem)
         if simulator_available():
             try:
                 return cls(s.sim_trace, log=log, seconds=s.sim_seconds, **serial_timing(s))
