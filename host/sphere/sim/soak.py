@@ -228,6 +228,17 @@ def _at(t: float, tt: np.ndarray, qq: np.ndarray, gap_s: float = 0.03, near_s: f
     return r / np.linalg.norm(r)
 
 
+def _qmul(p, q) -> np.ndarray:
+    w1, x1, y1, z1 = p
+    w2, x2, y2, z2 = q
+    return np.array([w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2, w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
+                     w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2, w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2])
+
+
+def _conj(q) -> np.ndarray:
+    return np.asarray(q, float) * np.array([1.0, -1.0, -1.0, -1.0])
+
+
 def _angle_deg(p, q) -> float:
     return math.degrees(2 * math.acos(min(1.0, abs(float(np.dot(p, q))))))
 
@@ -259,10 +270,13 @@ def _first_good_after(good_t: list[float], t: float) -> float:
 def orientation_excess(frames: list[Frame], ref: list[Frame], ends: list[dict], resets_t: list[float],
                        host_stalls=(), after_s: float = 2.0,
                        settle_after_reset_s: float = 2.5) -> tuple[Invariant, list]:
-    """orientation_excess_deg: the angle between the device's ORIENTATION and the reference run's (the same
-    motion and resets, no other faults) ``after_s`` after each fault ends, both taken at that same instant
-    (:func:`_at`); each row also says the angle just before the fault started (``before_deg``, for reading
-    what the fault did, not judged).
+    """orientation_excess_deg: what each fault did to the device's ORIENTATION against the reference run's (the
+    same motion and resets, no other faults), ``after_s`` after the fault ends, both runs taken at the same
+    instant (:func:`_at`): the angle between them then (``diff_deg``), unless they were already apart before the
+    fault started (``before_deg``; the reference has the resets too, and two start-ups can end degrees apart and
+    stay so): then only as far as the fault moved the device against the reference (``moved_deg``, the
+    earth-frame offset then against the one at the fault's start). ``excess_deg`` = min(diff, moved): a check
+    fails when the device is over the limit off the reference and the fault moved it that far.
 
     Not judged: within ``settle_after_reset_s`` of a reset (the firmware's start-up is not the same to the
     millisecond in both runs), nor while either run says it is still converging (ORIENTATION ``converging``, its
@@ -291,8 +305,15 @@ def orientation_excess(frames: list[Frame], ref: list[Frame], ends: list[dict], 
             continue
         pa, pb = _at(t, ta, qa), _at(t, tb, qb)
         ba, bb = _at(t0, ta, qa), _at(t0, tb, qb)
-        row["before_deg"] = round(_angle_deg(ba, bb), 2) if ba is not None and bb is not None else None
         deg = _angle_deg(pa, pb) if pa is not None and pb is not None else math.inf  # no orientation then
+        row["before_deg"] = row["moved_deg"] = None
+        if ba is not None and bb is not None:
+            row["before_deg"] = round(_angle_deg(ba, bb), 2)
+            if pa is not None and pb is not None:  # how far the fault moved the device against the reference
+                moved = _angle_deg(_qmul(_qmul(pa, _conj(pb)), _qmul(bb, _conj(ba))), np.array([1.0, 0, 0, 0]))
+                row["moved_deg"] = round(moved, 2)
+                row["diff_deg"] = round(deg, 2)
+                deg = min(deg, moved)
         row["excess_deg"] = round(deg, 2)
         rows.append(row)
         if deg > LIMITS["orientation_excess_deg"]:
