@@ -40,7 +40,7 @@ class Row:
     code: int
     words: str
     files: dict = field(default_factory=dict)  # name -> bytes | "dir" | "fifo" | "loop"
-    port: str | None = None  # None | "silent" | "garbage"
+    port: str | None = None  # None | "silent" | "garbage" | "vanish" (streams for 0.5 s, then is unplugged)
     timeout: float = 20.0
 
     @property
@@ -197,6 +197,7 @@ ROWS = [
     S(["capture", "--port", "{tmp}", "--out", "{tmp}/x.cap"], 2, "not a serial port"),
     S(["capture", "--port", "/dev/null", "--out", "{tmp}/x.cap"], 2, "not a serial port"),
     S(["capture", "--out", "{tmp}/x.cap"], 2, "required"),
+    S(["capture", "--port", "{port}", "--out", "{tmp}/x.cap", "--quiet"], 1, "went away", port="vanish"),
     # sim
     S(["sim", "--trace", "synthetic:still", "--seconds", "1e9"], 2, "at most 86400"),
     S(["sim", "--trace", "synthetic:still", "--seconds", "-5"], 2, "greater than 0"),
@@ -256,6 +257,7 @@ ROWS = [
     S(["monitor", "--port", "{port}", "--events", "-1"], 2, "events", port="silent"),
     S(["monitor", "--port", "{port}", "--baud", "0"], 2, "baud", port="silent"),
     S(["monitor", "--port", "/dev/null", "--seconds", "1"], 2, "not a serial port"),
+    S(["monitor", "--port", "{port}", "--seconds", "5"], 1, "went away", port="vanish"),
     # device
     S(["device", "--port", "/dev/ttyNOPE9", "get"], 2, "plugged in"),
     S(["device", "get"], 2, "--port"),
@@ -306,7 +308,8 @@ def _make(tmp, files):
 
 
 class _Port:
-    """A pty standing for a serial device: silent, or one that streams garbage while the row runs."""
+    """A pty standing for a serial device: silent, one that streams a capture while the row runs, or one
+    that streams for 0.5 s and is then unplugged (its master end closed)."""
 
     def __init__(self, kind):
         self.master, slave = os.openpty()
@@ -314,11 +317,16 @@ class _Port:
         self.path = os.ttyname(slave)
         os.close(slave)
         self.stop = threading.Event()
-        if kind == "garbage":
-            threading.Thread(target=self._feed, daemon=True).start()
+        self.lock = threading.Lock()
+        if kind in ("garbage", "vanish"):
+            threading.Thread(target=self._feed, args=(kind == "vanish",), daemon=True).start()
 
-    def _feed(self):
+    def _feed(self, vanish):
+        end = time.monotonic() + 0.5
         while not self.stop.is_set():
+            if vanish and time.monotonic() > end:
+                self.close()
+                return
             try:
                 os.write(self.master, GOOD[:2000])
             except OSError:
@@ -326,11 +334,16 @@ class _Port:
             time.sleep(0.05)
 
     def close(self):
-        self.stop.set()
-        os.close(self.master)
+        with self.lock:
+            self.stop.set()
+            if self.master is not None:
+                os.close(self.master)
+                self.master = None
 
 
-def _child(row, argv, out_path, env):
+def _child(row, argv, out_path, env, port):
+    if port is not None:
+        os.close(port.master)  # the device end stays with the test (an unplug must be one)
     os.environ.update(env)
     fd = os.open(out_path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC)
     os.dup2(fd, 2)
@@ -370,7 +383,7 @@ def run_row(row, tmp):
     sys.stderr.flush()
     pid = os.fork()
     if pid == 0:
-        _child(row, argv, out, env)
+        _child(row, argv, out, env, port)
     deadline = time.monotonic() + row.timeout
     status = None
     stopped = False
