@@ -35,15 +35,21 @@ def out_file(text: str) -> str:
     return text
 
 
-def positive(text: str) -> float:
-    """A finite number greater than 0."""
+def positive(text: str, least: float = 0.0, inclusive: bool = False) -> float:
+    """A finite number greater than 0 (or than ``least``; ``inclusive``: at least ``least``)."""
     try:
         v = float(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
-    if not math.isfinite(v) or v <= 0:
-        raise argparse.ArgumentTypeError(f"{text!r}: give a number greater than 0")
+    if not math.isfinite(v) or v < least or (v == least and not inclusive):
+        raise argparse.ArgumentTypeError(f"{text!r}: give a number {'of at least' if inclusive else 'greater than'} "
+                                         f"{least:g}")
     return v
+
+
+def non_negative(text: str) -> float:
+    """A finite number, 0 or more (a moment, a length, a rate)."""
+    return positive(text, 0.0, inclusive=True)
 
 
 def count(text: str, least: int = 0) -> int:

@@ -63,32 +63,6 @@ def _nack(text: str) -> str:
     return text
 
 
-def _time(text: str) -> float:
-    """A moment or a length in seconds: finite, 0 or more."""
-    import argparse
-
-    try:
-        v = float(text)
-    except ValueError:
-        v = math.nan
-    if not math.isfinite(v) or v < 0:
-        raise argparse.ArgumentTypeError(f"{text!r}: give a number of seconds, 0 or more")
-    return v
-
-
-def _rate(text: str) -> float:
-    """A rate: finite, 0 or more."""
-    import argparse
-
-    try:
-        v = float(text)
-    except ValueError:
-        v = math.nan
-    if not math.isfinite(v) or v < 0:
-        raise argparse.ArgumentTypeError(f"{text!r}: give a rate, 0 or more")
-    return v
-
-
 def _send_file(text: str) -> str:
     """A file of lines 'SECONDS HEX HEX ...' (checked before the board starts)."""
     import argparse
@@ -136,7 +110,7 @@ def add_arguments(p) -> None:
                    help="start this far into a BROAD trial (s), or 'auto': 10 s before its first movement "
                         "(default 0; with --accuracy auto)")
     p.add_argument("--full", action="store_true", help="play the whole BROAD trial (overrides --seconds and --start)")
-    p.add_argument("--hold", type=_time, default=0.0,
+    p.add_argument("--hold", type=argtypes.non_negative, default=0.0,
                    help="lead-in: hold the first sample still for this long before the motion (s)")
     p.add_argument("--firmware", default=None,
                    help="firmware image (default firmware/build/sphere.elf, built with `make -C firmware`); "
@@ -166,12 +140,12 @@ def add_arguments(p) -> None:
                    help="a chip's oscillator off the Nano's crystal by PPM")
     p.add_argument("--clocks", choices=["random"], default=None,
                    help="every chip's oscillator off by a seeded amount within its datasheet's tolerance")
-    p.add_argument("--glitch", type=_rate, default=None, metavar="RATE",
+    p.add_argument("--glitch", type=argtypes.non_negative, default=None, metavar="RATE",
                    help="transient I2C faults, RATE a second on average: single NACKs, clock stretching, a reset "
                         "in the middle of a read (the chip then holds SDA low)")
-    p.add_argument("--brownout", action="append", type=_time, default=[], metavar="T",
+    p.add_argument("--brownout", action="append", type=argtypes.non_negative, default=[], metavar="T",
                    help="the supply dips at T s: the AVR and the chips restart")
-    p.add_argument("--reset-mid-read", action="append", type=_time, default=[], metavar="T",
+    p.add_argument("--reset-mid-read", action="append", type=argtypes.non_negative, default=[], metavar="T",
                    help="reset the AVR at the first byte a chip sends after T s (the chip holds SDA)")
     p.add_argument("--sda-held", action="store_true", help="at power-up a sensor holds SDA low")
     p.add_argument("--host-stall", action="append", default=[], metavar="T0:T1", type=_span,
