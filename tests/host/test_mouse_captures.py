@@ -76,3 +76,35 @@ def test_fast_rotation_moves_the_pointer_by_the_turn_about_the_vertical():
     expected_x = -yaw_deg * 1280 / 40.0
     assert abs(expected_x) > 200  # the capture really turns
     assert backend.x == pytest.approx(expected_x, rel=0.02, abs=3)
+
+
+@pytest.mark.parametrize("mode", ["pointer", "tilt"])
+def test_deferred_bias_step_changes_nothing(mode):
+    """The daemon issues each move before the filter's bias step (SphereFilter's defer_bias / run_deferred);
+    every move, orientation and bias is the same bit for bit as with the step inside the update."""
+
+    def run(defer):
+        cfg = Config().with_overrides({"stream": {"enabled": False}, "output": {"screen_width_px": 1280},
+                                       "mode": {"start": mode}}, "test")
+        moves = []
+
+        class Rec(RecordingBackend):
+            def move(self, dx, dy):
+                moves.append((dx, dy))
+                super().move(dx, dy)
+
+        daemon = SphereMouse(cfg, ReplaySource(capture("sim_07_fast_rotation.bin"), speed=0), Rec(screen_size=None),
+                             log=lambda m: None)
+        m = daemon.motion
+        assert m.run_deferred is not None  # the default filter (sphere) has the split
+        if not defer:
+            m.run_deferred, m._defer = None, {}
+        quats = []
+        handle = daemon.handle
+        daemon.handle = lambda dp: (handle(dp), quats.append(m.quat))
+        daemon.run()
+        return moves, quats, list(m.filter.inner.bias)
+
+    deferred, inline = run(True), run(False)
+    assert len(deferred[0]) > 100
+    assert repr(deferred) == repr(inline)
