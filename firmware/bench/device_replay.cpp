@@ -72,7 +72,7 @@ int main(int argc, char** argv) {
         dev.tick();
         hal.wire.clear();
         int16_t q[4];
-        dev.filter().quaternionQ14(q);
+        dev.orientationQ14(q);
         out[5 * i] = dev.orientationFlags();
         for (int k = 0; k < 4; ++k) out[5 * i + 1 + k] = q[k];
     }

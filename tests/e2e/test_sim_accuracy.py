@@ -108,3 +108,39 @@ def test_firmware_bias_schedule_follows_the_tracking_windows():
                                                                             + [(5, -7, 1)] * W)
     sched = firmware_bias_schedule(r)
     assert len(sched) == 2 and sched[1][0] == len(r) - 1
+
+
+def test_stillness_takes_a_noisy_field_and_sees_a_slow_turn_in_the_halves_means():
+    """The host's replay of the firmware's stillness test (gyro_bias.cpp, the same numbers as the native
+    test "a still window with a noisy field is accepted"): magnetometer readings may scatter by ±15 LSB
+    (a module's noise), but a 1.5 °/s turn about the vertical, each reading within the per-reading span,
+    moves the second half's mean from the first's and ends the window at its last reading."""
+    from sphere.sim.analysis import TRACK_SAMPLES as W, _moved_at
+
+    rng = np.random.default_rng(1)
+    noisy = [RawSample(t_us=5000 * i, flags=7, accel=[0, 0, 256], gyro=[7, -3, -4],
+                       mag=[300 + int(rng.integers(-15, 16)), int(rng.integers(-15, 16)), -400]) for i in range(W)]
+    assert _moved_at(noisy, range(W)) is None
+    h = np.radians(1.5 * np.arange(W) / 200.0)
+    turn = [RawSample(t_us=5000 * i, flags=7, accel=[0, 0, 256], gyro=[7, -3, -4],
+                      mag=[int(round(300 * np.cos(a))), int(round(-300 * np.sin(a))), -400]) for i, a in enumerate(h)]
+    assert _moved_at(turn, range(W)) == W - 1
+
+
+def test_the_host_reference_predicts_its_output_as_the_firmware_does():
+    """ORIENTATION carries the state GYRO_DELAY_S ahead at the update's rate (SphereDevice::orientationQ14);
+    the host reference following the firmware does the same to its output: at a steady 100 °/s about z its
+    outputs lead the plain filter's by 100 °/s · GYRO_DELAY_S."""
+    from sphere.sim.analysis import GYRO_DELAY_S, host_madgwick
+
+    rate_lsb = 1438  # 100 °/s
+    raw = [RawSample(t_us=5000 * i, flags=7, accel=[0, 0, 256], gyro=[0, 0, rate_lsb], mag=[300, 0, -400])
+           for i in range(200)]
+    ori = [Orientation(t_us=5000 * i, flags=0x01, quat=[16384, 0, 0, 0]) for i in range(0, 200, 2)]
+    follow = host_madgwick(raw, 200, 0.0, 0.0, orientation=ori)
+    plain = host_madgwick(raw, 200, 0.0, 0.0)  # not following: no prediction (starts at the e-compass: level, north)
+    if follow is None:
+        pytest.skip("sphere.fusion.madgwick missing [optional]")
+    yaw = lambda q: np.degrees(2 * np.arctan2(q[:, 3], q[:, 0]))  # noqa: E731
+    lead = yaw(follow[1])[-1] - yaw(plain[1])[-1]
+    assert lead == pytest.approx(rate_lsb / 14.375 * GYRO_DELAY_S, rel=0.02)

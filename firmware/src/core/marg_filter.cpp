@@ -160,6 +160,25 @@ uint8_t MargFilter::update(const int16_t g[3], const int16_t a[3], const int16_t
     return flags;
 }
 
+void MargFilter::rotate(const int16_t g[3], uint32_t dt_us) {
+    int16_t q[4] = {q14of(q_[0]), q14of(q_[1]), q14of(q_[2]), q14of(q_[3])};
+    for (; dt_us > 10000; dt_us -= 10000) gyroStep(q, g, gyroK(10000), q_);
+    gyroStep(q, g, gyroK((uint16_t)dt_us), q_);
+    renormalise(q_, q_);
+}
+
+void MargFilter::predictQ14(const int16_t g[3], uint16_t ahead_us, int16_t out[4]) const {
+    int32_t n[4];
+    int16_t q[4];
+    for (uint8_t i = 0; i < 4; ++i) {
+        n[i] = q_[i];
+        q[i] = q14of(q_[i]);
+    }
+    gyroStep(q, g, gyroK(ahead_us), n);
+    renormalise(n, n);
+    for (uint8_t i = 0; i < 4; ++i) out[i] = q14of(n[i]);
+}
+
 void MargFilter::up(int16_t r2[3]) const {
     int16_t q0 = q14of(q_[0]), q1 = q14of(q_[1]), q2 = q14of(q_[2]), q3 = q14of(q_[3]);
     r2[0] = r13(mac2(q1, q3, (int16_t)-q0, q2));

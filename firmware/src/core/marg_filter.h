@@ -33,11 +33,18 @@ public:
     uint8_t update(const int16_t gyro[3], const int16_t accel[3], const int16_t mag[3], bool acc_valid,
                    bool mag_valid, uint16_t dt_us = 0);
     static const uint16_t MAX_DT_US = 50000;
+    // Rotates the state by the calibrated rate `gyro` (LSB) held for `dt_us` (in steps of ≤ 10 ms),
+    // without a gradient step: the device bridges a gap in the gyroscope's samples with it.
+    void rotate(const int16_t gyro[3], uint32_t dt_us);
     // The earth's vertical (NWU z) in the sensor frame: the bottom row of the rotation, Q14.
     void up(int16_t out[3]) const;
 
     const int32_t* quaternionQ30() const { return q_; }
     void quaternionQ14(int16_t out[4]) const;
+    // The orientation `ahead_us` (≤ 10 ms) later at the calibrated rate `gyro` (LSB), Q14: one gyro
+    // step from the state, normalised; the state itself is not changed. ORIENTATION packets carry it
+    // so that their quaternion is the orientation at their t_us, not the gyroscope's delay before it.
+    void predictQ14(const int16_t gyro[3], uint16_t ahead_us, int16_t out[4]) const;
 
 
 private:

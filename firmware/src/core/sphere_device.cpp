@@ -181,14 +181,49 @@ __attribute__((noinline)) void SphereDevice::handleEvents() {
     for (uint8_t i = 0; i < n; ++i) sendPacket(PKT_EVENT, body, writeEvent(ev[i], body));
 }
 
+// The rotation across a gap in the gyroscope's samples, by the trapezoid rule: the rate is taken to go
+// linearly from the last fresh sample's ω0 to this one's ω1, so the gap of T should turn the sphere by
+// (ω0 + ω1)/2·T. What was integrated instead (the held ω0 for each stale period, nothing while the gyro
+// was missing, ω1 for the late part of an overrun) is made good by one extra rotation. Gaps longer than
+// GAP_BRIDGE_TICKS are not bridged (the orientation stays as held).
+void SphereDevice::bridgeGap(const int16_t g[3], uint16_t dt_us) {
+    int16_t c[3];
+    uint32_t span = 0;
+    for (uint8_t i = 0; i < 3; ++i) {
+        int16_t mid = (int16_t)(((int32_t)g_fresh_[i] + g[i]) >> 1);
+        if (gap_) {
+            // held periods integrated ω0: the rest of the gap's turn at the mean rate over the gap
+            c[i] = (int16_t)(mid - (int32_t)g_fresh_[i] * gap_held_ / gap_);
+        } else {
+            c[i] = (int16_t)(((int32_t)g_fresh_[i] - g[i]) >> 1);  // an overrun: ω1 stood for the late part
+        }
+        g_fresh_[i] = g[i];
+    }
+    if (gap_ && gap_ <= GAP_BRIDGE_TICKS) span = (uint32_t)gap_ * MargFilter::DEFAULT_DT_US;
+    else if (!gap_ && dt_us > MargFilter::DEFAULT_DT_US) span = dt_us - MargFilter::DEFAULT_DT_US;
+    gap_ = gap_held_ = 0;
+    if (span) filter_.rotate(c, span);
+}
+
 __attribute__((noinline)) void SphereDevice::runFilter(uint16_t dt_us) {
     if (!(raw_flags_ & RAW_GYRO_OK)) {
         // no gyroscope: integrating zeros would turn a moving sphere still; hold the orientation
+        gyro_[0] = gyro_[1] = gyro_[2] = 0;
+        if (gap_ < 255) ++gap_;
         ori_flags_ = (uint8_t)(ORI_GYRO_MISSING | (converge_left_ ? ORI_CONVERGING : 0) | ((ori_flags_ & 7) << 5));
         return;
     }
-    int16_t g[3], a[3], m[3], up[3];
+    int16_t* g = gyro_;
+    int16_t a[3], m[3], up[3];
     applyGyro(cal_, raw_[1], g);
+    if (raw_flags_ & RAW_GYRO_STALE) {
+        if (gap_ < 255) {  // the held sample is integrated once more
+            ++gap_;
+            ++gap_held_;
+        }
+    } else {
+        bridgeGap(g, dt_us);
+    }
     applyAccel(cal_, raw_[0], a);
     applyMag(cal_, raw_[2], m);
     bool acc_ok = (raw_flags_ & RAW_ACCEL_OK) && !tap_active_ && gates_.accel(a);
@@ -272,7 +307,7 @@ __attribute__((noinline)) void SphereDevice::stream(uint32_t t_us) {
         Orientation o;
         o.t_us = t_us;
         o.flags = ori_flags_;
-        filter_.quaternionQ14(o.quat);
+        orientationQ14(o.quat);
         sendPacket(PKT_ORIENTATION, body, writeOrientation(o, body));
     }
     if ((stream_mode_ & STREAM_RAW) && raw_rate_hz_ && phase_ % (IMU_RATE_HZ / raw_rate_hz_) == 0) {

@@ -54,6 +54,13 @@ public:
     static const uint16_t STEP_BIAS_SAMPLES = 400;       // 2 s for CALIBRATION_STEP gyro_bias
     static const uint16_t TRACK_SAMPLES = 400;           // 2 s still windows for bias tracking
     static const int16_t TRACK_STEP_LSB = 2;             // the most one tracking window moves the bias
+    // ORIENTATION is the state predicted this far ahead at the current rate: the ITG-3200's delay at
+    // DLPF_CFG 3 (4.8 ms, datasheet §8.3 register 22) plus half its 5 ms output period (the mean age
+    // of the register when read), so the quaternion is the orientation at the packet's t_us
+    static const uint16_t GYRO_DELAY_US = 7300;
+    // a gap of up to this many periods without a fresh gyroscope sample (stale or missing) is bridged
+    // by the trapezoid rule when the gyroscope is back (SphereDevice::bridgeGap)
+    static const uint8_t GAP_BRIDGE_TICKS = 20;
     static const uint8_t MISSING_AFTER = 10;   // consecutive failed reads (50 ms) before a sensor is missing
     static const uint8_t FAST_PROBES = 200;    // a missing sensor is probed every period this many times,
     static const uint8_t SLOW_PROBE_TICKS = 20;  // then every 20th period (10 Hz)
@@ -88,6 +95,8 @@ public:
     const Calibration& calibration() const { return cal_; }
     const MargFilter& filter() const { return filter_; }
     InputGates& gates() { return gates_; }
+    // The quaternion an ORIENTATION packet carries now (the filter's state GYRO_DELAY_US ahead), Q14.
+    void orientationQ14(int16_t out[4]) const { filter_.predictQ14(gyro_, GYRO_DELAY_US, out); }
     bool tapActive() const { return tap_active_; }
 
 private:
@@ -98,6 +107,7 @@ private:
     bool magAccepted(const int16_t m[3]);
     void handleEvents();
     void runFilter(uint16_t dt_us);
+    void bridgeGap(const int16_t g[3], uint16_t dt_us);
     void stream(uint32_t t_us);
     void execute(const uint8_t* payload, uint8_t len);
     uint8_t executeCommand(const Command& c);
@@ -128,6 +138,9 @@ private:
     Status status_;
 
     int16_t raw_[3][3];        // accelerometer, gyroscope, magnetometer: body frame, last good read
+    int16_t gyro_[3];          // the calibrated rate of the last update (0 while the gyro is missing)
+    int16_t g_fresh_[3];       // the calibrated rate of the last fresh gyroscope sample
+    uint8_t gap_, gap_held_;   // periods since it without a fresh sample; of those, with the held one integrated
     uint32_t sample_t_us_, last_t_us_;
     uint16_t converge_left_;   // accepted samples still to run at the start-up gain
     uint8_t phase_;            // 0 … 199 within the second

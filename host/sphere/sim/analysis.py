@@ -93,13 +93,19 @@ STARTUP_BETA = 1.0  # the firmware's STARTUP_BETA_MILLI (firmware/src/core/marg_
 # the firmware's power-up gyro bias estimate (firmware/src/core/sphere_device.h, gyro_bias.h)
 STARTUP_BIAS_SAMPLES = 200
 STARTUP_BIAS_TRIES = 10
-GYRO_SPAN_LSB, ACCEL_SPAN_LSB, MAG_SPAN_LSB = 58, 24, 16
+GYRO_SPAN_LSB, ACCEL_SPAN_LSB, MAG_SPAN_LSB = 58, 24, 96
+MAG_DRIFT_LSB = 4  # the window's second-half magnetometer mean within this of the first half's (gyro_bias.h)
+# ORIENTATION carries the state predicted this far ahead at the update's rate (SphereDevice::GYRO_DELAY_US)
+GYRO_DELAY_S = 0.0073
 
 
 def _moved_at(raw: list, idx) -> int | None:
-    """The firmware's stillness test (gyro_bias.cpp) over the readings raw[i] for i in idx: every gyro,
-    accelerometer and (when present) magnetometer reading within ±span/2 of the window's first. Returns
-    the position in idx of the first reading that moved, or None when the window was still."""
+    """The firmware's stillness test (gyro_bias.cpp) over the readings raw[i] for i in idx: every gyro and
+    accelerometer reading within ±span/2 of the window's first, every magnetometer reading (when present)
+    within ±MAG_SPAN_LSB/2 of it, and the sums of the present magnetometer readings over the window's first
+    and second half (index < n/2, ≥ n/2) within MAG_DRIFT_LSB·(n/2) of each other on every axis. Returns
+    the position in idx of the first reading that moved (the last one when only the halves differ), or None
+    when the window was still."""
     half = (GYRO_SPAN_LSB // 2, ACCEL_SPAN_LSB // 2, MAG_SPAN_LSB // 2)
 
     def near(v, ref, h):
@@ -107,12 +113,18 @@ def _moved_at(raw: list, idx) -> int | None:
 
     first = raw[idx[0]]
     mag_ref = first.mag if first.flags & 0x04 else (0, 0, 0)
+    n = len(idx)
+    diff = [0, 0, 0]
     for j, i in enumerate(idx):
         p = raw[i]
         if not (near(p.gyro, first.gyro, half[0]) and near(p.accel, first.accel, half[1])
                 and (not p.flags & 0x04 or near(p.mag, mag_ref, half[2]))):
             return j
-    return None
+        if p.flags & 0x04:
+            sign = 1 if j < n // 2 else -1
+            diff = [d + sign * int(v) for d, v in zip(diff, p.mag)]
+    lim = MAG_DRIFT_LSB * (n // 2)
+    return n - 1 if any(abs(d) > lim for d in diff) else None
 
 
 def _mean_lsb(raw: list, idx) -> list[int]:
@@ -190,7 +202,8 @@ def host_madgwick(raw: list, imu_rate_hz: float, beta: float, bias_s: float = 0.
     sample by sample, so that only the arithmetic differs: the accelerometer is left out where the
     firmware flagged a tap (RAW_SAMPLE ``tap_active``) or ``accel_rejected``, the magnetometer where it
     was missing or ``mag_rejected`` (gravity-only), β is ``startup_beta`` while ``converging``, and the
-    state starts at the identity as the firmware's does (without ``orientation``: at the e-compass).
+    state starts at the identity as the firmware's does (without ``orientation``: at the e-compass), and
+    each output is the state predicted GYRO_DELAY_S ahead at that sample's rate, as ORIENTATION carries it.
     The flags of a raw sample without its own ORIENTATION packet are the next packet's "previous update"
     bits (protocol v2, flags bits 5-7) when that packet belongs to the next raw sample, else those of the
     newest packet before it.
@@ -252,6 +265,15 @@ def host_madgwick(raw: list, imu_rate_hz: float, beta: float, bias_s: float = 0.
         else:
             q = madgwick_step(q, gi[0], gi[1], gi[2], ai[0], ai[1], ai[2], None, None, None, dt, bl[i], av[i], False)
         out[i] = q
+    if orientation:
+        # what the firmware sends: the state GYRO_DELAY_S ahead at the update's rate (0 without a gyro),
+        # q + ½ q ⊗ [0, ω]·τ normalised (MargFilter::predictQ14)
+        w = np.where((rflags & 0x02).astype(bool)[:, None], gyr, 0.0) * (0.5 * GYRO_DELAY_S)
+        p0, p1, p2, p3 = out.T
+        wx, wy, wz = w.T
+        pred = np.stack([p0 - p1 * wx - p2 * wy - p3 * wz, p1 + p0 * wx + p2 * wz - p3 * wy,
+                         p2 + p0 * wy - p1 * wz + p3 * wx, p3 + p0 * wz + p1 * wy - p2 * wx], axis=1)
+        out = pred / np.linalg.norm(pred, axis=1, keepdims=True)
     return t, out
 
 
