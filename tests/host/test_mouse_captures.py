@@ -80,8 +80,8 @@ def test_fast_rotation_moves_the_pointer_by_the_turn_about_the_vertical():
 
 @pytest.mark.parametrize("mode", ["pointer", "tilt"])
 def test_deferred_bias_step_changes_nothing(mode):
-    """The daemon issues each move before the filter's bias step (SphereFilter's defer_bias / run_deferred);
-    every move, orientation and bias is the same bit for bit as with the step inside the update."""
+    """The daemon issues each move before the filter's bias step (SphereFilter's defer_bias / run_deferred) and
+    GyroBias's trend sums; every move, orientation and bias is the same bit for bit as with them inside."""
 
     def run(defer):
         cfg = Config().with_overrides({"stream": {"enabled": False}, "output": {"screen_width_px": 1280},
@@ -96,14 +96,13 @@ def test_deferred_bias_step_changes_nothing(mode):
         daemon = SphereMouse(cfg, ReplaySource(capture("sim_07_fast_rotation.bin"), speed=0), Rec(screen_size=None),
                              log=lambda m: None)
         m = daemon.motion
-        assert m.run_deferred is not None  # the default filter (sphere) has the split
-        if not defer:
-            m.run_deferred, m._defer = None, {}
+        assert m._filter_deferred is not None and m.bias.enabled  # the default filter (sphere) has the split
+        m.defer = defer
         quats = []
         handle = daemon.handle
         daemon.handle = lambda dp: (handle(dp), quats.append(m.quat))
         daemon.run()
-        return moves, quats, list(m.filter.inner.bias)
+        return moves, quats, list(m.filter.inner.bias), m.bias.bias, m.bias.updates, m.bias.rejected
 
     deferred, inline = run(True), run(False)
     assert len(deferred[0]) > 100

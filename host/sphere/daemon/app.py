@@ -172,8 +172,7 @@ class SphereMouse:
             motion = self.motion
             if self.stream is not None and motion.uses_host_filter:
                 self._publish_pose(t)
-            if motion.run_deferred is not None:
-                motion.run_deferred()  # the filter's bias step, when one fell due on this sample
+            motion.run_deferred()  # the filter's bias step and the still-detection's trend sums
         elif typ == Orientation.TYPE:
             dt = self.motion.orientation(p, t)
             if self.motion.uses_host_filter:

@@ -122,6 +122,7 @@ class GyroBias:
         self._pending = None  # (mean, confirmed) of the last window held back
         self._long = None  # its accelerometer and compass trends, carried on over the next window
         self._windows = 0
+        self._queued = None  # a sample's trend sums left for run_deferred (add(..., defer=True))
         self._start()
 
     def _start(self):
@@ -134,9 +135,14 @@ class GyroBias:
         self._acc = _Trend()
         self._mag = _Trend()
 
-    def add(self, gyro_dps, accel_g_norm: float, dt_s: float, mag_uT=None, accel_g=None) -> None:
+    def add(self, gyro_dps, accel_g_norm: float, dt_s: float, mag_uT=None, accel_g=None, defer: bool = False) -> None:
+        """One sample. ``defer=True`` leaves the accelerometer and compass trend sums (read only when a window
+        ends) for :meth:`run_deferred`, so the caller can act on the sample first; a window that ends on this
+        sample takes them at once. The result is the same bit for bit."""
         if not self.enabled:
             return
+        if self._queued is not None:
+            self.run_deferred()
         clock = self._clock = self._clock + dt_s
         g0, g1, g2 = gyro_dps  # written out (runs at every sample): the same sums and comparisons as a loop
         sm, lo, hi = self._sum, self._lo, self._hi
@@ -174,13 +180,27 @@ class GyroBias:
             accel_g = tuple(accel_g)
         if mag_uT is not None and type(mag_uT) is not tuple:
             mag_uT = tuple(mag_uT)
-        for acc, mag in ((self._acc, self._mag), self._long) if self._long is not None else ((self._acc, self._mag),):
+        trends = ((self._acc, self._mag), self._long) if self._long is not None else ((self._acc, self._mag),)
+        if defer and self._t < self.still_time_s:
+            self._queued = (clock, accel_g, mag_uT, trends)
+            return
+        self._add_trends(clock, accel_g, mag_uT, trends)
+        if self._t >= self.still_time_s:
+            self._end_window()
+
+    @staticmethod
+    def _add_trends(clock, accel_g, mag_uT, trends) -> None:
+        for acc, mag in trends:
             if accel_g is not None:
                 acc.add(clock, accel_g)
             if mag_uT is not None:
                 mag.add(clock, mag_uT)
-        if self._t >= self.still_time_s:
-            self._end_window()
+
+    def run_deferred(self) -> None:
+        """The trend sums an ``add(..., defer=True)`` left (nothing if none)."""
+        queued, self._queued = self._queued, None
+        if queued is not None:
+            self._add_trends(*queued)
 
     def _end_window(self) -> None:
         mean = [s / self._n for s in self._sum]
@@ -305,11 +325,12 @@ class MotionTracker:
         if orientation_source in ("auto", "host"):
             self.filter = host_filter(filter_name, beta)
         inner = getattr(self.filter, "inner", self.filter)
-        #: the filter's work that may wait until the sample's pointer move is out (SphereFilter's bias step,
-        #: every 10th sample): ``raw()`` leaves it pending, the daemon calls this after the move (bit-identical
-        #: to running it inside the update); None for a filter without it
-        self.run_deferred = getattr(inner, "run_deferred", None)
-        self._defer = {"defer_bias": True} if self.run_deferred is not None else {}
+        # the work that may wait until the sample's pointer move is out: SphereFilter's bias step (every 10th
+        # sample) and GyroBias's trend sums; ``raw()`` leaves it, the daemon calls run_deferred() after the move
+        # (bit-identical to doing it inside). ``defer = False`` does all of it inside raw().
+        self._filter_deferred = getattr(inner, "run_deferred", None)
+        self._defer = {"defer_bias": True} if self._filter_deferred is not None else {}
+        self.defer = True
         self.quat = None  # (w, x, y, z) sensor-to-NWU, or None until known
         self.up = None  # earth up in sensor axes
         self.accel_g = None  # the last RAW_SAMPLE's acceleration (g, sensor axes) when the chip answered
@@ -364,7 +385,7 @@ class MotionTracker:
         mag_ok = bool(flags & 0x04) and -4096 not in m
         mag = (m[0] * km, m[1] * km, m[2] * km) if mag_ok else None
         if accel_ok and not tap_active:
-            self.bias.add(gyro, anorm, dt, mag, (ax, ay, az))
+            self.bias.add(gyro, anorm, dt, mag, (ax, ay, az), self.defer)
         b = self.bias.bias
         self.gyro_dps = (gyro[0] - b[0], gyro[1] - b[1], gyro[2] - b[2])
         if accel_ok and not tap_active and 0.5 < anorm < 1.5:
@@ -382,13 +403,20 @@ class MotionTracker:
                 mag = None
             gd = self.gyro_dps
             q = self.filter.update((gd[0] * DEG, gd[1] * DEG, gd[2] * DEG), (ax * G_M_S2, ay * G_M_S2, az * G_M_S2),
-                                   mag, dt, acc_valid=accel_ok and not tap_active, **self._defer)
+                                   mag, dt, acc_valid=accel_ok and not tap_active, **(self._defer if self.defer else {}))
             # _NwuFilter gives a tuple of floats (_qmul's); another filter's output is made one
             self.quat = q if type(q) is tuple and type(q[0]) is float else tuple(float(v) for v in q)
             self.up = up_from_quat(self.quat)
         elif self.quat is None:
             self.up = self._accel_up
         return dt
+
+    def run_deferred(self) -> None:
+        """What the last ``raw()`` left for after the move (see ``defer``)."""
+        if self.bias._queued is not None:
+            self.bias.run_deferred()
+        if self._filter_deferred is not None:
+            self._filter_deferred()
 
     def _start_filter(self, ax, ay, az, sample) -> None:
         """Start the host filter at the accelerometer's tilt (no slow convergence from identity)."""
