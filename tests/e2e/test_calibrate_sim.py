@@ -148,6 +148,7 @@ def test_guided_calibration_on_the_virtual_sphere(tmp_path, capsys, monkeypatch)
     assert main(["calibrate", "--capture", str(cap), "--json", str(tmp_path / "offline.json")]) == 0
     offline = json.loads((tmp_path / "offline.json").read_text())["block"]
     _check_recovered(offline)
+    assert "axes agree" in (err := capsys.readouterr().err) and "(board profile gy85)" in err, err  # its HELLO
 
 
 def test_a_face_that_never_comes_times_out_and_sends_nothing(tmp_path, capsys):
