@@ -7,7 +7,9 @@ Modules are found by name, so adding a subcommand never means editing this file.
 from __future__ import annotations
 
 import argparse
+import errno
 import importlib
+import os
 import pkgutil
 import sys
 
@@ -39,6 +41,23 @@ def _command_modules():
             yield name, importlib.import_module(f"sphere.commands.{info.name}")
         except Exception as e:  # one broken subcommand must not take the others down
             yield name, _BrokenCommand(name, e)
+
+
+#: errors of a write that failed because of where the output goes (a full disk, /dev/full, a dead terminal)
+OUTPUT_ERRNOS = (errno.ENOSPC, errno.EIO, errno.EFBIG, errno.EDQUOT)
+
+
+def output_failed(prog: str, e: BaseException) -> int | None:
+    """For an OSError of :data:`OUTPUT_ERRNOS`: one line on stderr and the exit status 1 (stdout is pointed at
+    /dev/null, so that Python's final flush does not fail again); None for any other error."""
+    if not isinstance(e, OSError) or e.errno not in OUTPUT_ERRNOS:
+        return None
+    try:
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+    except (OSError, ValueError, AttributeError):
+        pass
+    print(f"{prog}: cannot write the output: {e.strerror}; make room (or write it somewhere else)", file=sys.stderr)
+    return 1
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -76,6 +95,11 @@ def main(argv: list[str] | None = None) -> int:
         # `sphere decode ... | head` closes the pipe early; that is not an error.
         sys.stderr.close()
         return 0
+    except OSError as e:
+        code = output_failed("sphere", e)
+        if code is None:
+            raise
+        return code
 
 
 if __name__ == "__main__":

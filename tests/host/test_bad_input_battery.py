@@ -41,12 +41,14 @@ class Row:
     words: str
     files: dict = field(default_factory=dict)  # name -> bytes | "dir" | "fifo" | "loop"
     port: str | None = None  # None | "silent" | "garbage" | "vanish" (streams for 0.5 s, then is unplugged)
+    stdout: str | None = None  # where stdout goes (/dev/full: a full disk); None: a file the test reads
     timeout: float = 20.0
 
     @property
     def id(self):
         files = ",".join(f"{k}={v if isinstance(v, str) else v[:12]!r}" for k, v in self.files.items())
-        return f"{self.prog} " + " ".join(str(a) for a in self.argv)[:90] + (f" [{files}]" if files else "")
+        return (f"{self.prog} " + " ".join(str(a) for a in self.argv)[:90] + (f" [{files}]" if files else "")
+                + (f" >{self.stdout}" if self.stdout else ""))
 
 
 def M(argv, code, words, **kw):
@@ -288,6 +290,20 @@ ROWS = [
     S(["hybrid-sim", "--seed", "abc"], 2, "invalid int value"),
     S(["hybrid-sim", "--json", "{tmp}"], 2, "is a folder"),
     S(["bench", "explode"], 2, "invalid choice"),
+    S(["bench", "pointer", "--seeds", "0"], 2, "seeds"),
+    S(["bench", "pointer", "--seconds", "-1"], 2, "seconds"),
+    S(["bench", "pointer", "--filters", "wobble", "--no-tune"], 2, "wobble"),
+    S(["bench", "decode", "--seconds", "-1"], 2, "seconds"),
+    S(["bench", "decode", "--repeat", "0"], 2, "repeat"),
+    S(["bench", "decode", "--json", "{tmp}"], 2, "is a folder"),
+    S(["bench", "pointer", "--json", "{tmp}"], 2, "is a folder"),
+    S(["decode", "{tmp}/good.cap"], 1, "no space left", files=CAP, stdout="/dev/full"),
+    S(["decode", "{tmp}/good.cap", "--jsonl"], 1, "no space left", files=CAP, stdout="/dev/full"),
+    S(["protocol", "types"], 1, "no space left", stdout="/dev/full"),
+    S(["device", "keys"], 1, "no space left", stdout="/dev/full"),
+    S(["service", "print"], 1, "no space left", stdout="/dev/full"),
+    M(["--print-config"], 1, "no space left", stdout="/dev/full"),
+    S(["service", "install"], 2, "xdg", files={"xdg": b"a file where a folder belongs"}),
     S(["protocol", "explode"], 2, "invalid choice"),
 ]
 
@@ -347,9 +363,9 @@ def _child(row, argv, out_path, env, port):
     os.environ.update(env)
     fd = os.open(out_path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC)
     os.dup2(fd, 2)
-    os.dup2(os.open(out_path + ".out", os.O_WRONLY | os.O_CREAT | os.O_TRUNC), 1)
+    os.dup2(os.open(row.stdout or out_path + ".out", os.O_WRONLY | os.O_CREAT | os.O_TRUNC), 1)
     os.dup2(os.open(os.devnull, os.O_RDONLY), 0)
-    sys.stdout = open(1, "w", closefd=False)
+    sys.stdout = open(1, "w", buffering=1, closefd=False)  # line-buffered: a write fails where it happens
     sys.stderr = open(2, "w", closefd=False)
     sys.stdin = open(0, "r", closefd=False)
     signal.signal(signal.SIGINT, signal.SIG_DFL)
@@ -368,8 +384,10 @@ def _child(row, argv, out_path, env, port):
     try:
         sys.stdout.flush()
         sys.stderr.flush()
-    finally:
-        os._exit(code or 0)
+    except OSError as e:  # what Python does when its last flush of stdout fails
+        os.write(2, f"Exception ignored while flushing sys.stdout: {e!r}\n".encode())
+        code = 120
+    os._exit(code or 0)
 
 
 def run_row(row, tmp):
@@ -408,6 +426,8 @@ def run_row(row, tmp):
             port.close()
     with open(out, errors="replace") as f:
         err = f.read()
+    if row.stdout:
+        return status, err, ""
     with open(out + ".out", errors="replace") as f:
         return status, err, f.read()
 

@@ -6,6 +6,7 @@ import json
 import random
 import time
 
+from sphere import argtypes
 from sphere.protocol import FrameDecoder, encode_frame
 from sphere.protocol.packets import Orientation, RawSample, Status
 
@@ -16,9 +17,9 @@ DEVICE_MAX_FRAMES_PER_S = 401
 
 
 def add_arguments(p) -> None:
-    p.add_argument("--seconds", type=float, default=60.0, help="simulated seconds of stream to decode (default 60)")
-    p.add_argument("--repeat", type=int, default=5, help="timed repetitions; the median is reported")
-    p.add_argument("--json", metavar="OUT", help="also write the figures as JSON")
+    p.add_argument("--seconds", type=argtypes.seconds, default=60.0, help="simulated seconds of stream to decode (default 60)")
+    p.add_argument("--repeat", type=argtypes.at_least_one, default=5, help="timed repetitions; the median is reported")
+    p.add_argument("--json", metavar="OUT", type=argtypes.out_file, help="also write the figures as JSON")
 
 
 def make_stream(seconds: float, seed: int = 1) -> tuple[bytes, int]:

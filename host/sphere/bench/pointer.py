@@ -48,6 +48,8 @@ from types import SimpleNamespace
 
 import numpy as np
 
+from sphere import argtypes
+
 HELP = "pointer tremor, jitter, lag per band, overshoot and drift for every smoothing filter, through the daemon's path"
 
 RATE_HZ = 200.0
@@ -62,7 +64,7 @@ BANDS = ("fine", "slow", "medium", "fast")
 
 def add_arguments(p) -> None:
     p.add_argument("--trials", help="BROAD folder (default: SPHERE_BROAD_DIR or ../shared/data/broad)")
-    p.add_argument("--json", metavar="OUT", help="write the figures as JSON")
+    p.add_argument("--json", metavar="OUT", type=argtypes.out_file, help="write the figures as JSON")
     p.add_argument("--seconds", type=float, default=60.0, help="seconds of each BROAD trial used (default 60)")
     p.add_argument("--filters", help="comma-separated filters from the registry (default: all)")
     p.add_argument("--seeds", type=int, default=3, help="synthetic:hold seeds per fold (default 3)")

@@ -63,8 +63,13 @@ def run(args) -> int:
         print(f"sphere service: {dest} exists and differs; compare with `sphere service print`, "
               "then run again with --force to replace it", file=sys.stderr)
         return 1
-    dest.parent.mkdir(parents=True, exist_ok=True)
-    dest.write_text(text)
+    try:
+        dest.parent.mkdir(parents=True, exist_ok=True)
+        dest.write_text(text)
+    except OSError as e:  # a file where a folder belongs ($XDG_CONFIG_HOME), a read-only home
+        print(f"sphere service: cannot write {dest}: {e.strerror}; check $XDG_CONFIG_HOME (or ~/.config) is a "
+              "folder you can write, or use `sphere service print` and place the unit yourself", file=sys.stderr)
+        return 2
     print(f"wrote {dest} (ExecStart={exe})")
     print("now: systemctl --user daemon-reload && systemctl --user enable --now sphere-mouse")
     return 0

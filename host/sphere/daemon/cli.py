@@ -166,6 +166,13 @@ def main(argv=None) -> int:
     except KeyboardInterrupt:  # Ctrl-C before the signal handlers are in place (while starting)
         print("sphere-mouse: interrupted", file=sys.stderr)
         return 130
+    except OSError as e:  # --print-config or --udev-rule into a full disk
+        from sphere.cli import output_failed
+
+        code = output_failed("sphere-mouse", e)
+        if code is None:
+            raise
+        return code
 
 
 def _main(argv=None) -> int:
