@@ -52,7 +52,7 @@ public:
     static const uint16_t STARTUP_BIAS_SAMPLES = 200;    // 1 s still at power-up
     static const uint16_t STARTUP_BIAS_TRIES = 10;       // give up after 10 windows with motion
     static const uint16_t STEP_BIAS_SAMPLES = 400;       // 2 s for CALIBRATION_STEP gyro_bias
-    static const uint16_t TRACK_SAMPLES = 400;           // 2 s still windows for bias tracking
+    static const uint16_t TRACK_SAMPLES = 200;           // 1 s still windows for bias tracking
     static const int16_t TRACK_STEP_LSB = 2;             // the most one tracking window moves the bias
     // ORIENTATION is the state predicted this far ahead at the current rate: the ITG-3200's delay at
     // DLPF_CFG 3 (4.8 ms, datasheet §8.3 register 22) plus half its 5 ms output period (the mean age

@@ -102,8 +102,9 @@ GYRO_DELAY_S = 0.0073
 def _moved_at(raw: list, idx) -> int | None:
     """The firmware's stillness test (gyro_bias.cpp) over the readings raw[i] for i in idx: every gyro and
     accelerometer reading within ±span/2 of the window's first, every magnetometer reading (when present)
-    within ±MAG_SPAN_LSB/2 of it, and the sums of the present magnetometer readings over the window's first
-    and second half (index < n/2, ≥ n/2) within MAG_DRIFT_LSB·(n/2) of each other on every axis. Returns
+    within ±MAG_SPAN_LSB/2 of it, and the means of the present magnetometer readings over the window's first
+    and second half (index < n/2, ≥ n/2) within MAG_DRIFT_LSB of each other on every axis (compared
+    multiplied out, |Σ₁·n₂ − Σ₂·n₁| ≤ MAG_DRIFT_LSB·n₁·n₂, as the firmware does). Returns
     the position in idx of the first reading that moved (the last one when only the halves differ), or None
     when the window was still."""
     half = (GYRO_SPAN_LSB // 2, ACCEL_SPAN_LSB // 2, MAG_SPAN_LSB // 2)
@@ -114,17 +115,19 @@ def _moved_at(raw: list, idx) -> int | None:
     first = raw[idx[0]]
     mag_ref = first.mag if first.flags & 0x04 else (0, 0, 0)
     n = len(idx)
-    diff = [0, 0, 0]
+    sums, counts = [[0, 0, 0], [0, 0, 0]], [0, 0]
     for j, i in enumerate(idx):
         p = raw[i]
         if not (near(p.gyro, first.gyro, half[0]) and near(p.accel, first.accel, half[1])
                 and (not p.flags & 0x04 or near(p.mag, mag_ref, half[2]))):
             return j
         if p.flags & 0x04:
-            sign = 1 if j < n // 2 else -1
-            diff = [d + sign * int(v) for d, v in zip(diff, p.mag)]
-    lim = MAG_DRIFT_LSB * (n // 2)
-    return n - 1 if any(abs(d) > lim for d in diff) else None
+            h = int(j >= n // 2)
+            counts[h] += 1
+            sums[h] = [s + int(v) for s, v in zip(sums[h], p.mag)]
+    n1, n2 = counts
+    lim = MAG_DRIFT_LSB * n1 * n2
+    return n - 1 if any(abs(a * n2 - b * n1) > lim for a, b in zip(*sums)) else None
 
 
 def _mean_lsb(raw: list, idx) -> list[int]:
@@ -160,7 +163,7 @@ def firmware_startup_bias(raw: list):
     return None if k is None else (k, bias)
 
 
-TRACK_SAMPLES, TRACK_STEP_LSB = 400, 2  # the firmware's bias tracking (SphereDevice::trackBias)
+TRACK_SAMPLES, TRACK_STEP_LSB = 200, 2  # the firmware's bias tracking (SphereDevice::trackBias)
 
 
 def firmware_bias_schedule(raw: list) -> list[tuple[int, list[int]]]:
