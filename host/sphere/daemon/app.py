@@ -64,6 +64,7 @@ class SphereMouse:
         self.motion = MotionTracker(cfg.orientation.source, cfg.orientation.use_mag, cfg.orientation.beta,
                                     GyroBias(g.still_dps, g.still_time_s, g.auto_bias),
                                     filter_name=cfg.orientation.filter)
+        self.motion.defer = True  # handle() runs the deferred work after each sample's move
         self.actions = EventActions(cfg.events, cfg.freeze)
         self.modes = list(cfg.mode.cycle)
         if cfg.mode.start not in self.modes:

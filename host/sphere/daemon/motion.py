@@ -327,10 +327,11 @@ class MotionTracker:
         inner = getattr(self.filter, "inner", self.filter)
         # the work that may wait until the sample's pointer move is out: SphereFilter's bias step (every 10th
         # sample) and GyroBias's trend sums; ``raw()`` leaves it, the daemon calls run_deferred() after the move
-        # (bit-identical to doing it inside). ``defer = False`` does all of it inside raw().
+        # (bit-identical to doing it inside). Off by default: a caller that sets ``defer = True`` calls
+        # run_deferred() after each raw() (the daemon does).
         self._filter_deferred = getattr(inner, "run_deferred", None)
         self._defer = {"defer_bias": True} if self._filter_deferred is not None else {}
-        self.defer = True
+        self.defer = False
         self.quat = None  # (w, x, y, z) sensor-to-NWU, or None until known
         self.up = None  # earth up in sensor axes
         self.accel_g = None  # the last RAW_SAMPLE's acceleration (g, sensor axes) when the chip answered
