@@ -122,7 +122,7 @@ class GyroBias:
         self._pending = None  # (mean, confirmed) of the last window held back
         self._long = None  # its accelerometer and compass trends, carried on over the next window
         self._windows = 0
-        self._queued = None  # a sample's trend sums left for run_deferred (add(..., defer=True))
+        self._queued = None  # a sample left for run_deferred (add(..., defer=True))
         self._start()
 
     def _start(self):
@@ -136,13 +136,16 @@ class GyroBias:
         self._mag = _Trend()
 
     def add(self, gyro_dps, accel_g_norm: float, dt_s: float, mag_uT=None, accel_g=None, defer: bool = False) -> None:
-        """One sample. ``defer=True`` leaves the accelerometer and compass trend sums (read only when a window
-        ends) for :meth:`run_deferred`, so the caller can act on the sample first; a window that ends on this
-        sample takes them at once. The result is the same bit for bit."""
+        """One sample. ``defer=True`` leaves it for :meth:`run_deferred` (so the caller can act on the sample
+        first) when it cannot end a window — only a window's end changes the bias — and takes it at once when it
+        may; the next add() takes a sample left behind first. The result is the same bit for bit."""
         if not self.enabled:
             return
         if self._queued is not None:
             self.run_deferred()
+        if defer and self._t + dt_s < self.still_time_s:  # the same sum as below: this sample ends no window
+            self._queued = (gyro_dps, accel_g_norm, dt_s, mag_uT, accel_g)
+            return
         clock = self._clock = self._clock + dt_s
         g0, g1, g2 = gyro_dps  # written out (runs at every sample): the same sums and comparisons as a loop
         sm, lo, hi = self._sum, self._lo, self._hi
@@ -180,27 +183,19 @@ class GyroBias:
             accel_g = tuple(accel_g)
         if mag_uT is not None and type(mag_uT) is not tuple:
             mag_uT = tuple(mag_uT)
-        trends = ((self._acc, self._mag), self._long) if self._long is not None else ((self._acc, self._mag),)
-        if defer and self._t < self.still_time_s:
-            self._queued = (clock, accel_g, mag_uT, trends)
-            return
-        self._add_trends(clock, accel_g, mag_uT, trends)
-        if self._t >= self.still_time_s:
-            self._end_window()
-
-    @staticmethod
-    def _add_trends(clock, accel_g, mag_uT, trends) -> None:
-        for acc, mag in trends:
+        for acc, mag in ((self._acc, self._mag), self._long) if self._long is not None else ((self._acc, self._mag),):
             if accel_g is not None:
                 acc.add(clock, accel_g)
             if mag_uT is not None:
                 mag.add(clock, mag_uT)
+        if self._t >= self.still_time_s:
+            self._end_window()
 
     def run_deferred(self) -> None:
-        """The trend sums an ``add(..., defer=True)`` left (nothing if none)."""
+        """The sample an ``add(..., defer=True)`` left (nothing if none)."""
         queued, self._queued = self._queued, None
         if queued is not None:
-            self._add_trends(*queued)
+            self.add(*queued)
 
     def _end_window(self) -> None:
         mean = [s / self._n for s in self._sum]
@@ -326,7 +321,7 @@ class MotionTracker:
             self.filter = host_filter(filter_name, beta)
         inner = getattr(self.filter, "inner", self.filter)
         # the work that may wait until the sample's pointer move is out: SphereFilter's bias step (every 10th
-        # sample) and GyroBias's trend sums; ``raw()`` leaves it, the daemon calls run_deferred() after the move
+        # sample) and GyroBias's still detection (but on a window's last sample); ``raw()`` leaves it, the daemon calls run_deferred() after the move
         # (bit-identical to doing it inside). Off by default: a caller that sets ``defer = True`` calls
         # run_deferred() after each raw() (the daemon does).
         self._filter_deferred = getattr(inner, "run_deferred", None)
