@@ -36,8 +36,9 @@ That prior (σ_motion) makes the filter slow in motion on purpose: real hand mot
 the measurement (lever arm, scale factors) that a fast filter would follow. A bias that really changes (a step)
 is caught by a **change test** on the same measurements (``_change_test``): an F-test of a constant bias error
 fitted over K = ``bias_change_blocks`` one-second blocks, significant at ``bias_change_alpha`` in two consecutive
-windows that agree. Then b restarts from the latest window's estimate with P = P₀, and for 2K blocks the filter
-uses the measurement noise that window showed (no process noise), so it settles in seconds. Its threshold is a
+windows that agree. Then b restarts from the latest window's least-squares fit of the bias itself, with the
+covariance that fit has (not P₀, which threw the window's data away), and for 2K blocks the filter uses the
+measurement noise that fit showed (no process noise), so it settles in seconds. Its threshold is a
 quantile of the F distribution, not a tuned value.
 
 The free settings (``tau_acc_s``, ``bias_sigma_motion_dps``, ``bias_forget_s``) are the ones ``sphere eval --cv``
@@ -523,16 +524,24 @@ class SphereFilter:
         si = _inv3([[vp[i][j] + vc[i][j] for j in range(3)] for i in range(3)])
         if sum(d[i] * si[i][j] * d[j] for i in range(3) for j in range(3)) / 3.0 > self._ct_f:
             return False  # both significant, but not the same bias: motion, not a change
-        # the change: b starts again from the latest window's estimate with the initial uncertainty P₀, and for
-        # the next 2K blocks the Kalman filter takes the measurement noise the latest window showed (the residual
-        # variance of its 1 s means, per step as _b_wmot is) and no process noise: the new, constant bias is
-        # pinned down at the rate the data allow, not at the slow rate the prior σ_motion sets
+        # the change: b starts again from the latest window's own fit of the bias itself (not of a constant error
+        # e = b_true − b: b moved during the window, so the measurements' bias-like part is z = y + H·b_block, fitted
+        # as one constant; blocks keep b at their end), with the covariance that fit has (var·A⁻¹, the information of
+        # the window's K s of data, where P₀ threw it away), and for the next 2K blocks the Kalman filter takes the
+        # measurement noise that fit showed (its residual variance of 1 s means, per step as _b_wmot is) and no
+        # process noise: the new, constant bias is pinned down at the rate the data allow, not at the slow rate the
+        # prior σ_motion sets
+        win = _fit([[y0 + h0 * c0 + h1 * c1 + h2 * c2, y1 + h3 * c0 + h4 * c1 + h5 * c2, h0, h1, h2, h3, h4, h5]
+                    for y0, y1, h0, h1, h2, h3, h4, h5, c0, c1, c2 in blocks[k:]])
+        if win is None:  # cannot happen with cur's rows unless the fit is exact; then b + e with P₀ as a fallback
+            win = (bc, [[self._b_p0 / cur[2] if i == j else 0.0 for j in range(3)] for i in range(3)], cur[2], 0.0)
+        bw, ai, var, _ = win
         clip = self._bias_clip
         for i in range(3):
-            v_ = bc[i]
+            v_ = bw[i]
             b[i] = clip if v_ > clip else (-clip if v_ < -clip else v_)
-        self.bias_P = [[self._b_p0 if i == j else 0.0 for j in range(3)] for i in range(3)]
-        self._track_w = cur[2] / self._tb
+        self.bias_P = [[var * a for a in row] for row in ai]
+        self._track_w = var / self._tb
         self._track_left = 2 * k * self._ct_block
         self.bias_changes += 1
         self._ct_clear()
