@@ -95,6 +95,6 @@ def test_bad_settings_are_one_line_and_touch_nothing(capsys):
                        (["set", "board=nano"], "one of aligned, sen10724, gy85"),
                        (["set", "tap.axes=xq"], "letters from xyz"),
                        (["identify", "99"], "1 … 60")):
-        assert main(["device", "--port", "/dev/nonexistent", *argv]) == 1
+        assert main(["device", "--port", "/dev/nonexistent", *argv]) == 2  # a usage error (sphere-mouse.md, Exit status)
         err = capsys.readouterr().err
         assert err.startswith("sphere device: ") and text in err and err.count("\n") == 1, err

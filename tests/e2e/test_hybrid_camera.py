@@ -73,10 +73,10 @@ def test_jitter_at_rest(broad_dir):
 def test_bad_input_is_one_clear_line(capsys, broad_dir):
     assert main(["hybrid-eval", "--seconds", "5"]) == 2
     assert "at least 9" in capsys.readouterr().err
-    assert main(["hybrid-eval", "--trials", "99:40"]) == 1
+    assert main(["hybrid-eval", "--trials", "99:40"]) == 2
     err = capsys.readouterr().err
     assert "no BROAD trial named '99'" in err and "Traceback" not in err
-    assert main(["hybrid-eval", "--trials", "10:900"]) == 1
+    assert main(["hybrid-eval", "--trials", "10:900"]) == 2
     assert "choose --start and --seconds inside it" in capsys.readouterr().err
     with pytest.raises(SystemExit, match="TRIAL:START_S"):
         main(["hybrid-eval", "--trials", "10:soon"])
