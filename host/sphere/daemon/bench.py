@@ -1,6 +1,7 @@
 """Latency and CPU benchmark of sphere-mouse's serial path (prints figures; not a unit test).
 
-    python -m sphere.daemon.bench [--seconds 10] [--rate 200]
+    python -m sphere.daemon.bench [--seconds 10] [--rate 200] [--json]
+    python -m sphere.daemon.bench --against REV [--pairs 8] [--seconds 10]
 
 1. **Latency**, in process: a writer process plays a sphere on a pty at ``--rate`` RAW_SAMPLE frames/s
    (a steady turn, so every sample moves the pointer); the daemon (SerialSource → SphereMouse) runs in
@@ -11,13 +12,23 @@
    daemon's own work adds: decoding, duplicate check, bias, fusion filter, smoothing, the move).
    For comparison, the floor: the same pty path read by a bare ``select`` + ``os.read`` loop.
 2. **CPU**, out of process: the real ``sphere-mouse --port PTY --backend log`` as a subprocess fed at
-   the same rate; its user + system CPU time from /proc over the run, as % of one core.
+   the same rate; its CPU time over the run (the kernel's per-thread run time in /proc/PID/task/*/schedstat,
+   nanoseconds; utime + stime in clock ticks where that is absent), as % of one core.
+
+``--against REV`` runs the daemon of another revision of this repository (say the one an issue was filed
+at) side by side with this one: ``git archive REV host`` into a temporary folder, then ``--pairs`` runs of
+each, interleaved and in alternating order, every run a fresh process executing *this* file's
+measurement with the other tree's ``sphere`` package on ``PYTHONPATH`` (so both are measured the same
+way, with the same settings); it prints each side's medians and their ratios (this tree / REV).
 """
 
 from __future__ import annotations
 
 import argparse
+import glob
+import json
 import os
+import statistics
 import select
 import subprocess
 import sys
@@ -183,6 +194,18 @@ def baseline(seconds: float, rate: float):
 
 
 def proc_cpu_s(pid: int) -> float:
+    """CPU seconds the process's threads have run: schedstat's nanoseconds where the kernel keeps them (a
+    10 s run at 2.5 % is 25 clock ticks, too coarse to compare two versions), else utime + stime."""
+    tasks = glob.glob(f"/proc/{pid}/task/*/schedstat")
+    try:
+        total_ns = 0
+        for path in tasks:
+            with open(path) as f:
+                total_ns += int(f.read().split()[0])
+        if tasks:
+            return total_ns * 1e-9
+    except (OSError, ValueError, IndexError):
+        pass
     with open(f"/proc/{pid}/stat") as f:
         fields = f.read().rsplit(")", 1)[1].split()
     ticks = os.sysconf("SC_CLK_TCK")
@@ -210,29 +233,126 @@ def cpu(seconds: float, rate: float, orientation: bool):
     return {"cpu_pct": 100.0 * (c1 - c0) / (w1 - w0), "wall_s": w1 - w0, "fps": (f1 - f0) / (w1 - w0)}
 
 
+def measure(seconds: float, rate: float, orientation: bool) -> dict:
+    lat = latency(seconds, rate, orientation)
+    t, a = lat["total"], lat["after_read"]
+    b = baseline(seconds, rate)
+    c = cpu(seconds, rate, orientation)
+    return {"calls": lat["calls"], "frames": lat["frames"],
+            "p50_us": percentile(t, 50), "p99_us": percentile(t, 99), "max_us": max(t) if t else float("nan"),
+            "after_read_p50_us": percentile(a, 50), "after_read_p99_us": percentile(a, 99),
+            "floor_p50_us": percentile(b, 50), "floor_p99_us": percentile(b, 99),
+            "cpu_pct": c["cpu_pct"], "cpu_wall_s": c["wall_s"], "fps": c["fps"]}
+
+
+def report(r: dict) -> None:
+    print(f"latency, last byte written → backend call ({r['calls']} pointer moves of {r['frames']} frames):")
+    print(f"  p50 {r['p50_us']:7.0f} µs   p99 {r['p99_us']:7.0f} µs   max {r['max_us']:7.0f} µs")
+    print(f"  of which after the read returned: p50 {r['after_read_p50_us']:.0f} µs, p99 {r['after_read_p99_us']:.0f} µs")
+    print(f"  floor on this machine now (same pty and writer, a bare os.read loop): p50 {r['floor_p50_us']:.0f} µs, "
+          f"p99 {r['floor_p99_us']:.0f} µs")
+    print(f"CPU of the sphere-mouse process (backend log, stdout to /dev/null) at {r['fps']:.0f} frames/s over "
+          f"{r['cpu_wall_s']:.1f} s: {r['cpu_pct']:.2f} % of one core")
+    print(f"load average after: {os.getloadavg()[0]:.2f} (other work on the machine shows in the latency tail)")
+    target_ok = r["p99_us"] < 2000 and r["cpu_pct"] < 5.0
+    print("targets (p99 < 2 ms, CPU < 5 % of one core): " + ("met" if target_ok else "NOT met"))
+
+
+#: the figures the side-by-side table compares (key, label)
+COMPARED = (("p50_us", "latency p50 µs"), ("p99_us", "latency p99 µs"),
+            ("after_read_p50_us", "after the read p50 µs"), ("after_read_p99_us", "after the read p99 µs"),
+            ("floor_p99_us", "pty floor p99 µs"), ("cpu_pct", "CPU % of one core"))
+
+
+class UsageError(Exception):
+    pass
+
+
+def tree_of(rev: str, into: str) -> str:
+    """``host/`` of revision ``rev`` of the repository this file is in, extracted into ``into``."""
+    repo = os.path.dirname(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))))
+    git = ["git", "-C", repo]
+    try:
+        ok = subprocess.run(git + ["rev-parse", "--verify", "--quiet", f"{rev}^{{commit}}"],
+                            capture_output=True, text=True)
+    except FileNotFoundError:
+        raise UsageError("--against needs git on PATH") from None
+    if ok.returncode != 0:
+        raise UsageError(f"--against {rev}: not a commit of the repository at {repo} (this needs a git checkout "
+                         "of the project; `git log --oneline` lists the revisions)")
+    archive = subprocess.run(git + ["archive", "--format=tar", ok.stdout.strip(), "host"], capture_output=True)
+    if archive.returncode != 0:
+        raise UsageError(f"--against {rev}: git archive failed: {archive.stderr.decode(errors='replace').strip()}")
+    subprocess.run(["tar", "-x", "-C", into], input=archive.stdout, check=True)
+    return os.path.join(into, "host")
+
+
+def run_side(host_dir: str, args) -> dict:
+    """One measurement in a fresh process: this file, with ``host_dir``'s ``sphere`` package imported."""
+    env = dict(os.environ, PYTHONPATH=host_dir)
+    cmd = [sys.executable, "-P", os.path.abspath(__file__), "--json", "--seconds", str(args.seconds),
+           "--rate", str(args.rate)] + (["--orientation"] if args.orientation else [])
+    out = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=args.seconds * 4 + 120)
+    if out.returncode != 0:
+        raise RuntimeError(f"the run with {host_dir} failed: {out.stderr.strip()[-2000:]}")
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def against(args) -> int:
+    import tempfile
+
+    here = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))  # .../host
+    with tempfile.TemporaryDirectory(prefix="sphere-bench-") as tmp:
+        other = tree_of(args.against, tmp)
+        sides = {"this": here, args.against: other}
+        runs: dict[str, list[dict]] = {k: [] for k in sides}
+        for i in range(args.pairs):
+            order = list(sides) if i % 2 == 0 else list(reversed(sides))  # alternate who goes first
+            for name in order:
+                r = run_side(sides[name], args)
+                runs[name].append(r)
+                print(f"  pair {i + 1}/{args.pairs} {name:>12}: p50 {r['p50_us']:.0f} µs, p99 {r['p99_us']:.0f} µs, "
+                      f"after read p50 {r['after_read_p50_us']:.0f} / p99 {r['after_read_p99_us']:.0f} µs, "
+                      f"CPU {r['cpu_pct']:.2f} %", flush=True)
+    print(f"medians of {args.pairs} runs each ({args.seconds:g} s per run), this tree beside {args.against}; "
+          f"load average after {os.getloadavg()[0]:.2f}:")
+    print(f"  {'':24} {'this tree':>10} {args.against:>12} {'ratio':>7}")
+    for key, label in COMPARED:
+        a = statistics.median(r[key] for r in runs["this"])
+        b = statistics.median(r[key] for r in runs[args.against])
+        print(f"  {label:24} {a:10.2f} {b:12.2f} {a / b:7.2f}")
+    return 0
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="python -m sphere.daemon.bench", description=__doc__.split("\n\n")[0])
     ap.add_argument("--seconds", type=float, default=10.0, help="length of each run (default 10)")
     ap.add_argument("--rate", type=float, default=200.0, help="RAW_SAMPLE frames per second (default 200)")
     ap.add_argument("--orientation", action="store_true", help="also send ORIENTATION at half the rate")
+    ap.add_argument("--json", action="store_true", help="print the figures as one JSON object")
+    ap.add_argument("--against", metavar="REV", help="side by side with the daemon of this git revision")
+    ap.add_argument("--pairs", type=int, default=8, help="with --against: runs of each side (default 8)")
     args = ap.parse_args(argv)
-    print(f"sphere-mouse benchmark: {args.rate:g} RAW_SAMPLE frames/s" + (" + ORIENTATION" if args.orientation else "")
-          + f", {args.seconds:g} s per run, pty, {os.cpu_count()} CPUs, Python {sys.version.split()[0]}, "
-          f"load average before {os.getloadavg()[0]:.2f}")
-    lat = latency(args.seconds, args.rate, args.orientation)
-    t, a = lat["total"], lat["after_read"]
-    print(f"latency, last byte written → backend call ({lat['calls']} pointer moves of {lat['frames']} frames):")
-    print(f"  p50 {percentile(t, 50):7.0f} µs   p99 {percentile(t, 99):7.0f} µs   max {max(t) if t else float('nan'):7.0f} µs")
-    print(f"  of which after the read returned: p50 {percentile(a, 50):.0f} µs, p99 {percentile(a, 99):.0f} µs")
-    b = baseline(args.seconds, args.rate)
-    print(f"  floor on this machine now (same pty and writer, a bare os.read loop): p50 {percentile(b, 50):.0f} µs, "
-          f"p99 {percentile(b, 99):.0f} µs")
-    c = cpu(args.seconds, args.rate, args.orientation)
-    print(f"CPU of the sphere-mouse process (backend log, stdout to /dev/null) at {c['fps']:.0f} frames/s over "
-          f"{c['wall_s']:.1f} s: {c['cpu_pct']:.2f} % of one core")
-    print(f"load average after: {os.getloadavg()[0]:.2f} (other work on the machine shows in the latency tail)")
-    target_ok = percentile(t, 99) < 2000 and c["cpu_pct"] < 5.0
-    print("targets (p99 < 2 ms, CPU < 5 % of one core): " + ("met" if target_ok else "NOT met"))
+    if not 0.5 <= args.seconds <= 3600 or not 1 <= args.rate <= 2000 or not 1 <= args.pairs <= 100:
+        ap.error("--seconds must be 0.5–3600, --rate 1–2000, --pairs 1–100")
+    if args.against:
+        print(f"sphere-mouse benchmark, side by side: {args.rate:g} RAW_SAMPLE frames/s, {args.seconds:g} s per run, "
+              f"{os.cpu_count()} CPUs, Python {sys.version.split()[0]}, load average before {os.getloadavg()[0]:.2f}",
+              flush=True)
+        try:
+            return against(args)
+        except UsageError as e:
+            print(f"python -m sphere.daemon.bench: {e}", file=sys.stderr)
+            return 2
+    if not args.json:
+        print(f"sphere-mouse benchmark: {args.rate:g} RAW_SAMPLE frames/s" + (" + ORIENTATION" if args.orientation else "")
+              + f", {args.seconds:g} s per run, pty, {os.cpu_count()} CPUs, Python {sys.version.split()[0]}, "
+              f"load average before {os.getloadavg()[0]:.2f}")
+    r = measure(args.seconds, args.rate, args.orientation)
+    if args.json:
+        print(json.dumps(r))
+    else:
+        report(r)
     return 0
 
 

@@ -1,0 +1,80 @@
+"""The daemon's latency/CPU benchmark (python -m sphere.daemon.bench): what it measures is what the kernel
+says, its side-by-side mode runs, and bad arguments get a clear line and exit 2. No timing is asserted."""
+
+from __future__ import annotations
+
+import json
+import os
+import resource
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from sphere.daemon import bench
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def _bench(*args, timeout=240):
+    return subprocess.run([sys.executable, "-m", "sphere.daemon.bench", *args], capture_output=True, text=True,
+                          timeout=timeout, cwd=ROOT)
+
+
+def test_cpu_time_of_a_child_agrees_with_the_kernels_rusage():
+    """proc_cpu_s (schedstat, read while the process runs) against getrusage of the same child once reaped."""
+    child = subprocess.Popen([sys.executable, "-c",
+                              "import time, sys\nt = time.process_time()\nwhile time.process_time() - t < 0.4: pass\n"
+                              "sys.stdout.write('x'); sys.stdout.flush(); time.sleep(30)"],
+                             stdout=subprocess.PIPE)
+    try:
+        assert child.stdout.read(1) == b"x"
+        seen = bench.proc_cpu_s(child.pid)
+    finally:
+        before = resource.getrusage(resource.RUSAGE_CHILDREN)
+        child.kill()
+        child.wait()
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    kernel = (after.ru_utime + after.ru_stime) - (before.ru_utime + before.ru_stime)
+    assert seen >= 0.4
+    assert abs(seen - kernel) < 0.05, (seen, kernel)
+
+
+def test_json_run_reports_every_figure():
+    out = _bench("--json", "--seconds", "1")
+    assert out.returncode == 0, out.stderr
+    r = json.loads(out.stdout.strip().splitlines()[-1])
+    for key, _ in bench.COMPARED:
+        assert r[key] > 0, key
+    assert r["calls"] >= 150 and r["frames"] >= r["calls"]
+    assert r["after_read_p50_us"] < r["p50_us"]
+
+
+def test_side_by_side_with_a_revision_of_this_repository():
+    if not (ROOT / ".git").exists():
+        pytest.skip("[optional] not a git checkout: --against compares revisions of one")
+    out = _bench("--against", "HEAD", "--pairs", "1", "--seconds", "0.5")
+    assert out.returncode == 0, out.stderr
+    lines = out.stdout.splitlines()
+    assert sum("pair 1/1" in line for line in lines) == 2
+    table = lines[[i for i, line in enumerate(lines) if line.startswith("medians of 1 runs each")][0] + 2:]
+    for (_, label), row in zip(bench.COMPARED, table):
+        assert row.strip().startswith(label), (label, row)
+        this, other, ratio = (float(v) for v in row.split()[-3:])
+        assert this > 0 and other > 0 and ratio == pytest.approx(this / other, abs=0.01)
+
+
+@pytest.mark.parametrize("args, says", [
+    (["--against", "no-such-revision"], "not a commit"),
+    (["--seconds", "-1"], "--seconds"),
+    (["--pairs", "0", "--against", "HEAD"], "--pairs"),
+])
+def test_bad_arguments_are_one_line_and_exit_2(args, says):
+    t0 = time.monotonic()
+    out = _bench(*args, timeout=60)
+    assert out.returncode == 2, (out.stdout, out.stderr)
+    assert says in out.stderr and "Traceback" not in out.stderr
+    assert time.monotonic() - t0 < 30
+    assert os.path.isdir(ROOT / "host")  # nothing was extracted over the checkout
