@@ -392,10 +392,51 @@ static double wall_now(void)
 static uint32_t resets;
 static board_t *the_board;
 static int plain_reset; /* --reset-at: a reset that leaves no chip holding SDA (the soak's reference run) */
+
+/* MCUSR and SRAM over the resets (ATmega328P datasheet, "System Control and Reset": "Reset Sources", "MCU
+ * Status Register - MCUSR"). A power-on reset sets PORF, and EXTRF, BORF and WDRF are "reset by a Power-on
+ * Reset"; an external, brown-out or watchdog reset sets its own flag and leaves the others as they were
+ * until the program writes 0 to them. "During reset, all I/O Registers are set to their initial values":
+ * SRAM is not an I/O register and no reset source writes it, so it keeps its contents over every reset but
+ * a power-on, after which its contents are not defined (the model: seeded random bytes).
+ * simavr 1.6's avr_reset (measured with hardware/sim/probe, tests/e2e/test_board_chips.py) keeps SRAM but
+ * clears every I/O register, MCUSR too, and sets no flag for an external reset; its watchdog sets WDRF
+ * after its reset. The board puts back the flags MCUSR held before (read after every instruction step) and
+ * adds the flag of its own reset. */
+enum { MCUSR_PORF = 1, MCUSR_EXTRF = 2, MCUSR_BORF = 4, MCUSR_WDRF = 8 };
+static uint16_t mcusr_addr = 0x54;  /* MCUSR in the ATmega328P's data space (I/O 0x34) */
+static uint8_t mcusr_before;        /* MCUSR as the program left it */
+static uint8_t reset_flag;          /* the flag of the reset the board makes now (0: simavr's watchdog) */
+
+/* SRAM after a power-on: not defined by the datasheet; seeded random bytes, so a program that trusts it shows */
+static void sram_power_on(avr_t *avr, uint64_t seed, uint32_t power_ons)
+{
+	uint64_t r = (seed + 1) * 0x9E3779B97F4A7C15ULL ^ (0xA5A5A5A5ULL + power_ons);
+	for (uint32_t a = 0x100; a <= avr->ramend; a++) {
+		r ^= r >> 12; r ^= r << 25; r ^= r >> 27;
+		avr->data[a] = (uint8_t)((r * 0x2545F4914F6CDD1DULL) >> 56);
+	}
+}
+
+/* the board's own resets: kind MCUSR_EXTRF (reset pin), MCUSR_BORF (brown-out detector) or MCUSR_PORF
+ * (the supply went below the power-on threshold: SRAM lost, the other flags cleared) */
+static void reset_avr(avr_t *avr, uint8_t kind, uint64_t seed)
+{
+	static uint32_t power_ons;
+	reset_flag = kind;
+	if (kind == MCUSR_PORF)
+		mcusr_before = 0;
+	avr_reset(avr);
+	reset_flag = 0;
+	if (kind == MCUSR_PORF)
+		sram_power_on(avr, seed, ++power_ons);
+	mcusr_before = avr->data[mcusr_addr];
+}
+
 static void on_reset(avr_t *avr)
 {
-	(void)avr;
 	resets++;
+	avr->data[mcusr_addr] = (uint8_t)(mcusr_before | reset_flag);
 	if (the_board && !plain_reset)
 		board_avr_reset(the_board); /* the chips keep their power: one in the middle of a read holds SDA */
 	else if (the_board) {
@@ -452,9 +493,13 @@ static void usage(FILE *f)
 		"  --clocks random      every chip's oscillator off by a seeded amount within its datasheet's tolerance\n"
 		"  --glitch RATE        transient faults, RATE a second on average (seeded): single NACKs, clock\n"
 		"                       stretching, an AVR reset in the middle of a read (the chip then holds SDA)\n"
-		"  --reset-mid-read T   reset the AVR at the first byte a chip sends after T s (the chip holds SDA)\n"
-		"  --brownout T         the supply dips at T s: the AVR and the chips restart (repeatable)\n"
-		"  --reset-at T         the AVR resets at T s, no chip left holding SDA (repeatable)\n"
+		"  --reset-mid-read T   reset the AVR (reset pin: EXTRF) at the first byte a chip sends after T s (the\n"
+		"                       chip holds SDA)\n"
+		"  --brownout T         the supply dips below the AVR's brown-out level at T s (not below its power-on\n"
+		"                       threshold): brown-out reset (BORF, SRAM kept), the chips restart (repeatable)\n"
+		"  --power-off T        the supply goes away at T s and comes back: power-on reset (PORF, SRAM lost),\n"
+		"                       the chips restart (repeatable)\n"
+		"  --reset-at T         the AVR resets at T s (reset pin: EXTRF), no chip left holding SDA (repeatable)\n"
 		"  --sda-held           at power-up the magnetometer holds SDA low (left mid-read by a reset)\n"
 		"  --host-stall T0:T1   the host stops reading from T0 to T1 s: the adapter's buffer fills, bytes drop\n"
 		"  --adapter NAME       the USB-serial adapter between the UART and the host (capture, pty): ftdi (62-byte\n"
@@ -500,8 +545,8 @@ int main(int argc, char **argv)
 	imperfections_t imp;
 	memset(&imp, 0, sizeof imp);
 	imp.seed = 1;
-	int clocks_random = 0, sda_held = 0, n_brownouts = 0, n_stalls = 0, n_resets_mid = 0, n_resets_at = 0;
-	double glitch_rate = 0, brownouts[MAX_FAULTS], resets_mid[MAX_FAULTS], host_stalls[MAX_FAULTS][2], resets_at[MAX_FAULTS];
+	int clocks_random = 0, sda_held = 0, n_brownouts = 0, n_stalls = 0, n_resets_mid = 0, n_resets_at = 0, n_power_offs = 0;
+	double glitch_rate = 0, power_offs[MAX_FAULTS], brownouts[MAX_FAULTS], resets_mid[MAX_FAULTS], host_stalls[MAX_FAULTS][2], resets_at[MAX_FAULTS];
 	const char *adapter = NULL, *times_path = NULL;
 	char tpin_port = 'B', lpin_port = 0, dpin_port = 0;
 	int tpin_bit = 5, lpin_bit = 0, dpin_bit = 0;
@@ -522,7 +567,8 @@ int main(int argc, char **argv)
 		{"brownout", required_argument, 0, 'b'}, {"sda-held", no_argument, 0, 'H'},
 		{"host-stall", required_argument, 0, 'o'}, {"adapter", required_argument, 0, 'a'},
 		{"simavr-i2c-timing", no_argument, 0, 'U'}, {"capture-times", required_argument, 0, 'X'},
-		{"reset-at", required_argument, 0, 'A'}, {"drdy-pin", required_argument, 0, 'D'}, {0, 0, 0, 0}};
+		{"reset-at", required_argument, 0, 'A'}, {"drdy-pin", required_argument, 0, 'D'},
+		{"power-off", required_argument, 0, 'O'}, {0, 0, 0, 0}};
 	int o;
 	while ((o = getopt_long(argc, argv, "t:s:c:prj:vh", opts, NULL)) != -1) {
 		switch (o) {
@@ -563,10 +609,11 @@ int main(int argc, char **argv)
 			imp.ppm[chip] = atof(c + 1);
 			break;
 		}
-		case 'b': case 'm': case 'A':
-			if ((o == 'b' ? n_brownouts : o == 'm' ? n_resets_mid : n_resets_at) >= MAX_FAULTS) { fprintf(stderr, "too many faults of one kind (at most %d)\n", MAX_FAULTS); return 2; }
+		case 'b': case 'm': case 'A': case 'O':
+			if ((o == 'b' ? n_brownouts : o == 'm' ? n_resets_mid : o == 'O' ? n_power_offs : n_resets_at) >= MAX_FAULTS) { fprintf(stderr, "too many faults of one kind (at most %d)\n", MAX_FAULTS); return 2; }
 			if (o == 'b') brownouts[n_brownouts++] = atof(optarg);
 			else if (o == 'm') resets_mid[n_resets_mid++] = atof(optarg);
+			else if (o == 'O') power_offs[n_power_offs++] = atof(optarg);
 			else resets_at[n_resets_at++] = atof(optarg);
 			break;
 		case 'o': {
@@ -642,7 +689,12 @@ int main(int argc, char **argv)
 	avr_load_firmware(avr, &fw);
 	avr->frequency = 16000000; /* a Nano's crystal, whatever the ELF says */
 	avr->sleep = no_sleep;     /* sleep is simulated time, never wall time */
-	avr->reset = on_reset;     /* counts resets after power-up (the watchdog's) */
+	avr->reset = on_reset;     /* counts resets after power-up (the watchdog's); MCUSR as the datasheet says */
+	if (avr->reset_flags.porf.reg)
+		mcusr_addr = avr->reset_flags.porf.reg;
+	sram_power_on(avr, imp.seed, 0); /* power-up: SRAM holds whatever its cells came up with */
+	avr->data[mcusr_addr] = MCUSR_PORF;
+	mcusr_before = MCUSR_PORF;
 
 	const board_variant_t *variant = board_variant_find(variant_name);
 	if (!variant) {
@@ -764,12 +816,13 @@ int main(int argc, char **argv)
 	double wall0 = wall_now(), cpu0 = cpu_now();
 	int stall = 0, state = cpu_Running;
 	double next_glitch = glitch_rate > 0 ? 0.5 : INFINITY;
-	int brown_i = 0, reset_i = 0, reset_at_i = 0;
+	int brown_i = 0, reset_i = 0, reset_at_i = 0, power_off_i = 0;
 	uint32_t resets_seen = resets;
 	while (avr->cycle < end_cycle && !stop_requested) {
 		state = avr_run(avr);
 		if (state == cpu_Done || state == cpu_Crashed)
 			break;
+		mcusr_before = avr->data[mcusr_addr];
 		if (resets != resets_seen) { /* simavr's reset cancelled every cycle timer: ours start again */
 			resets_seen = resets;
 			board_restart_timers(&board);
@@ -787,7 +840,7 @@ int main(int argc, char **argv)
 		if (board.reset_pending) {
 			board.reset_pending = 0;
 			log_fault(board_time_s(&board), "reset_mid_read", board.cur_chip);
-			avr_reset(avr);
+			reset_avr(avr, MCUSR_EXTRF, imp.seed);
 		}
 		if (avr->cycle >= next_check) {
 			next_check = avr->cycle + check_every;
@@ -806,14 +859,20 @@ int main(int argc, char **argv)
 			while (brown_i < n_brownouts && t >= brownouts[brown_i]) {
 				brown_i++;
 				log_fault(t, "brownout", -1);
-				avr_reset(avr);
+				reset_avr(avr, MCUSR_BORF, imp.seed);
+				board_power_cycle(&board);
+			}
+			while (power_off_i < n_power_offs && t >= power_offs[power_off_i]) {
+				power_off_i++;
+				log_fault(t, "power_off", -1);
+				reset_avr(avr, MCUSR_PORF, imp.seed);
 				board_power_cycle(&board);
 			}
 			while (reset_at_i < n_resets_at && t >= resets_at[reset_at_i]) {
 				reset_at_i++;
 				log_fault(t, "reset", -1);
 				plain_reset = 1;
-				avr_reset(avr);
+				reset_avr(avr, MCUSR_EXTRF, imp.seed);
 				plain_reset = 0;
 			}
 			while (reset_i < n_resets_mid && t >= resets_mid[reset_i]) {

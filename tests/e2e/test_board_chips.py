@@ -363,6 +363,64 @@ def test_watchdog_reset_restarts_the_program_with_wdrf():
     cmds = [(0.1, "w 1e 00 18"), (0.5, "W"), (0.8, "r 1e 00 1")]
     r = probe(cmds, T.still(1.0), 1.0)
     banners = r.tagged("probe")
-    assert [b.data for b in banners] == [[1], [8]], banners
+    assert [b.data[0] for b in banners] == [1, 8], banners
     assert r.stats["resets"] == 1
     assert r.tagged("r")[0].data == [0x18]
+
+
+# ---------------------------------------------------------------- the ATmega328P's resets: MCUSR and SRAM
+# ATmega328P datasheet, "System Control and Reset": "Reset Sources" (power-on, external, watchdog, brown-out),
+# "MCU Status Register - MCUSR" (PORF "set if a Power-on Reset occurs"; EXTRF, BORF, WDRF "set if an External /
+# Brown-out / Watchdog System Reset occurs. The bit is reset by a Power-on Reset, or by writing a logic zero to
+# the flag"), "Resetting the AVR" ("During reset, all I/O Registers are set to their initial values": SRAM is not
+# one, and no reset source writes it). The probe prints MCUSR as it found it and four .noinit SRAM bytes as they
+# were, then writes 5a a5 c3 3c there (hardware/sim/probe/probe.cpp).
+
+MARK = [0x5A, 0xA5, 0xC3, 0x3C]
+PORF, EXTRF, BORF, WDRF = 1, 2, 4, 8
+
+
+def _banners(r):
+    return [(b.data[0], b.data[1:]) for b in r.tagged("probe")]
+
+
+@pytest.mark.parametrize("kind, flag", [("reset_at", EXTRF), ("brownout", BORF)])
+def test_a_reset_that_is_not_a_power_on_sets_its_flag_and_keeps_sram(kind, flag):
+    """External reset (the reset pin: a host's DTR, --reset-at) -> EXTRF; brown-out (the supply below the BOD
+    level, not below the power-on threshold) -> BORF; SRAM as the program left it."""
+    r = probe([], T.still(0.6), 0.6, **{kind: [0.3]})
+    (c0, _), (c1, m1) = _banners(r)
+    assert c0 == PORF and c1 == flag and m1 == MARK, _banners(r)
+
+
+def test_a_watchdog_reset_keeps_sram():
+    r = probe([(0.3, "W")], T.still(0.6), 0.6)
+    (c0, _), (c1, m1) = _banners(r)
+    assert c0 == PORF and c1 == WDRF and m1 == MARK
+
+
+def test_a_reset_mid_read_is_an_external_reset():
+    """The board's reset in the middle of a read pulls the reset pin: EXTRF, SRAM kept. The banner after it
+    follows the line the reset cut, on the same line of the capture, so the program keeps MCUSR (`k`) and a
+    watchdog reset afterwards shows both flags."""
+    r = probe([(0.05, "k"), (0.1, "p 68 1d 6 1000 50"), (0.3, "W")], T.still(0.5), 0.5, reset_mid_read=[0.12])
+    assert [f["kind"] for f in r.stats["faults"]] == ["reset_mid_read"] and r.stats["resets"] == 2
+    (c0, _), *_, (c2, m2) = _banners(r)
+    assert c0 == PORF and c2 == EXTRF | WDRF and m2 == MARK, _banners(r)
+
+
+def test_power_on_sets_porf_alone_and_sram_is_not_defined():
+    """A power-on reset (at start and --power-off): MCUSR = PORF only (the other flags "reset by a Power-on
+    Reset"), SRAM not what the program left (the model: seeded random bytes, different per power-on)."""
+    r = probe([(0.1, "k")], T.still(0.8), 0.8, reset_at=[0.2], power_off=[0.5])
+    (c0, m0), (c1, m1), (c2, m2) = _banners(r)
+    assert c0 == PORF and c1 == EXTRF and m1 == MARK
+    assert c2 == PORF and m2 != MARK and m2 != m0, _banners(r)  # EXTRF (left set by `k`) cleared by the power-on
+    assert [f["kind"] for f in r.stats["faults"]] == ["reset", "power_off"]
+
+
+def test_reset_flags_accumulate_until_the_program_clears_them():
+    """EXTRF, BORF and WDRF are reset only by a power-on or by writing 0: a program that leaves MCUSR alone
+    (`k`) finds the earlier reset's flag beside the new one."""
+    r = probe([(0.1, "k"), (0.4, "k"), (0.7, "W")], T.still(1.0), 1.0, reset_at=[0.3], brownout=[0.5])
+    assert [c for c, _ in _banners(r)] == [PORF, EXTRF, EXTRF | BORF, EXTRF | BORF | WDRF], _banners(r)

@@ -16,11 +16,18 @@
 //                           after: one "<micros> e <level>" line each (at most 100)
 //   W                       the watchdog at 15 ms, then hang: a watchdog reset
 //   c                       bus clear: TWI off, nine SCL pulses and a STOP on the pins, TWI on -> "c"
+//   k                       leave MCUSR as it is at the next start (do not clear it)         -> "k"
+// At every start it prints "<micros> probe <MCUSR> <m0> <m1> <m2> <m3>": the reset flags as the program found
+// them, and four bytes of .noinit SRAM (which neither the C start-up nor a reset writes) as they were, then
+// writes 5a a5 c3 3c there, so the next start shows whether SRAM was kept over the reset. It then clears
+// MCUSR, unless told by `k` (kept in .noinit) not to, once.
 #include <Arduino.h>
 #include <avr/wdt.h>
 #include <Wire.h>
 #include "../sketch_wire.h"
 
+static uint8_t mark[4] __attribute__((section(".noinit")));
+static uint8_t keep_mcusr __attribute__((section(".noinit")));  // 0x4b: `k` was sent before this start
 static char line[64];
 static uint8_t len;
 
@@ -134,6 +141,9 @@ static void run(char *s) {
     Serial.print(micros()); Serial.print(" W\n"); Serial.flush();
     wdt_enable(WDTO_15MS);
     for (;;) {}
+  } else if (cmd == 'k') {
+    keep_mcusr = 0x4b;
+    Serial.print(micros()); Serial.print(" k\n");
   } else if (cmd == 'c') {
     bus_clear();
     Serial.print(micros()); Serial.print(" c\n");
@@ -144,11 +154,17 @@ static void run(char *s) {
 
 void setup() {
   uint8_t cause = MCUSR;
-  MCUSR = 0;
-  wdt_disable();  // a watchdog reset leaves the watchdog on (WDRF)
+  if (keep_mcusr != 0x4b) {
+    MCUSR = 0;
+    wdt_disable();  // a watchdog reset leaves the watchdog on (WDRF)
+  }
+  keep_mcusr = 0;
   Serial.begin(115200);
   Wire.begin(); Wire.setClock(400000); Wire.setWireTimeout(3000, true);
-  Serial.print(micros()); Serial.print(" probe "); hex(cause); Serial.write('\n');
+  Serial.print(micros()); Serial.print(" probe "); hex(cause);
+  static const uint8_t pattern[4] = {0x5a, 0xa5, 0xc3, 0x3c};
+  for (uint8_t i = 0; i < 4; i++) { Serial.write(' '); hex(mark[i]); mark[i] = pattern[i]; }
+  Serial.write('\n');
 }
 
 void loop() {

@@ -120,7 +120,8 @@ def board_command(elf, trace, seconds: float, capture=None, pty=False, realtime=
                   nack=(), stall=(), send=None, timing_pin=None, loop_pin=None, rate_hz=None,
                   verbose=0, build=True, i2c_real_timing=True, board=None, noise=False, seed=None,
                   clock_ppm=(), clocks_random=False, glitch=None, reset_mid_read=(), brownout=(), sda_held=False,
-                  host_stall=(), adapter=None, capture_times=None, reset_at=(), drdy_pin=None) -> list[str]:
+                  host_stall=(), adapter=None, capture_times=None, reset_at=(), drdy_pin=None,
+                  power_off=()) -> list[str]:
     """sphere-board's command line. I2C runs at its real 400 kHz timing unless ``i2c_real_timing=False``."""
     cmd = [str(board_path(build)), str(elf), "--trace", str(trace), "--seconds", f"{seconds:g}"]
     if capture:
@@ -163,6 +164,8 @@ def board_command(elf, trace, seconds: float, capture=None, pty=False, realtime=
         cmd += ["--brownout", f"{t:g}"]
     for t in reset_at:
         cmd += ["--reset-at", f"{t:.6f}"]
+    for t in power_off:
+        cmd += ["--power-off", f"{t:g}"]
     if sda_held:
         cmd.append("--sda-held")
     for h in host_stall:
