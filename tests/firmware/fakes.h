@@ -112,6 +112,8 @@ struct FakeHal : sphere::DeviceHal {
     FakeHal() { std::memset(eeprom, 0xFF, sizeof eeprom); }
     uint8_t txRoom() override { return tx_full ? 0 : (uint8_t)tx_room; }
     uint8_t resetCause() override { return reset_cause; }
+    sphere::KeptBias kept{};  // the RAM a reset other than a power-on keeps: a new SphereDevice on this hal sees it
+    sphere::KeptBias& keptBias() override { return kept; }
     uint32_t micros() override { return now += 4; }
     bool send(const uint8_t* f, uint8_t n) override {
         if (tx_full) return false;

@@ -529,3 +529,157 @@ TEST_CASE("a gap in the gyro's samples is bridged by the trapezoid rule: NACKs h
     late.quat(b);
     CHECK(angleDegPrecise(a, b) < 0.15);  // the late rate for the whole 25 ms: 0.28°
 }
+
+// ---------------------------------------------------------------- the gyro bias kept over a warm reset
+namespace {
+
+// A reset of the AVR: the program starts again (a new SphereDevice in the same storage, begin()), the RAM the
+// C start-up leaves alone (FakeHal::kept) and the chips (FakeBus) as they were.
+void resetDevice(Bench& b, uint8_t cause) {
+    b.hal.reset_cause = cause;
+    b.dev.~SphereDevice();
+    new (&b.dev) SphereDevice(b.bus, b.hal);
+    b.dev.begin();
+}
+
+// turning: no still window can complete
+void turn(Bench& b, int ticks) {
+    for (int i = 0; i < ticks; ++i) {
+        b.bus.setGyro((int16_t)(5 + 60 * (i % 2)), -7, 1);
+        b.tick();
+    }
+}
+
+int biasX(const Bench& b) { return b.dev.calibration().gyro_bias[0]; }
+
+// a Bench whose bias (5, −7, 1) was estimated at power-up, then the sphere turns
+void tracked(Bench& b) {
+    b.bus.setGyro(5, -7, 1);
+    b.dev.begin();
+    b.run(210);
+    REQUIRE(biasX(b) == 5);
+    turn(b, 20);
+}
+
+}  // namespace
+
+TEST_CASE("a reset that is not a power-on keeps the tracked gyro bias; the HELLO says why it reset") {
+    for (uint8_t cause : {RESET_EXTERNAL, RESET_WATCHDOG, RESET_BROWN_OUT, (uint8_t)(RESET_EXTERNAL | RESET_WATCHDOG)}) {
+        CAPTURE((int)cause);
+        Bench b(false);
+        tracked(b);
+        b.frames();
+        resetDevice(b, cause);  // mid-turn
+        CHECK(biasX(b) == 5);
+        CHECK((int)b.dev.calibration().gyro_bias[1] == -7);
+        CHECK((int)b.dev.calibration().gyro_bias[2] == 1);
+        const uint8_t* h = lastOf(b.frames(), PKT_HELLO)->data() + 2;
+        CHECK(h[19] == cause);  // reset_cause
+        CHECK((h[18] & (CAL_GYRO_BIAS_VALID | CAL_GYRO_BIAS_ESTIMATED)) == (CAL_GYRO_BIAS_VALID | CAL_GYRO_BIAS_ESTIMATED));
+        // no power-up estimate replaces it: still windows move it by TRACK_STEP_LSB at most
+        turn(b, 100);
+        b.bus.setGyro(25, -7, 1);
+        b.run(SphereDevice::TRACK_SAMPLES + 5);
+        CHECK(biasX(b) == 5 + SphereDevice::TRACK_STEP_LSB);
+        // and what was tracked after the reset is kept over the next one
+        resetDevice(b, RESET_WATCHDOG);
+        CHECK(biasX(b) == 5 + SphereDevice::TRACK_STEP_LSB);
+    }
+}
+
+TEST_CASE("the kept gyro bias is ignored after a power-on, with a bad check word or past the plausible range") {
+    SUBCASE("power-on (PORF), also beside another flag: the RAM is not defined") {
+        for (uint8_t cause : {RESET_POWER_ON, (uint8_t)(RESET_POWER_ON | RESET_EXTERNAL)}) {
+            Bench b(false);
+            tracked(b);
+            REQUIRE(keptBiasValid(b.hal.kept));
+            resetDevice(b, cause);
+            CHECK(biasX(b) == 0);
+            CHECK_FALSE((b.dev.calibrationState() & CAL_GYRO_BIAS_VALID));
+            b.bus.setGyro(9, -7, 1);  // the power-up estimate runs: the first still second sets the bias
+            b.run(210);
+            CHECK(biasX(b) == 9);
+        }
+    }
+    SUBCASE("a bad check word: any one bit of the record flipped") {
+        for (size_t bit = 0; bit < 8 * sizeof(KeptBias); ++bit) {
+            Bench b(false);
+            tracked(b);
+            ((uint8_t*)&b.hal.kept)[bit / 8] ^= (uint8_t)(1u << (bit % 8));
+            CHECK_FALSE(keptBiasValid(b.hal.kept));
+            resetDevice(b, RESET_EXTERNAL);
+            CHECK(biasX(b) == 0);
+            CHECK_FALSE((b.dev.calibrationState() & CAL_GYRO_BIAS_VALID));
+        }
+    }
+    SUBCASE("random RAM is never taken for a record") {
+        uint32_t x = 12345;
+        int accepted = 0;
+        for (int n = 0; n < 200000; ++n) {
+            KeptBias k;
+            for (size_t i = 0; i < sizeof k; ++i) {
+                x ^= x << 13, x ^= x >> 17, x ^= x << 5;
+                ((uint8_t*)&k)[i] = (uint8_t)x;
+            }
+            accepted += keptBiasValid(k);
+        }
+        CHECK(accepted == 0);
+    }
+    SUBCASE("a bias past ±1000 LSB (70 °/s) is not plausible, whatever its check word") {
+        Bench b(false);
+        b.dev.begin();
+        const int16_t edge[3] = {KEPT_BIAS_LIMIT_LSB, -KEPT_BIAS_LIMIT_LSB, 0}, past[3] = {0, 0, KEPT_BIAS_LIMIT_LSB + 1};
+        keepBias(b.hal.kept, edge, CAL_GYRO_BIAS_VALID | CAL_GYRO_BIAS_ESTIMATED);
+        CHECK(keptBiasValid(b.hal.kept));
+        resetDevice(b, RESET_WATCHDOG);
+        CHECK(biasX(b) == KEPT_BIAS_LIMIT_LSB);
+        keepBias(b.hal.kept, past, CAL_GYRO_BIAS_VALID | CAL_GYRO_BIAS_ESTIMATED);
+        CHECK_FALSE(keptBiasValid(b.hal.kept));
+        resetDevice(b, RESET_WATCHDOG);
+        CHECK((int)b.dev.calibration().gyro_bias[2] == 0);
+        CHECK_FALSE((b.dev.calibrationState() & CAL_GYRO_BIAS_VALID));
+    }
+    SUBCASE("no bias yet, or RESET_CALIBRATION: nothing to keep") {
+        Bench b(false);
+        b.bus.setGyro(5, -7, 1);
+        b.dev.begin();
+        turn(b, 50);  // no window completed before the reset
+        resetDevice(b, RESET_EXTERNAL);
+        CHECK_FALSE((b.dev.calibrationState() & CAL_GYRO_BIAS_VALID));
+        b.bus.setGyro(5, -7, 1);
+        b.run(210);
+        REQUIRE(biasX(b) == 5);
+        for (uint8_t x : frameOf(CMD_RESET_CALIBRATION, 1, {})) b.dev.receive(x);
+        b.tick();
+        turn(b, 10);
+        resetDevice(b, RESET_EXTERNAL);
+        CHECK(biasX(b) == 0);
+        CHECK_FALSE((b.dev.calibrationState() & CAL_GYRO_BIAS_VALID));
+    }
+}
+
+TEST_CASE("the kept bias against the EEPROM's: the newer one, the EEPROM's flags when they agree") {
+    Bench b(false);
+    b.dev.begin();
+    std::vector<uint8_t> block(42, 0);
+    block[0] = 20;  // gyro bias x 20 LSB, the rest default
+    for (int i = 0; i < 3; ++i) block[12 + 2 * i + 1] = 0x40;                 // accel scale 1.0 (Q14)
+    for (int i = 0; i < 9; i += 4) block[24 + 2 * i + 1] = 0x40;              // soft iron identity
+    for (uint8_t x : frameOf(CMD_SET_CALIBRATION, 1, block)) b.dev.receive(x);
+    for (uint8_t x : frameOf(CMD_SAVE_CALIBRATION, 2, {})) b.dev.receive(x);
+    turn(b, 10);
+    resetDevice(b, RESET_EXTERNAL);  // the kept bias is the EEPROM's
+    CHECK(biasX(b) == 20);
+    CHECK((b.dev.calibrationState() & CAL_FROM_EEPROM));
+    b.bus.setGyro(40, 0, 0);  // tracking moves it away from the EEPROM's
+    b.run(SphereDevice::TRACK_SAMPLES + 5);
+    REQUIRE(biasX(b) == 20 + SphereDevice::TRACK_STEP_LSB);
+    turn(b, 10);
+    resetDevice(b, RESET_EXTERNAL);
+    CHECK(biasX(b) == 20 + SphereDevice::TRACK_STEP_LSB);
+    CHECK_FALSE((b.dev.calibrationState() & CAL_FROM_EEPROM));
+    CHECK((b.dev.calibrationState() & CAL_GYRO_BIAS_VALID));
+    resetDevice(b, RESET_POWER_ON);  // a power-on: the EEPROM's
+    CHECK(biasX(b) == 20);
+    CHECK((b.dev.calibrationState() & CAL_FROM_EEPROM));
+}

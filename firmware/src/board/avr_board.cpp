@@ -84,6 +84,11 @@ uint8_t AvrBoard::txRoom() {
 
 uint8_t AvrBoard::resetCause() { return g_reset_cause; }
 
+// The gyro bias kept over a reset that is not a power-on: the C start-up leaves .noinit as the last program
+// run left it (SphereDevice::begin decides by the reset cause and the record's check word whether to use it).
+static sphere::KeptBias g_kept_bias __attribute__((section(".noinit")));
+sphere::KeptBias& AvrBoard::keptBias() { return g_kept_bias; }
+
 void AvrBoard::eepromRead(uint16_t addr, uint8_t* out, uint8_t len) {
     eeprom_read_block(out, (const void*)addr, len);
 }

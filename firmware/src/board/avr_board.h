@@ -21,6 +21,7 @@ public:
     bool send(const uint8_t* frame, uint8_t len) override;
     uint8_t txRoom() override;
     uint8_t resetCause() override;
+    sphere::KeptBias& keptBias() override;
     void eepromRead(uint16_t addr, uint8_t* out, uint8_t len) override;
     bool eepromWrite(uint16_t addr, const uint8_t* data, uint8_t len) override;
     void margPin(bool high) override;

@@ -56,11 +56,25 @@ __attribute__((noinline)) void SphereDevice::begin() {
     loadCalibration(true);
     filter_.begin(MargFilter::DEFAULT_DT_US);
     filter_.setBetaMilli(MargFilter::STARTUP_BETA_MILLI);
-    if (sensors_ok_ & SENSOR_ITG3200) {
+    // After a reset that was not a power-on, the bias tracked before it (kept_bias.h): tracking goes on from
+    // it (a still window moves it by TRACK_STEP_LSB at most) and no power-up estimate replaces it.
+    KeptBias& k = hal_.keptBias();
+    if (!(reset_cause_ & RESET_POWER_ON) && keptBiasValid(k) && (k.cal_bits & CAL_GYRO_BIAS_VALID)) {
+        bool changed = false;
+        for (uint8_t i = 0; i < 3; ++i) {
+            if (k.gyro_bias[i] != cal_.gyro_bias[i]) changed = true;
+            cal_.gyro_bias[i] = k.gyro_bias[i];
+        }
+        if (changed)  // not the EEPROM's bias: as after a tracking window
+            cal_state_ = (uint8_t)((cal_state_ & ~(CAL_FROM_EEPROM | CAL_GYRO_BIAS_ESTIMATED)) |
+                                   (k.cal_bits & (CAL_GYRO_BIAS_VALID | CAL_GYRO_BIAS_ESTIMATED)));
+    } else if (sensors_ok_ & SENSOR_ITG3200) {
         bias_est_.start(STARTUP_BIAS_SAMPLES);
         bias_at_startup_ = true;
         bias_tries_ = 1;
     }
+    k.cal_bits = 0xFF;  // no state has these bits: the record is written now, whatever the RAM held
+    keepTrackedBias();
     uint8_t zero = 0;
     hal_.send(&zero, 1);  // ends any partial frame in the receiver's buffer
     sendHello();
@@ -276,6 +290,17 @@ void SphereDevice::trackBias() {
     }
 }
 
+// The record kept over a reset follows the bias in use (tracked, estimated, set, loaded or reset by a
+// command): rewritten when it differs, at most once a period.
+__attribute__((noinline)) void SphereDevice::keepTrackedBias() {
+    KeptBias& k = hal_.keptBias();
+    uint8_t bits = (uint8_t)(cal_state_ & (CAL_GYRO_BIAS_VALID | CAL_GYRO_BIAS_ESTIMATED));
+    bool same = k.cal_bits == bits;
+    for (uint8_t i = 0; i < 3; ++i)
+        if (k.gyro_bias[i] != cal_.gyro_bias[i]) same = false;
+    if (!same) keepBias(k, cal_.gyro_bias, bits);
+}
+
 __attribute__((noinline)) void SphereDevice::tick() {
     uint32_t t0 = hal_.micros();
     // the real interval after an overrun (a period is 5000 µs; the first tick has no predecessor)
@@ -290,6 +315,7 @@ __attribute__((noinline)) void SphereDevice::tick() {
     else tap_active_ = false;
     if (tap_active_) raw_flags_ |= RAW_TAP_ACTIVE;
     trackBias();
+    keepTrackedBias();
     runFilter(dt);
     stream(t0);
     if (++phase_ >= IMU_RATE_HZ) phase_ = 0;

@@ -14,6 +14,7 @@
 #include "i2c_bus.h"
 #include "input_gates.h"
 #include "itg3200.h"
+#include "kept_bias.h"
 #include "marg_filter.h"
 #include "packets.h"
 #include "qmc5883l.h"
@@ -32,6 +33,8 @@ public:
     virtual bool eepromWrite(uint16_t addr, const uint8_t* data, uint8_t len) = 0;
     // Why the chip last reset: HELLO reset_cause bits (captured before anything cleared them).
     virtual uint8_t resetCause() = 0;
+    // The gyro bias record in RAM that a reset other than a power-on leaves as it was (kept_bias.h).
+    virtual KeptBias& keptBias() = 0;
     // Timing pin (D13): high exactly while the MARG update runs.
     virtual void margPin(bool high) = 0;
     // True when the ADXL345's INT1 fired (edge captured or line high); t_us = when it was seen.
@@ -104,6 +107,7 @@ private:
     bool readSensor(uint8_t index, bool& fresh);
     void readSensors(uint32_t t_us);
     void trackBias();
+    void keepTrackedBias();
     bool magAccepted(const int16_t m[3]);
     void handleEvents();
     void runFilter(uint16_t dt_us);

@@ -194,6 +194,20 @@ def rotation(seconds: float, rate_dps: float = 90.0, axis=(0.0, 0.0, 1.0), still
     return _from_orientation(_integrate(gyr, rate_hz), gyr, rate_hz, f"rotation_{rate_dps:g}dps")
 
 
+def sway(seconds: float, peak_dps: float = 150.0, period_s: float = 1.3, axis=(0.0, 0.0, 1.0), still_s: float = 1.0,
+         rate_hz: float = SYNTH_RATE_HZ) -> Motion:
+    """Still for ``still_s``, then turning back and forth about a sensor-frame axis, the rate
+    ``peak_dps``·sin(2π t / ``period_s``): never still for a whole second, never a steady turn."""
+    n = int(round(seconds * rate_hz))
+    a = np.asarray(axis, dtype=float)
+    a = a / np.linalg.norm(a)
+    i0 = int(round(still_s * rate_hz))
+    gyr = np.zeros((n, 3))
+    t = np.arange(n - i0) / rate_hz
+    gyr[i0:] = np.radians(peak_dps) * np.sin(2 * np.pi * t / period_s)[:, None] * a
+    return _from_orientation(_integrate(gyr, rate_hz), gyr, rate_hz, f"sway_{peak_dps:g}dps")
+
+
 def toss(seconds: float = 4.0, toss_at_s: float = 2.0, flight_s: float = 0.4, spin_dps: float = 200.0,
          rate_hz: float = SYNTH_RATE_HZ) -> Motion:
     """Still, a throw (1.5 g up for 0.1 s), free flight (0 g, spinning), a catch (3 g for 0.05 s), still."""
