@@ -30,14 +30,22 @@ its lag, and q_inc's correction undoes the horizontal part of it. So the measure
 second-order low-pass on R and on R·b as on the accelerometer (the lag-matched model VQF introduced,
 Laidig & Seel 2023, §3.5): correction rate c ≈ LP(R·b) − LP(R)·b_true, horizontal rows only (noise
 ``bias_sigma_motion_dps``, the rate's noise over 1 s); the vertical component becomes observable as the
-sensor turns. b is clipped to ``bias_clip_dps``, each diagonal of P to its initial value.
+sensor turns. With ``bias_mag`` the **magnetometer** adds two rows while the field is accepted (``_mag_rows``):
+the field's direction in E′ turns as E′ does, so its rotation, on the two axes across the field, equals the drift
+Φ·b_true − Ψ plus the corrections q_inc applied: exactly, with no lag-matching needed and nothing of the hand's
+linear acceleration in it (the tilt that acceleration causes is in the known corrections). Those rows see the
+vertical component (heading) the tilt rows cannot. Their noise is σ_motion² plus what the field's own noise gives
+them (measured from consecutive steps); a step whose rows a bias within P cannot explain (χ² test at
+``bias_change_alpha``: a magnet riding on the sensor that the disturbance test let through) is not used. The update
+is the Kalman update in information form, so any number of rows costs one 3×3 inverse. b is clipped to
+``bias_clip_dps``, each diagonal of P to its initial value.
 
 That prior (σ_motion) makes the filter slow in motion on purpose: real hand motion leaves bias-like errors in
 the measurement (lever arm, scale factors) that a fast filter would follow. A bias that really changes (a step)
-is caught by a **change test** on the same measurements (``_change_test``): an F-test of a constant bias error
-fitted over K = ``bias_change_blocks`` one-second blocks, significant at ``bias_change_alpha`` in two consecutive
-windows that agree. Then b restarts from the latest window's least-squares fit of the bias itself, with the
-covariance that fit has (not P₀, which threw the window's data away), and for 2K blocks the filter uses the
+is caught by a **change test** on the same measurements (``_change_test``, the magnetometer's rows weighted by
+their noise): an F-test of a constant bias fitted over K = ``bias_change_blocks`` one-second blocks against b,
+significant at ``bias_change_alpha`` in two consecutive windows that agree. Then b restarts from the latest
+window's least-squares fit of the bias itself, with the covariance that fit has (not P₀, which threw the window's data away), and for 2K blocks the filter uses the
 measurement noise that fit showed (no process noise), so it settles in seconds. Its threshold is a
 quantile of the F distribution, not a tuned value.
 
@@ -48,7 +56,7 @@ chose, leave one trial out (host/docs/fusion.md); the rest are VQF's published d
 from __future__ import annotations
 
 import math
-from math import cos as _cos, sin as _sin, sqrt as _sqrt
+from math import atan2 as _atan2, cos as _cos, sin as _sin, sqrt as _sqrt
 
 import numpy as np
 
@@ -79,8 +87,12 @@ def _norm4(q):
     return (q[0] * n, q[1] * n, q[2] * n, q[3] * n)
 
 
+_PI = math.pi
+_TWO_PI = 2.0 * math.pi
+
+
 def _wrap(a):
-    return (a + math.pi) % (2.0 * math.pi) - math.pi
+    return (a + _PI) % _TWO_PI - _PI
 
 
 DEFAULTS = dict(
@@ -106,6 +118,7 @@ DEFAULTS = dict(
     bias_change_block_s=1.0,
     bias_change_blocks=6,
     bias_change_alpha=1e-3,
+    bias_mag=True,  # the magnetometer's rows in the bias measurement (see _mag_rows)
 )
 
 
@@ -156,10 +169,23 @@ class SphereFilter:
         self._blp1 = [0.0] * 8
         self._blp = [0.0] * 8
         self._blp3 = [0.0] * 10
-        self._blp3_prev = [0.0] * 10
+        # the magnetometer rows (see _bias_step): the accepted field's direction in E′ summed over the step, and
+        # the chain of 1 s low-passes over R's three rows, R·b, the corrections and that direction
+        self._msum = [0.0, 0.0, 0.0]
+        self._mcount = 0
+        self._m_new = False
+        self._int2 = [0.0] * 4  # ∫R's third row, ∫(R·b)_z
+        self._mlp = [0.0] * 15
+        self._m_n = 0
+        self._m_u = (0.0, 0.0, 1.0)
+        self._m_prev_end = None
+        self._m_v = 0.0
+        self._m_nv = 0
         # the change test (see _change_test): sums over the current block, the finished blocks' means
         self._ct_sum = [0.0] * 8
         self._ct_n = 0
+        self._ct_msum = [0.0] * 8
+        self._ct_mn = 0
         self._ct_blocks = []
         #: bias changes the change test has detected (and applied)
         self.bias_changes = 0
@@ -213,11 +239,17 @@ class SphereFilter:
         # the sigma is for the rate over 1 s; the mean over tb is noisier by 1/tb
         self._b_wmot = c["bias_sigma_motion_dps"] ** 2 * d2 / tb if c["bias_sigma_motion_dps"] > 0 else 0.0
         self._bias_clip = math.radians(c["bias_clip_dps"])
+        self._mag_gate = -2.0 * math.log(c["bias_change_alpha"])  # the χ²(2) quantile at 1 − α
         self._ct_block = max(1, int(round(c["bias_change_block_s"] / tb)))
         self._rest_gyr2 = math.radians(c["rest_th_gyr_dps"]) ** 2
         self._rest_acc2 = c["rest_th_acc_m_s2"] ** 2
         self._new_min_gyr2 = math.radians(c["mag_new_min_gyr_dps"]) ** 2
         self._dip_th = math.radians(c["mag_dip_th_deg"])
+        self._norm_th = c["mag_norm_th"]
+        self._use_mag = bool(c["bias_mag"])
+        self._lp_s = c["bias_lp_s"]
+        self._ct_on = self._ct_f is not None and bool(c["bias_change_test"])
+        self._rest_min = c["rest_min_s"]
 
     def update(self, gyr_rad_s, acc_m_s2, mag_uT, dt_s: float, *, acc_valid: bool = True, mag_valid: bool = True,
                defer_bias: bool = False):
@@ -281,7 +313,27 @@ class SphereFilter:
             self._bias_step()
         if self._dt is None or abs(dt - self._dt) > 1e-3 * self._dt:
             self._coeffs(dt)  # a live link's intervals jitter by a few µs: the gains follow changes over 0.1 %
-        self._rest(gx, gy, gz, ax, ay, az, dt)
+        # rest detection (VQF's): gyro and accelerometer steady for rest_min_s
+        rg, ra = self.rest_gyr, self.rest_acc
+        if not self._rest_init:
+            rg[:] = [gx, gy, gz]
+            ra[:] = [ax, ay, az]
+            self._rest_init = True
+        k = self._k_rest
+        rg[0] += k * (gx - rg[0])
+        rg[1] += k * (gy - rg[1])
+        rg[2] += k * (gz - rg[2])
+        ra[0] += k * (ax - ra[0])
+        ra[1] += k * (ay - ra[1])
+        ra[2] += k * (az - ra[2])
+        dg = (gx - rg[0]) ** 2 + (gy - rg[1]) ** 2 + (gz - rg[2]) ** 2
+        da = (ax - ra[0]) ** 2 + (ay - ra[1]) ** 2 + (az - ra[2]) ** 2
+        lg = rg[0] * rg[0] + rg[1] * rg[1] + rg[2] * rg[2]
+        if dg < self._rest_gyr2 and da < self._rest_acc2 and lg < self._rest_gyr2:
+            self.rest_time += dt
+        else:
+            self.rest_time = 0.0
+        self.at_rest = self.rest_time >= self._rest_min
         b = self.bias
         wx, wy, wz = gx - b[0], gy - b[1], gz - b[2]
 
@@ -389,102 +441,205 @@ class SphereFilter:
         l1[:] = [a + k * (c - a) for a, c in zip(l1, it)]
         lp[:] = [a + k * (c - a) for a, c in zip(lp, l1)]
         k3 = self._k_blp3
-        l3, prev = self._blp3, self._blp3_prev
-        prev[:] = l3
-        l3[:8] = [a + k3 * (c - a) for a, c in zip(l3, lp)]
-        l3[8] += k3 * (it[8] - l3[8])
-        l3[9] += k3 * (it[9] - l3[9])
+        prev = self._blp3
+        l3 = [a + k3 * (c - a) for a, c in zip(prev, lp)]
+        l3 += (prev[8] + k3 * (it[8] - prev[8]), prev[9] + k3 * (it[9] - prev[9]))
+        self._blp3 = l3
         g = 1.0 / tb
         d = [(a - c) * g for a, c in zip(l3, prev)]
+        mrows = self._mag_rows(q0, q1, q2, q3, b, tb) if self._use_mag else None
         P = self.bias_P
         v, p0 = self._b_v, self._b_p0
         if self._track_left:
             v = 0.0  # after a detected change the bias is taken as constant while the data pin it down
         for i in range(3):
             P[i][i] = min(P[i][i] + v, p0)
+        b0, b1, b2 = b
         if self.at_rest:
             if self._ct_n or self._ct_blocks:
                 self._ct_clear()
             self._track_left = 0
             # measurement: the low-passed gyro at rest, H = I
-            w = self._b_wrest
-            S = [[P[i][j] + (w if i == j else 0.0) for j in range(3)] for i in range(3)]
-            Si = _inv3(S)
-            S0, S1, S2 = Si
-            K = [[sum((Pi[0] * S0[j], Pi[1] * S1[j], Pi[2] * S2[j])) for j in range(3)] for Pi in P]
+            iw = 1.0 / self._b_wrest
             rg = self.rest_gyr
-            y = (rg[0] - b[0], rg[1] - b[1], rg[2] - b[2])
-            H = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
+            rows = ((1.0, 0.0, 0.0, rg[0] - b0, iw), (0.0, 1.0, 0.0, rg[1] - b1, iw), (0.0, 0.0, 1.0, rg[2] - b2, iw))
         elif self._b_wmot:
             # measurement: z = ΔF[Ψ] − ΔC = ΔF[Φ]·b_true + noise (rates over the step), H = ΔF[Φ]
             H = ((d[0], d[1], d[2]), (d[3], d[4], d[5]))
-            y = (d[6] - d[8] - (d[0] * b[0] + d[1] * b[1] + d[2] * b[2]),
-                 d[7] - d[9] - (d[3] * b[0] + d[4] * b[1] + d[5] * b[2]))
-            PH = [[P[i][0] * h[0] + P[i][1] * h[1] + P[i][2] * h[2] for h in H] for i in range(3)]  # P Hᵀ, 3×2
+            y = (d[6] - d[8] - (d[0] * b0 + d[1] * b1 + d[2] * b2),
+                 d[7] - d[9] - (d[3] * b0 + d[4] * b1 + d[5] * b2))
             w = self._b_wmot
             if self._track_left:
                 self._track_left -= 1
                 w = self._track_w
+            scale = w / self._b_wmot  # after a detected change: the noise the fit showed, for every row
             if self.n_acc * self._k_acc < 1.0:
                 # the accelerometer low-pass still averages (gain 1/n > k): c is noisier by about 1/(n·k)
                 w /= max(self.n_acc * self._k_acc, 1e-3) ** 2
-            s00 = H[0][0] * PH[0][0] + H[0][1] * PH[1][0] + H[0][2] * PH[2][0] + w
-            s01 = H[0][0] * PH[0][1] + H[0][1] * PH[1][1] + H[0][2] * PH[2][1]
-            s11 = H[1][0] * PH[0][1] + H[1][1] * PH[1][1] + H[1][2] * PH[2][1] + w
-            det = s00 * s11 - s01 * s01
-            i00, i01, i11 = s11 / det, -s01 / det, s00 / det
-            K = [[PH[i][0] * i00 + PH[i][1] * i01, PH[i][0] * i01 + PH[i][1] * i11] for i in range(3)]
-            if self._ct_f is not None and self.cfg["bias_change_test"] and self._change_test(H, y):
+            mag = None
+            if mrows is not None:
+                (g0, g1, g2), (g3, g4, g5), z0, z1, wm = mrows
+                m0 = z0 - (g0 * b0 + g1 * b1 + g2 * b2)
+                m1 = z1 - (g3 * b0 + g4 * b1 + g5 * b2)
+                if self._mag_consistent(g0, g1, g2, g3, g4, g5, m0, m1, wm, P):
+                    mag = (mrows[0], mrows[1], m0, m1, wm)
+            if self._ct_on and self._change_test(H, y, mag):
                 return
+            iw = 1.0 / w
+            rows = ((d[0], d[1], d[2], y[0], iw), (d[3], d[4], d[5], y[1], iw))
+            if mag is not None:
+                # the magnetometer's rows: their noise per step as the tilt rows' (σ²/tb), with σ² theirs
+                iw = tb / (wm * scale)
+                rows += ((g0, g1, g2, m0, iw), (g3, g4, g5, m1, iw))
         else:
             return
-        # the sums below are sum() over tuples written out (no generators; the same additions in the same order)
+        # the update in information form (the same as the Kalman gain's, with one 3×3 inverse for any rows):
+        # P⁺ = (P⁻¹ + Σ hᵀh / w)⁻¹, b⁺ = b + P⁺ Σ hᵀ y / w
+        j00 = j01 = j02 = j11 = j12 = j22 = s0 = s1 = s2 = 0.0
+        for h0, h1, h2, yy, iw in rows:
+            a0, a1, a2 = h0 * iw, h1 * iw, h2 * iw
+            j00 += a0 * h0
+            j01 += a0 * h1
+            j02 += a0 * h2
+            j11 += a1 * h1
+            j12 += a1 * h2
+            j22 += a2 * h2
+            s0 += a0 * yy
+            s1 += a1 * yy
+            s2 += a2 * yy
+        (i00, i01, i02), (_, i11, i12), (_, _, i22) = _inv3(P)
+        Pn = _inv3(((i00 + j00, i01 + j01, i02 + j02), (i01 + j01, i11 + j11, i12 + j12),
+                    (i02 + j02, i12 + j12, i22 + j22)))
         clip = self._bias_clip
-        if len(y) == 2:
-            y0, y1 = y
-            H0, H1 = H
-            Ky = [sum((Ki[0] * y0, Ki[1] * y1)) for Ki in K]
-            KH = [[sum((Ki[0] * H0[0], Ki[1] * H1[0])), sum((Ki[0] * H0[1], Ki[1] * H1[1])),
-                   sum((Ki[0] * H0[2], Ki[1] * H1[2]))] for Ki in K]
-        else:
-            y0, y1, y2 = y
-            H0, H1, H2 = H
-            Ky = [sum((Ki[0] * y0, Ki[1] * y1, Ki[2] * y2)) for Ki in K]
-            KH = [[sum((Ki[0] * H0[0], Ki[1] * H1[0], Ki[2] * H2[0])),
-                   sum((Ki[0] * H0[1], Ki[1] * H1[1], Ki[2] * H2[1])),
-                   sum((Ki[0] * H0[2], Ki[1] * H1[2], Ki[2] * H2[2]))] for Ki in K]
         for i in range(3):
-            v_ = b[i] + Ky[i]
+            p = Pn[i]
+            v_ = b[i] + p[0] * s0 + p[1] * s1 + p[2] * s2
             b[i] = clip if v_ > clip else (-clip if v_ < -clip else v_)
-        # P ← (I − K H) P, kept symmetric
-        P0, P1, P2 = P
-        (n00, n01, n02), (n10, n11, n12), (n20, n21, n22) = [
-            [Pi[0] - sum((KHi[0] * P0[0], KHi[1] * P1[0], KHi[2] * P2[0])),
-             Pi[1] - sum((KHi[0] * P0[1], KHi[1] * P1[1], KHi[2] * P2[1])),
-             Pi[2] - sum((KHi[0] * P0[2], KHi[1] * P1[2], KHi[2] * P2[2]))] for Pi, KHi in zip(P, KH)]
-        self.bias_P = [[0.5 * (n00 + n00), 0.5 * (n01 + n10), 0.5 * (n02 + n20)],
-                       [0.5 * (n10 + n01), 0.5 * (n11 + n11), 0.5 * (n12 + n21)],
-                       [0.5 * (n20 + n02), 0.5 * (n21 + n12), 0.5 * (n22 + n22)]]
+        self.bias_P = Pn
+
+    def _mag_rows(self, q0, q1, q2, q3, b, tb):
+        """The magnetometer's two rows of the bias measurement: (h₁, h₂, z₁, z₂, σ²) or None.
+
+        The field's direction m in E′ turns as E′ does: a bias error turns E′ at R·e and q_inc's corrections C turn
+        it back, so with α E′'s misalignment, α = Φ·b_true − Ψ + C + const (C = (Cx, Cy, 0)) and m × Δm = Δα on the
+        two axes u₁, u₂ perpendicular to m: exactly for small angles, and free of the hand's linear acceleration
+        (whatever tilt it causes is in C, which is known). Both sides pass through the same 1 s low-pass
+        (``bias_lp_s``, averaging start); the chain starts again whenever a step had a sample without an accepted
+        field (disturbed, missing) or a new field was accepted, and its rows count after a full ``bias_lp_s`` of
+        accepted readings. Their noise σ² (for the rate over 1 s, as σ_motion is the tilt rows'): σ_motion² plus
+        what the field's own noise gives the row (v, the noise of a step's mean direction across it, measured from
+        consecutive steps, through the low-pass and the difference: 2k²v / ((2 − k) tb²))."""
+        r20, r21, r22 = 2.0 * (q1 * q3 - q0 * q2), 2.0 * (q2 * q3 + q0 * q1), 1.0 - 2.0 * (q1 * q1 + q2 * q2)
+        i2 = self._int2
+        i2[0] += r20 * tb
+        i2[1] += r21 * tb
+        i2[2] += r22 * tb
+        i2[3] += (r20 * b[0] + r21 * b[1] + r22 * b[2]) * tb
+        it = self._int
+        # Φ (three rows), Ψ − C at the step's end; paired with the field's mean over the step, they are taken at the
+        # step's middle (the mean of this end and the last: the corrections swing with the hand's translation, and
+        # half a step between the two sides of the model would show as a rate)
+        xe = (it[0], it[1], it[2], it[3], it[4], it[5], i2[0], i2[1], i2[2], it[6] - it[8], it[7] - it[9], i2[3])
+        xp = self._m_prev_end
+        self._m_prev_end = xe
+        ms = self._msum
+        mx, my, mz = ms
+        full = self._mcount == self._nb_step and not self._m_new and xp is not None
+        ms[0] = ms[1] = ms[2] = 0.0
+        self._mcount = 0
+        self._m_new = False
+        if not full:
+            self._m_n = 0
+            return None
+        x = [0.5 * (a + c) for a, c in zip(xe, xp)]
+        x += (mx, my, mz)
+        un = 1.0 / _sqrt(mx * mx + my * my + mz * mz)
+        ux, uy, uz = mx * un, my * un, mz * un
+        n = self._m_n
+        if n:
+            pu = self._m_u
+            dv = ((ux - pu[0]) ** 2 + (uy - pu[1]) ** 2 + (uz - pu[2]) ** 2) * 0.25
+            self._m_nv += 1
+            self._m_v += (dv - self._m_v) / self._m_nv
+        self._m_u = (ux, uy, uz)
+        n = self._m_n = n + 1
+        prev = self._mlp
+        if n == 1:
+            self._mlp = x
+            return None
+        k = self._k_blp3
+        if n * k < 1.0:
+            k = 1.0 / n
+        self._mlp = lp = [a + k * (c - a) for a, c in zip(prev, x)]
+        if n * tb < self._lp_s:
+            return None
+        g = 1.0 / tb
+        d = [(a - c) * g for a, c in zip(lp, prev)]
+        mx, my, mz = lp[12], lp[13], lp[14]
+        h = mx * mx + my * my
+        if h <= 0.0:
+            return None
+        mn = 1.0 / _sqrt(h + mz * mz)
+        h = _sqrt(h) * mn
+        mx, my, mz = mx * mn, my * mn, mz * mn
+        dx, dy, dz = d[12] * mn, d[13] * mn, d[14] * mn
+        # the rotation the field shows: m × Δm (its part along m is not seen)
+        wx, wy, wz = my * dz - mz * dy, mz * dx - mx * dz, mx * dy - my * dx
+        # u₁ horizontal, across the field; u₂ = m × u₁
+        u0, u1 = my / h, -mx / h
+        v0, v1, v2 = -mz * u1, mz * u0, mx * u1 - my * u0
+        k3 = self._k_blp3
+        var = self._b_wmot * tb + 2.0 * k3 * k3 * self._m_v / ((2.0 - k3) * tb * tb)
+        return ((u0 * d[0] + u1 * d[3], u0 * d[1] + u1 * d[4], u0 * d[2] + u1 * d[5]),
+                (v0 * d[0] + v1 * d[3] + v2 * d[6], v0 * d[1] + v1 * d[4] + v2 * d[7],
+                 v0 * d[2] + v1 * d[5] + v2 * d[8]),
+                u0 * (wx + d[9]) + u1 * (wy + d[10]),
+                v0 * (wx + d[9]) + v1 * (wy + d[10]) + v2 * (wz + d[11]),
+                var)
+
+    def _mag_consistent(self, g0, g1, g2, g3, g4, g5, y0, y1, var, P) -> bool:
+        """Is the rotation the field shows one a bias within the filter's uncertainty can explain? The innovation
+        (y0, y1) of the two rows h = (g0, g1, g2), (g3, g4, g5) (each a rate over the 1 s low-pass, so of noise σ²,
+        not the per-step σ²/tb the update uses) against S = H P Hᵀ + σ² I: d² = yᵀ S⁻¹ y below the 1 −
+        ``bias_change_alpha`` quantile of χ²(2), −2 ln α. A field that turns with the sensor (a magnet riding on it)
+        while its norm and dip happen to stay within the disturbance test's bounds shows rates of several °/s and
+        is not used."""
+        (p00, p01, p02), (_, p11, p12), (_, _, p22) = P
+        a0 = p00 * g0 + p01 * g1 + p02 * g2
+        a1 = p01 * g0 + p11 * g1 + p12 * g2
+        a2 = p02 * g0 + p12 * g1 + p22 * g2
+        c0 = p00 * g3 + p01 * g4 + p02 * g5
+        c1 = p01 * g3 + p11 * g4 + p12 * g5
+        c2 = p02 * g3 + p12 * g4 + p22 * g5
+        s00 = g0 * a0 + g1 * a1 + g2 * a2 + var
+        s01 = g3 * a0 + g4 * a1 + g5 * a2
+        s11 = g3 * c0 + g4 * c1 + g5 * c2 + var
+        return (s11 * y0 * y0 - 2.0 * s01 * y0 * y1 + s00 * y1 * y1) < self._mag_gate * (s00 * s11 - s01 * s01)
 
     def _ct_clear(self):
         self._ct_sum[:] = [0.0] * 8
-        self._ct_n = 0
+        self._ct_msum[:] = [0.0] * 8
+        self._ct_n = self._ct_mn = 0
         self._ct_blocks.clear()
 
-    def _change_test(self, H, y) -> bool:
-        """Has the bias changed? A test on the motion measurements' innovations y = H·e + noise (e = b_true − b).
+    def _change_test(self, H, y, mag=None) -> bool:
+        """Has the bias changed? A test on the motion measurements: the tilt rows (H, y) and the magnetometer's rows
+        ``mag`` = (h₁, h₂, y₁, y₂, σ²) when it has them, y the innovations (z − H·b); the magnetometer's rows are
+        scaled by σ_motion/σ (weighted least squares: every row then has the tilt rows' noise).
 
-        The innovations of the bias steps are averaged over blocks of ``bias_change_block_s`` (1 s: the hand's
-        oscillations and the third low-pass stage make neighbouring steps strongly correlated, the block means
-        much less so), H alike. Over a window of K = ``bias_change_blocks`` blocks (2K rows) a constant error e
-        is fitted by least squares; with the noise variance estimated from the fit's own residuals, the statistic
-        F = (explained / 3) / (residual / (2K − 3)) is F-distributed with (3, 2K − 3) degrees of freedom when
-        e = 0 (the F-test of a linear regression): the threshold is its 1 − ``bias_change_alpha`` quantile, a
-        statistic of the noise, not a tuned value. A bias change must show in two consecutive windows (the last
-        2K blocks), each significant, and the two estimates of the bias (b + e, each at its window's end) must
-        agree (the same F quantile on their difference): real hand motion produces bias-like errors too (on BROAD's
-        fast rotations, flipping every few seconds), a changed bias stays. What follows a change is described
-        below; the blocks start afresh. Returns True when it did so (the Kalman update of this step is skipped)."""
+        Rows are averaged over blocks of ``bias_change_block_s`` (1 s: the hand's oscillations and the third
+        low-pass stage make neighbouring steps strongly correlated, the block means much less so); a block has the
+        magnetometer's rows only if every one of its steps had them. Over a window of K = ``bias_change_blocks``
+        blocks (n rows) one constant bias is fitted by least squares to the measurements' bias-like part
+        z = y + H·b (b as it was at each block's end: b moves during a window, so z, not y, is what is constant when
+        the bias is) and tested against b now with the regression's F statistic, (explained / 3) / (residual /
+        (n − 3)), whose noise variance comes from the fit's own residuals, so the threshold is the 1 −
+        ``bias_change_alpha`` quantile of F(3, n − 3), a statistic of the noise, not a tuned value. A bias change
+        must show in two consecutive windows (the last 2K blocks), each significant against b at its end, and the
+        two fits of the bias must agree (the same quantile on their difference): real hand motion produces
+        bias-like errors too (on BROAD's fast rotations, flipping every few seconds), a changed bias stays. What
+        follows a change is described below; the blocks start afresh. Returns True when it did so (the Kalman
+        update of this step is skipped)."""
         s = self._ct_sum
         s[0] += y[0]
         s[1] += y[1]
@@ -495,47 +650,67 @@ class SphereFilter:
         s[5] += h3
         s[6] += h4
         s[7] += h5
+        if mag is not None:
+            # weighted least squares: the magnetometer's rows scaled to the tilt rows' noise
+            (h0, h1, h2), (h3, h4, h5), y0, y1, var = mag
+            c = _sqrt(self._b_wmot * self._tb / var)
+            sm = self._ct_msum
+            sm[0] += c * y0
+            sm[1] += c * h0
+            sm[2] += c * h1
+            sm[3] += c * h2
+            sm[4] += c * y1
+            sm[5] += c * h3
+            sm[6] += c * h4
+            sm[7] += c * h5
+            self._ct_mn += 1
         self._ct_n += 1
         if self._ct_n < self._ct_block:
             return False
         blocks = self._ct_blocks
         g = 1.0 / self._ct_n
         b = self.bias
-        blocks.append([v * g for v in s] + b)
+        m = [v * g for v in s]
+        rows = [(m[0], m[2], m[3], m[4]), (m[1], m[5], m[6], m[7])]
+        if self._ct_mn == self._ct_n:
+            m = [v * g for v in self._ct_msum]
+            rows += [(m[0], m[1], m[2], m[3]), (m[4], m[5], m[6], m[7])]
+        # z = y + H·b at the block's end
+        blocks.append(([(yy + hh0 * b[0] + hh1 * b[1] + hh2 * b[2], hh0, hh1, hh2) for yy, hh0, hh1, hh2 in rows],
+                       list(b)))
         s[:] = [0.0] * 8
-        self._ct_n = 0
+        self._ct_msum[:] = [0.0] * 8
+        self._ct_n = self._ct_mn = 0
         k = self._ct_k
         if len(blocks) > 2 * k:
             del blocks[0]
         if len(blocks) < 2 * k:
             return False
-        cur = _fit(blocks[k:])
-        if cur is None or cur[3] < self._ct_f:
+        alpha = 1.0 - self.cfg["bias_change_alpha"]
+        cur_rows = [r for blk in blocks[k:] for r in blk[0]]
+        cur = _fit(cur_rows, about=b)
+        if cur is None or cur[3] < _f_quantile(3, len(cur_rows) - 3, alpha):
             return False
-        prev = _fit(blocks[:k])
-        if prev is None or prev[3] < self._ct_f:
+        prev_rows = [r for blk in blocks[:k] for r in blk[0]]
+        prev = _fit(prev_rows, about=blocks[k - 1][1])
+        if prev is None or prev[3] < _f_quantile(3, len(prev_rows) - 3, alpha):
             return False
-        # the two windows' estimates of the bias itself (b at the window's end + e), each with covariance var·A⁻¹
-        bp = [blocks[k - 1][8 + i] + prev[0][i] for i in range(3)]
-        bc = [b[i] + cur[0][i] for i in range(3)]
+        # the two windows' fits of the bias itself, each with covariance var·A⁻¹
+        bp, bc = prev[0], cur[0]
         vp = [[prev[2] * a for a in row] for row in prev[1]]
         vc = [[cur[2] * a for a in row] for row in cur[1]]
         d = [bc[i] - bp[i] for i in range(3)]
         si = _inv3([[vp[i][j] + vc[i][j] for j in range(3)] for i in range(3)])
-        if sum(d[i] * si[i][j] * d[j] for i in range(3) for j in range(3)) / 3.0 > self._ct_f:
+        if sum(d[i] * si[i][j] * d[j] for i in range(3) for j in range(3)) / 3.0 > _f_quantile(
+                3, min(len(cur_rows), len(prev_rows)) - 3, alpha):
             return False  # both significant, but not the same bias: motion, not a change
-        # the change: b starts again from the latest window's own fit of the bias itself (not of a constant error
-        # e = b_true − b: b moved during the window, so the measurements' bias-like part is z = y + H·b_block, fitted
-        # as one constant; blocks keep b at their end), with the covariance that fit has (var·A⁻¹, the information of
-        # the window's K s of data, where P₀ threw it away), and for the next 2K blocks the Kalman filter takes the
-        # measurement noise that fit showed (its residual variance of 1 s means, per step as _b_wmot is) and no
-        # process noise: the new, constant bias is pinned down at the rate the data allow, not at the slow rate the
-        # prior σ_motion sets
-        win = _fit([[y0 + h0 * c0 + h1 * c1 + h2 * c2, y1 + h3 * c0 + h4 * c1 + h5 * c2, h0, h1, h2, h3, h4, h5]
-                    for y0, y1, h0, h1, h2, h3, h4, h5, c0, c1, c2 in blocks[k:]])
-        if win is None:  # cannot happen with cur's rows unless the fit is exact; then b + e with P₀ as a fallback
-            win = (bc, [[self._b_p0 / cur[2] if i == j else 0.0 for j in range(3)] for i in range(3)], cur[2], 0.0)
-        bw, ai, var, _ = win
+        # the change: b starts again from the latest window's own fit of the bias itself (not "b now + a constant
+        # error e": b moved during the window, so e was not constant), with the covariance that fit has (var·A⁻¹, the
+        # information of the window's K s of data, where P₀ threw it away), and for the next 2K blocks the Kalman
+        # filter takes the measurement noise that fit showed (its residual variance of 1 s means, per step as
+        # _b_wmot is) and no process noise: the new, constant bias is pinned down at the rate the data allow, not at
+        # the slow rate the prior σ_motion sets
+        bw, ai, var, _ = cur
         clip = self._bias_clip
         for i in range(3):
             v_ = bw[i]
@@ -548,17 +723,25 @@ class SphereFilter:
         return True
 
     def _mag(self, mx, my, mz, gx, gy, gz, dt):
-        q6 = _qmul(self.q_inc, self.q_gyr)
-        ex, ey, ez = _rot(q6, mx, my, mz)
-        norm = math.sqrt(ex * ex + ey * ey + ez * ez)
-        hn = math.sqrt(ex * ex + ey * ey)
-        dip = math.atan2(ez, hn)
+        # _rot(_qmul(q_inc, q_gyr), m) written out (the same operations in the same order: the same bits)
+        p0, p1, p2, p3 = self.q_inc
+        q0, q1, q2, q3 = self.q_gyr
+        r0 = p0 * q0 - p1 * q1 - p2 * q2 - p3 * q3
+        r1 = p0 * q1 + p1 * q0 + p2 * q3 - p3 * q2
+        r2 = p0 * q2 - p1 * q3 + p2 * q0 + p3 * q1
+        r3 = p0 * q3 + p1 * q2 - p2 * q1 + p3 * q0
+        ex = 2.0 * (mx * (0.5 - r2 * r2 - r3 * r3) + my * (r1 * r2 - r0 * r3) + mz * (r1 * r3 + r0 * r2))
+        ey = 2.0 * (mx * (r1 * r2 + r0 * r3) + my * (0.5 - r1 * r1 - r3 * r3) + mz * (r2 * r3 - r0 * r1))
+        ez = 2.0 * (mx * (r1 * r3 - r0 * r2) + my * (r2 * r3 + r0 * r1) + mz * (0.5 - r1 * r1 - r2 * r2))
+        norm = _sqrt(ex * ex + ey * ey + ez * ez)
+        hn = _sqrt(ex * ex + ey * ey)
+        dip = _atan2(ez, hn)
         self.n_mag += 1
         if self.mag_ref is None:
             self.mag_ref = [norm, dip]
         ref = self.mag_ref
         c = self.cfg
-        ok = abs(norm - ref[0]) < c["mag_norm_th"] * ref[0] and abs(dip - ref[1]) < self._dip_th
+        ok = abs(norm - ref[0]) < self._norm_th * ref[0] and abs(dip - ref[1]) < self._dip_th
         if ok:
             self.mag_disturbed = False
             self.mag_cand = None
@@ -577,75 +760,74 @@ class SphereFilter:
                     self.mag_ref = [cand[0], cand[1]]
                     self.mag_cand = None
                     self.mag_cand_time = 0.0
+                    self._m_new = True  # a new field: the bias rows' chain starts again
                     ok = True
             else:
                 self.mag_cand = [norm, dip]
                 self.mag_cand_time = 0.0
         if not ok or hn <= 0.0:
             return 0.0
-        # δ* puts the horizontal field on +y (north in ENU)
-        err = _wrap(0.5 * math.pi - math.atan2(ey, ex) - self.delta)
-        k = max(self._k_mag, 1.0 / self.n_mag)
+        ms = self._msum
+        ms[0] += ex
+        ms[1] += ey
+        ms[2] += ez
+        self._mcount += 1
+        # δ* puts the horizontal field on +y (north in ENU); _wrap written out
+        err = (0.5 * _PI - _atan2(ey, ex) - self.delta + _PI) % _TWO_PI - _PI
+        k = self._k_mag
+        kn = 1.0 / self.n_mag
+        if kn > k:
+            k = kn
         step = k * err
-        self.delta = _wrap(self.delta + step)
+        self.delta = (self.delta + step + _PI) % _TWO_PI - _PI
         return step
 
-    def _rest(self, gx, gy, gz, ax, ay, az, dt):
-        rg, ra = self.rest_gyr, self.rest_acc
-        if not self._rest_init:
-            rg[:] = [gx, gy, gz]
-            ra[:] = [ax, ay, az]
-            self._rest_init = True
-        k = self._k_rest
-        rg[0] += k * (gx - rg[0])
-        rg[1] += k * (gy - rg[1])
-        rg[2] += k * (gz - rg[2])
-        ra[0] += k * (ax - ra[0])
-        ra[1] += k * (ay - ra[1])
-        ra[2] += k * (az - ra[2])
-        dg = (gx - rg[0]) ** 2 + (gy - rg[1]) ** 2 + (gz - rg[2]) ** 2
-        da = (ax - ra[0]) ** 2 + (ay - ra[1]) ** 2 + (az - ra[2]) ** 2
-        lg = rg[0] * rg[0] + rg[1] * rg[1] + rg[2] * rg[2]
-        if dg < self._rest_gyr2 and da < self._rest_acc2 and lg < self._rest_gyr2:
-            self.rest_time += dt
-        else:
-            self.rest_time = 0.0
-        self.at_rest = self.rest_time >= self.cfg["rest_min_s"]
 
+def _fit(rows, about=None):
+    """Least-squares fit of a constant e to rows (y, h0, h1, h2): y = h·e + noise.
 
-def _fit(blocks):
-    """Least-squares fit of a constant e to block means (y0, y1, h0..h5, ...): (y0, y1) = [h0 h1 h2; h3 h4 h5]·e.
-
-    Returns (e, A⁻¹, residual variance, F) with A = Σ hᵀh, the residual variance over 2n − 3 degrees of freedom
-    and F = (explained / 3) / residual variance, the regression's F statistic for e = 0; or None when the rows
-    do not determine all three axes."""
+    Returns (e, A⁻¹, residual variance, F) with A = Σ hᵀh, the residual variance over n − 3 degrees of freedom
+    (n rows) and F = (explained / 3) / residual variance, the regression's F statistic for e = ``about`` (default
+    0); or None when the rows do not determine all three axes."""
     a00 = a01 = a02 = a11 = a12 = a22 = r0 = r1 = r2 = yy = 0.0
-    for y0, y1, h0, h1, h2, h3, h4, h5, *_ in blocks:
-        a00 += h0 * h0 + h3 * h3
-        a01 += h0 * h1 + h3 * h4
-        a02 += h0 * h2 + h3 * h5
-        a11 += h1 * h1 + h4 * h4
-        a12 += h1 * h2 + h4 * h5
-        a22 += h2 * h2 + h5 * h5
-        r0 += h0 * y0 + h3 * y1
-        r1 += h1 * y0 + h4 * y1
-        r2 += h2 * y0 + h5 * y1
-        yy += y0 * y0 + y1 * y1
+    n = 0
+    for y, h0, h1, h2 in rows:
+        a00 += h0 * h0
+        a01 += h0 * h1
+        a02 += h0 * h2
+        a11 += h1 * h1
+        a12 += h1 * h2
+        a22 += h2 * h2
+        r0 += h0 * y
+        r1 += h1 * y
+        r2 += h2 * y
+        yy += y * y
+        n += 1
     det = a00 * (a11 * a22 - a12 * a12) - a01 * (a01 * a22 - a12 * a02) + a02 * (a01 * a12 - a11 * a02)
-    if det <= 1e-9 * ((a00 + a11 + a22) / 3.0) ** 3:
+    if n <= 3 or det <= 1e-9 * ((a00 + a11 + a22) / 3.0) ** 3:
         return None  # the turns in the window do not make all three axes observable
     ai = _inv3(((a00, a01, a02), (a01, a11, a12), (a02, a12, a22)))
     e = [ai[i][0] * r0 + ai[i][1] * r1 + ai[i][2] * r2 for i in range(3)]
     explained = e[0] * r0 + e[1] * r1 + e[2] * r2
-    var = (yy - explained) / (2 * len(blocks) - 3)
+    var = (yy - explained) / (n - 3)
     if var <= 0.0:
         return None
+    if about is not None:  # (e − about)ᵀ A (e − about)
+        d0, d1, d2 = e[0] - about[0], e[1] - about[1], e[2] - about[2]
+        explained = (d0 * (a00 * d0 + a01 * d1 + a02 * d2) + d1 * (a01 * d0 + a11 * d1 + a12 * d2)
+                     + d2 * (a02 * d0 + a12 * d1 + a22 * d2))
     return e, ai, var, explained / 3.0 / var
 
 
-#: F quantiles (dfn, dfd, p) → value; the one the defaults need is written here so that the daemon does not import
-#: scipy (half a second) when it builds its filter (tests/host/test_bias.py checks it against scipy)
-_F_QUANTILES = {(3, 9, 0.999): 13.901803191033137}
+#: F quantiles (dfn, dfd, p) → value; the ones the defaults need (a window of 12 to 24 rows) are written here so that
+#: the daemon does not import scipy (half a second) when it builds or runs its filter (tests/host/test_bias.py checks
+#: them against scipy)
+_F_QUANTILES = {(3, 9, 0.999): 13.901803191033137, (3, 10, 0.999): 12.552745388943725,
+                (3, 11, 0.999): 11.561125849997026, (3, 12, 0.999): 10.80420437772044,
+                (3, 13, 0.999): 10.208935588641129, (3, 14, 0.999): 9.729366314629939,
+                (3, 15, 0.999): 9.335253584839293, (3, 16, 0.999): 9.005936855560376,
+                (3, 17, 0.999): 8.72685203612592, (3, 18, 0.999): 8.48745452828306, (3, 19, 0.999): 8.2799321061764,
+                (3, 20, 0.999): 8.098379786583402, (3, 21, 0.999): 7.938255045159838}
 
 
 def _f_quantile(dfn: int, dfd: int, p: float) -> float:
