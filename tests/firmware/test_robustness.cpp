@@ -683,3 +683,29 @@ TEST_CASE("the kept bias against the EEPROM's: the newer one, the EEPROM's flags
     CHECK(biasX(b) == 20);
     CHECK((b.dev.calibrationState() & CAL_FROM_EEPROM));
 }
+
+TEST_CASE("SET_BOARD to another profile: the bias of the old frame is not valid, the next still second sets it whole") {
+    Bench b(false);
+    tracked(b);  // aligned: bias (5, −7, 1)
+    for (uint8_t x : frameOf(CMD_SET_BOARD, 1, {BOARD_GY85})) b.dev.receive(x);
+    CHECK((*lastOf(b.frames(), PKT_REPLY))[4] == RESULT_OK);
+    CHECK_FALSE((b.dev.calibrationState() & CAL_GYRO_BIAS_VALID));
+    // a warm reset now does not bring the old frame's bias back: the power-up estimate runs
+    resetDevice(b, RESET_EXTERNAL);
+    b.bus.setGyro(5, -7, 1);  // the chip's bias; in the GY-85's body frame (−x, −y, +z): (−5, 7, 1)
+    b.run(SphereDevice::STARTUP_BIAS_SAMPLES + 10);
+    CHECK(biasX(b) == -5);
+    CHECK((int)b.dev.calibration().gyro_bias[1] == 7);
+    CHECK((int)b.dev.calibration().gyro_bias[2] == 1);
+    CHECK((b.dev.calibrationState() & CAL_GYRO_BIAS_VALID));
+    // without a reset: back to aligned, and one still window (not TRACK_STEP_LSB per window) sets it
+    for (uint8_t x : frameOf(CMD_SET_BOARD, 2, {BOARD_ALIGNED})) b.dev.receive(x);
+    CHECK_FALSE((b.dev.calibrationState() & CAL_GYRO_BIAS_VALID));
+    b.run(2 * SphereDevice::TRACK_SAMPLES + 10);
+    CHECK(biasX(b) == 5);
+    CHECK((int)b.dev.calibration().gyro_bias[1] == -7);
+    CHECK((b.dev.calibrationState() & CAL_GYRO_BIAS_VALID));
+    // the same profile again changes nothing
+    for (uint8_t x : frameOf(CMD_SET_BOARD, 3, {BOARD_ALIGNED})) b.dev.receive(x);
+    CHECK((b.dev.calibrationState() & CAL_GYRO_BIAS_VALID));
+}

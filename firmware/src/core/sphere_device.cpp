@@ -407,6 +407,7 @@ __attribute__((noinline)) void SphereDevice::execute(const uint8_t* payload, uin
     Command c;
     uint8_t result = CommandParser::parse(payload, len, c);
     if (result == RESULT_OK) result = executeCommand(c);
+    keepTrackedBias();  // a command that changed the bias is kept at once: a REBOOT may follow in this period
     uint8_t body[REPLY_CALIBRATION_LEN];
     uint8_t n;
     if (result == RESULT_OK && c.type == CMD_GET_CALIBRATION) {
@@ -534,6 +535,9 @@ __attribute__((noinline)) uint8_t SphereDevice::executeCommand(const Command& c)
                 filter_.setBetaMilli(MargFilter::STARTUP_BETA_MILLI);
                 converge_left_ = STARTUP_CONVERGE_SAMPLES;
                 gates_.reset();
+                // the bias was measured in the old frame (a GY-85's gyro x and y change sign): not valid, so
+                // the next still window sets it whole and a warm reset does not bring it back (kept_bias.h)
+                cal_state_ &= (uint8_t)~CAL_GYRO_BIAS_VALID;
             }
             return RESULT_OK;
         }
