@@ -437,6 +437,7 @@ static void on_reset(avr_t *avr)
 {
 	resets++;
 	avr->data[mcusr_addr] = (uint8_t)(mcusr_before | reset_flag);
+	tm_update.have_last_rise = 0; /* the program starts again: the gap before its first update is no overrun */
 	if (the_board && !plain_reset)
 		board_avr_reset(the_board); /* the chips keep their power: one in the middle of a read holds SDA */
 	else if (the_board) {

@@ -248,3 +248,40 @@ def test_pty_leaves_the_fixed_simavr_name_alone(tmp_path):
             os.unlink(link)
         if saved is not None:
             os.symlink(saved, link)
+
+
+def test_restarts_are_neither_overruns_nor_a_faster_stream(tmp_path, capsys):
+    """A brown-out and a power-off restart the firmware: the stream's rate is counted per run of the device's
+    clock (it starts again at each restart), and the pause while it restarts is no overrun of the timing pin."""
+    import json
+
+    from sphere.cli import main
+    from simscenarios import need_board, need_firmware
+
+    need_board()
+    fw = need_firmware()
+    stats = tmp_path / "stats.json"
+    rc = main(["sim", "--no-build", "--firmware", str(fw), "--trace", "synthetic:still", "--seconds", "4.5",
+               "--brownout", "1.5", "--power-off", "3", "--stats", str(stats)])
+    assert rc == 0
+    d = json.loads(stats.read_text())
+    assert [f["kind"] for f in d["faults"] if f["kind"] in ("brownout", "power_off")] == ["brownout", "power_off"]
+    assert d["overruns"] == 0
+    s = d["stream"]
+    assert s["hellos"] == 3
+    assert s["raw_rate_hz"] == pytest.approx(200.0, rel=0.002)
+    assert s["orientation_rate_hz"] == pytest.approx(100.0, rel=0.002)
+    assert "raw " in capsys.readouterr().out
+
+
+def test_stream_rate_spans_add_up_over_restarts_and_the_clock_wrap():
+    from types import SimpleNamespace as P
+
+    from sphere.sim.analysis import CaptureSummary
+
+    wrap = 1 << 32
+    run1 = [P(t_us=(wrap - 20_000 + 5_000 * i) % wrap) for i in range(9)]  # 200 Hz across the u32 wrap
+    run2 = [P(t_us=1_000 + 5_000 * i) for i in range(5)]  # restarted: the clock begins again, behind run1's end
+    assert CaptureSummary.rate_hz(run1) == pytest.approx(200.0)
+    assert CaptureSummary.rate_hz(run1 + run2) == pytest.approx(200.0)
+    assert CaptureSummary.rate_hz(run2[1:2] + run2[:1]) is None  # one packet in each run: no interval

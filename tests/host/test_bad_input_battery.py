@@ -216,6 +216,7 @@ ROWS = [
     S(["sim", "--trace", "synthetic:still", "--nack", "adxl345:2:1"], 2, "T0 < T1"),
     S(["sim", "--trace", "synthetic:still", "--hold", "-1"], 2, "hold"),
     S(["sim", "--trace", "synthetic:still", "--brownout", "nan"], 2, "brownout"),
+    S(["sim", "--trace", "synthetic:still", "--power-off", "-1"], 2, "power-off"),
     S(["sim", "--trace", "synthetic:still", "--json", "{tmp}"], 2, "is a folder"),
     S(["sim", "--trace", "synthetic:still", "--firmware", "{tmp}"], 2, "no firmware image"),
     S(["sim", "--trace", "synthetic:still", "--stall", "2:1"], 2, "stall"),

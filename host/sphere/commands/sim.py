@@ -25,7 +25,7 @@ DESCRIPTION = (
     "--stats writes them as JSON. The I2C bus runs at its real 400 kHz timing (--simavr-i2c-timing: simavr's "
     "1 us per step); the MARG update's cycle counts (from the timing pin D13) are exact. The board can be "
     "one of several variants (--board), its chips noisy and on their own clocks (--noise, --clocks random), and "
-    "faults can be injected (--nack, --stall, --glitch, --brownout, --reset-mid-read, --sda-held, --host-stall). "
+    "faults can be injected (--nack, --stall, --glitch, --brownout, --power-off, --reset-mid-read, --sda-held, --host-stall). "
     "--soak SECONDS runs the firmware on BROAD motion under a random schedule of all faults and checks the "
     "stream's invariants (hardware/sim/README.md)."
 )
@@ -145,6 +145,8 @@ def add_arguments(p) -> None:
                         "in the middle of a read (the chip then holds SDA low)")
     p.add_argument("--brownout", action="append", type=argtypes.non_negative, default=[], metavar="T",
                    help="the supply dips at T s: the AVR and the chips restart")
+    p.add_argument("--power-off", action="append", type=argtypes.non_negative, default=[], metavar="T",
+                   help="the supply is cut at T s and comes back: a power-on reset (RAM lost, the chips restart)")
     p.add_argument("--reset-mid-read", action="append", type=argtypes.non_negative, default=[], metavar="T",
                    help="reset the AVR at the first byte a chip sends after T s (the chip holds SDA)")
     p.add_argument("--sda-held", action="store_true", help="at power-up a sensor holds SDA low")
@@ -212,7 +214,7 @@ def board_options(args) -> dict:
     """The board's variant, imperfections and faults from the command line (run_board's keywords)."""
     return dict(i2c_real_timing=not args.simavr_i2c_timing, board=args.board, noise=args.noise, seed=args.seed,
                 clock_ppm=args.clock_ppm, clocks_random=args.clocks == "random", glitch=args.glitch,
-                brownout=args.brownout, reset_mid_read=args.reset_mid_read, sda_held=args.sda_held,
+                brownout=args.brownout, power_off=args.power_off, reset_mid_read=args.reset_mid_read, sda_held=args.sda_held,
                 host_stall=args.host_stall, adapter=args.adapter)
 
 

@@ -13,7 +13,7 @@ import numpy as np
 from sphere.chips import ITG3200_LSB_PER_DPS
 from sphere.protocol.decoder import decode_all
 from sphere.protocol.packets import Event, Hello, Orientation, RawSample, Status
-from sphere.protocol.timebase import TimeUnwrapper
+from sphere.protocol.timebase import WRAP_US, TimeUnwrapper
 
 
 @dataclass
@@ -28,11 +28,18 @@ class CaptureSummary:
 
     @staticmethod
     def rate_hz(packets) -> float | None:
-        if len(packets) < 2:
-            return None
-        un = TimeUnwrapper()
-        t = [un(p.t_us) for p in packets]
-        return (len(t) - 1) / ((t[-1] - t[0]) * 1e-6) if t[-1] > t[0] else None
+        """Packets per second of device time. A reset starts the device's clock again: each run between
+        restarts is a span of its own (the time spent restarting is in no span), and the spans add up."""
+        intervals, span_us = 0, 0
+        prev = None
+        for p in packets:
+            if prev is not None:
+                step = (p.t_us - prev) % WRAP_US  # forward, also across the u32 wrap
+                if step < WRAP_US // 2:  # forward; a step back (the clock started again) comes out above half
+                    intervals += 1
+                    span_us += step
+            prev = p.t_us
+        return intervals / (span_us * 1e-6) if span_us > 0 else None
 
     @property
     def raw_rate_hz(self) -> float | None:
