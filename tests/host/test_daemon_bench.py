@@ -78,3 +78,17 @@ def test_bad_arguments_are_one_line_and_exit_2(args, says):
     assert says in out.stderr and "Traceback" not in out.stderr
     assert time.monotonic() - t0 < 30
     assert os.path.isdir(ROOT / "host")  # nothing was extracted over the checkout
+
+
+def test_a_setting_reaches_every_part_of_the_measurement():
+    """--set gyro.auto_bias=false: the in-process parts build the daemon with it, and the sphere-mouse
+    subprocess of the CPU run accepts the same override (a bad key is refused as sphere-mouse refuses it)."""
+    settings = bench._settings(["gyro.auto_bias=false"])
+    cfg = bench._config(settings)
+    assert cfg.gyro.auto_bias is False and cfg.stream.enabled is False
+    assert bench._config({}).gyro.auto_bias is True
+    assert bench.work_per_frame_us(frames=200, passes=1, settings=settings) > 0
+    out = _bench("--json", "--seconds", "0.5", "--set", "gyro.auto_bias=false")
+    assert out.returncode == 0, out.stderr
+    bad = _bench("--set", "gyro.nope=1", timeout=60)
+    assert bad.returncode == 2 and "nope" in bad.stderr and "Traceback" not in bad.stderr

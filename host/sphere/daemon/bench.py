@@ -120,15 +120,14 @@ def percentile(sorted_values, p):
     return sorted_values[k]
 
 
-def latency(seconds: float, rate: float, orientation: bool):
+def latency(seconds: float, rate: float, orientation: bool, settings: dict | None = None):
     from sphere.daemon.app import SphereMouse
     from sphere.daemon.backends.memory import RecordingBackend
-    from sphere.daemon.config import Config
     from sphere.daemon.sources import SerialSource
 
     dev = PtySphere(rate, seconds, orientation)
     source = SerialSource(dev.path, hello_timeout_s=0.1, link_timeout_s=5.0)
-    cfg = Config().with_overrides({"stream": {"enabled": False}}, "bench")
+    cfg = _config(settings)
     calls = []  # (device t_us being handled, call ns, source arrival ns)
     backend = RecordingBackend()
     daemon = SphereMouse(cfg, source, backend, log=lambda m: None)
@@ -214,10 +213,11 @@ def proc_cpu_s(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / ticks  # utime, stime
 
 
-def cpu(seconds: float, rate: float, orientation: bool):
+def cpu(seconds: float, rate: float, orientation: bool, set_items=()):
     dev = PtySphere(rate, seconds + 1.0, orientation)
     proc = subprocess.Popen([sys.executable, "-m", "sphere.mouse", "--port", dev.path, "--backend", "log",
-                             "--no-stream", "--quiet", "--config", os.devnull],
+                             "--no-stream", "--quiet", "--config", os.devnull]
+                            + [a for item in set_items for a in ("--set", item)],
                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     try:
         if not dev.started.wait(15):
@@ -235,13 +235,12 @@ def cpu(seconds: float, rate: float, orientation: bool):
     return {"cpu_pct": 100.0 * (c1 - c0) / (w1 - w0), "wall_s": w1 - w0, "fps": (f1 - f0) / (w1 - w0)}
 
 
-def work_per_frame_us(frames: int = 12000, passes: int = 3) -> float:
+def work_per_frame_us(frames: int = 12000, passes: int = 3, settings: dict | None = None) -> float:
     """CPU µs per frame of the daemon's own work, in this process with no pty and no other thread: decoding and
     ``SphereMouse.handle`` (deferred work included) over ``frames`` frames of the same steady turn, best of
     ``passes``. Far steadier than a process's CPU share, which the pty's wake-ups dominate."""
     from sphere.daemon.app import SphereMouse
     from sphere.daemon.backends.memory import RecordingBackend
-    from sphere.daemon.config import Config
 
     try:
         from sphere.protocol import PacketStream
@@ -256,7 +255,7 @@ def work_per_frame_us(frames: int = 12000, passes: int = 3) -> float:
 
     sphere = ScriptedSphere(imu_rate_hz=200, orientation_every=10**9, status_every_s=1.0)
     data = [sphere.frame(hello_packet(200, 0))] + [f for _ in range(frames) for _, f in sphere.sample((0.0, 8.0, 50.0))]
-    cfg = Config().with_overrides({"stream": {"enabled": False}}, "bench")
+    cfg = _config(settings)
 
     class _NoSource:
         generation = 0
@@ -274,16 +273,35 @@ def work_per_frame_us(frames: int = 12000, passes: int = 3) -> float:
     return 1e6 * best
 
 
-def measure(seconds: float, rate: float, orientation: bool) -> dict:
-    lat = latency(seconds, rate, orientation)
+def _settings(set_items) -> dict:
+    """``--set`` items as a config override (checked against the daemon's config: a bad one is an error)."""
+    from sphere.daemon.config import Config, parse_set
+
+    settings = parse_set(list(set_items)) if set_items else {}
+    if settings:
+        Config().with_overrides(settings, "--set")
+    return settings
+
+
+def _config(settings: dict | None):
+    """The daemon's default config with the 3-D stream (a separate server) off, and ``settings`` over it."""
+    from sphere.daemon.config import Config
+
+    cfg = Config().with_overrides({"stream": {"enabled": False}}, "bench")
+    return cfg.with_overrides(settings, "--set") if settings else cfg
+
+
+def measure(seconds: float, rate: float, orientation: bool, set_items=()) -> dict:
+    settings = _settings(set_items)
+    lat = latency(seconds, rate, orientation, settings)
     t, a = lat["total"], lat["after_read"]
     b = baseline(seconds, rate)
-    c = cpu(seconds, rate, orientation)
+    c = cpu(seconds, rate, orientation, set_items)
     return {"calls": lat["calls"], "frames": lat["frames"],
             "p50_us": percentile(t, 50), "p99_us": percentile(t, 99), "max_us": max(t) if t else float("nan"),
             "after_read_p50_us": percentile(a, 50), "after_read_p99_us": percentile(a, 99),
             "floor_p50_us": percentile(b, 50), "floor_p99_us": percentile(b, 99),
-            "cpu_pct": c["cpu_pct"], "cpu_wall_s": c["wall_s"], "fps": c["fps"], "work_us": work_per_frame_us()}
+            "cpu_pct": c["cpu_pct"], "cpu_wall_s": c["wall_s"], "fps": c["fps"], "work_us": work_per_frame_us(settings=settings)}
 
 
 def report(r: dict) -> None:
@@ -336,6 +354,7 @@ def run_side(host_dir: str, args) -> dict:
     env = dict(os.environ, PYTHONPATH=host_dir)
     cmd = [sys.executable, "-P", os.path.abspath(__file__), "--json", "--seconds", str(args.seconds),
            "--rate", str(args.rate)] + (["--orientation"] if args.orientation else [])
+    cmd += [a for item in args.set for a in ("--set", item)]
     out = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=args.seconds * 4 + 120)
     if out.returncode != 0:
         raise RuntimeError(f"the run with {host_dir} failed: {out.stderr.strip()[-2000:]}")
@@ -376,9 +395,16 @@ def main(argv=None) -> int:
     ap.add_argument("--json", action="store_true", help="print the figures as one JSON object")
     ap.add_argument("--against", metavar="REV", help="side by side with the daemon of this git revision")
     ap.add_argument("--pairs", type=int, default=8, help="with --against: runs of each side (default 8)")
+    ap.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
+                    help="a daemon setting other than its default, as sphere-mouse's --set (repeatable), e.g. "
+                         "--set gyro.auto_bias=false")
     args = ap.parse_args(argv)
     if not 0.5 <= args.seconds <= 3600 or not 1 <= args.rate <= 2000 or not 1 <= args.pairs <= 100:
         ap.error("--seconds must be 0.5–3600, --rate 1–2000, --pairs 1–100")
+    try:
+        _settings(args.set)
+    except Exception as e:  # ConfigError: the same one line sphere-mouse gives
+        ap.error(str(e))
     if args.against:
         print(f"sphere-mouse benchmark, side by side: {args.rate:g} RAW_SAMPLE frames/s, {args.seconds:g} s per run, "
               f"{os.cpu_count()} CPUs, Python {sys.version.split()[0]}, load average before {os.getloadavg()[0]:.2f}",
@@ -392,7 +418,7 @@ def main(argv=None) -> int:
         print(f"sphere-mouse benchmark: {args.rate:g} RAW_SAMPLE frames/s" + (" + ORIENTATION" if args.orientation else "")
               + f", {args.seconds:g} s per run, pty, {os.cpu_count()} CPUs, Python {sys.version.split()[0]}, "
               f"load average before {os.getloadavg()[0]:.2f}")
-    r = measure(args.seconds, args.rate, args.orientation)
+    r = measure(args.seconds, args.rate, args.orientation, args.set)
     if args.json:
         print(json.dumps(r))
     else:
