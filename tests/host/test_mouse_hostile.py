@@ -360,3 +360,36 @@ def test_a_connection_flood_does_not_cost_the_sphere(tmp_path):
         thread.join(5)
         stream.stop()
         dev._stop.set()
+
+
+def test_a_magnetometer_whose_first_conversion_has_not_come_is_not_a_fault():
+    """After a HELLO the first RAW_SAMPLEs lack mag_ok until the HMC5883L's first single measurement is read
+    (spec §4.2: its values are not valid yet): no "not answering", no "answers again". A sensor the HELLO says
+    was not found at start is said once; one that stops later is said, and said again when it answers."""
+    logs = []
+    cfg = Config().with_overrides({"stream": {"enabled": False}}, "t")
+    d = SphereMouse(cfg, source=None, backend=RecordingBackend(), log=logs.append)
+    stream = PacketStream()
+    frames = [encode_frame(hello_packet(), 0)]
+    flags = [0x0B, 0x0B, 0x0F, 0x0F]  # accel + gyro, then the magnetometer's first conversion
+    frames += [encode_frame(_raw(1_000_000 + 5000 * i, (0, 0, 0), f), i) for i, f in enumerate(flags, 1)]
+    feed_bytes(d, b"".join(frames), stream)
+    assert logs == [] and d.sensors_missing == ()
+    # the device starts again (a reset): the same, again no message
+    frames = [encode_frame(hello_packet(), 0)]
+    frames += [encode_frame(_raw(5000 * i, (0, 0, 0), f), i) for i, f in enumerate(flags, 1)]
+    feed_bytes(d, b"".join(frames), stream)
+    assert logs == []
+    # the magnetometer stops answering, then answers again
+    frames = [encode_frame(_raw(100_000 + 5000 * i, (0, 0, 0), f), i) for i, f in enumerate([0x0B] * 3 + [0x0F], 5)]
+    feed_bytes(d, b"".join(frames), stream)
+    assert logs == ["the sphere reports its magnetometer not answering (RAW_SAMPLE flags)",
+                    "the sphere's magnetometer answers again"]
+    # a sphere without a magnetometer: said once, at its first sample
+    logs.clear()
+    hello = hello_packet()
+    hello.sensors_found = 0x03
+    frames = [encode_frame(hello, 0)] + [encode_frame(_raw(5000 * i, (0, 0, 0), 0x03), i) for i in range(1, 50)]
+    feed_bytes(d, b"".join(frames), PacketStream())
+    assert logs == ["the sphere found no magnetometer at start (HELLO)"]
+    assert d.sensors_missing == ("magnetometer",)

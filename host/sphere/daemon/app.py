@@ -81,7 +81,8 @@ class SphereMouse:
         self._recentre_tilt = True
         self._stopped = False
         self._requests: list[str] = []
-        self.sensor_flags = None  # the last RAW_SAMPLE's sensor bits
+        self.sensor_flags = None  # the last RAW_SAMPLE's sensor bits (None: none since the last HELLO)
+        self._sensors_reported = 0  # the sensors the log has said are missing (until it says they answer)
         self.sensors_missing: tuple[str, ...] = ()
         if stream is not None:
             stream.mode = self.mode
@@ -195,6 +196,7 @@ class SphereMouse:
             self.battery_mv = p.battery_mv
         elif typ == Hello.TYPE:
             self.hello = p
+            self.sensor_flags = None  # a new start: its first samples may not have every sensor yet
             self.motion.reset_time()
 
     def _raw_sample(self, p, t) -> None:
@@ -232,17 +234,27 @@ class SphereMouse:
         self.stream.publish_orientation(q, t_us)
 
     def _sensors_changed(self, bits: int) -> None:
-        """A sensor stopped or started answering (RAW_SAMPLE flags): said in the log and on the status line."""
+        """A sensor stopped or started answering (RAW_SAMPLE flags): said in the log and on the status line.
+        The first samples after a HELLO may lack a sensor that is there (``mag_ok`` waits for the magnetometer's
+        first conversion, spec §4.2): that is no fault; one the HELLO says was not found at start is reported."""
         before = self.sensor_flags
         self.sensor_flags = bits
         self.sensors_missing = tuple(name for name, bit in SENSOR_FLAGS if not bits & bit)
+        found = self.hello.sensors_found if self.hello is not None else 0x07
         for name, bit in SENSOR_FLAGS:
-            was = before is None or before & bit
-            if was and not bits & bit:
-                extra = ": the pointer holds still until it answers again" if bit == GYRO_OK else ""
+            extra = ": the pointer holds still until it answers again" if bit == GYRO_OK else ""
+            if bits & bit:
+                if self._sensors_reported & bit:
+                    self._sensors_reported &= ~bit
+                    self.log(f"the sphere's {name} answers again")
+            elif self._sensors_reported & bit:
+                continue
+            elif before is not None and before & bit:
+                self._sensors_reported |= bit
                 self.warn(f"the sphere reports its {name} not answering (RAW_SAMPLE flags){extra}")
-            elif before is not None and not before & bit and bits & bit:
-                self.log(f"the sphere's {name} answers again")
+            elif before is None and not found & bit:
+                self._sensors_reported |= bit
+                self.warn(f"the sphere found no {name} at start (HELLO){extra}")
 
     # -- requests (from signal handlers: they only call request(), the loop acts) --
     def request(self, what: str) -> None:
