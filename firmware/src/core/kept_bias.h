@@ -2,7 +2,7 @@
 // opening the port, a brown-out that left the RAM as it was), so that the firmware goes on from the bias it
 // had tracked instead of starting from 0 or from the EEPROM's and drifting at the chip's own bias (≈ 1–5 °/s)
 // until the next still second. The record lives in RAM that the C start-up does not clear (`.noinit` on the
-// AVR, AvrBoard's `kept()`); the ATmega328P's SRAM keeps its contents over every reset but a power-on
+// AVR, AvrBoard::keptBias()); the ATmega328P's SRAM keeps its contents over every reset but a power-on
 // (datasheet, "System Control and Reset"). Whether it is used is decided by the reset cause and by the record
 // itself: after a power-on (PORF) the RAM is not defined and the record is ignored whatever it says; after
 // any other reset it is used only when its magic, its CRC-16 and its range hold (a brown-out deep enough to

@@ -102,7 +102,7 @@ class GyroBias:
     A window the compass confirmed replaces one it did not confirm at once.
     """
 
-    MAX_BIAS_DPS = 40.0  # ITG-3200 datasheet (PS-ITG-3200A-00-01.4) §2.1: initial ZRO tolerance ±40 °/s
+    MAX_BIAS_DPS = 40.0  # ITG-3200 datasheet (PS-ITG-3200A-00-01.4) §3.1 Sensor Specifications: initial ZRO tolerance ±40 °/s
     ACCEL_FLOOR_G = 1.0 / 256  # one ADXL345 LSB at full resolution
     AVERAGE_WINDOWS = 8
 
