@@ -934,10 +934,15 @@ int main(int argc, char **argv)
 	double sim_s = (double)avr->cycle / avr->frequency;
 	if (uart_out.pending)
 		adapter_flush(&uart_out); /* what the adapter still held */
-	if (uart_out.capture)
-		fclose(uart_out.capture);
-	if (uart_out.times)
-		fclose(uart_out.times);
+	/* a full or read-only disk: say so and fail, never leave a short file behind silently */
+	if (uart_out.capture && (ferror(uart_out.capture) | fclose(uart_out.capture))) {
+		fprintf(stderr, "sphere-board: cannot write %s: %s\n", capture_path, strerror(errno ? errno : EIO));
+		return 1;
+	}
+	if (uart_out.times && (ferror(uart_out.times) | fclose(uart_out.times))) {
+		fprintf(stderr, "sphere-board: cannot write %s: %s\n", times_path, strerror(errno ? errno : EIO));
+		return 1;
+	}
 	/* no uart_pty_stop(): it signals its thread with SIGINT, which our handler catches, and then waits
 	 * for it forever; leaving main ends the thread with the process */
 
@@ -1020,7 +1025,10 @@ int main(int argc, char **argv)
 		fprintf(sf, "],\n");
 		fprintf(sf, "  \"crashed\": %s\n", state == cpu_Crashed ? "true" : "false");
 		fprintf(sf, "}\n");
-		fclose(sf);
+		if (ferror(sf) | fclose(sf)) {
+			fprintf(stderr, "sphere-board: cannot write %s: %s\n", stats_path, strerror(errno ? errno : EIO));
+			return 1;
+		}
 	}
 	fprintf(stderr,
 		"sphere-board: %.3f simulated s in %.3f wall s (x%.2f); %u MARG updates, median %u cycles; "

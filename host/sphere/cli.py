@@ -44,7 +44,7 @@ def _command_modules():
 
 
 #: errors of a write that failed because of where the output goes (a full disk, /dev/full, a dead terminal)
-OUTPUT_ERRNOS = (errno.ENOSPC, errno.EIO, errno.EFBIG, errno.EDQUOT)
+OUTPUT_ERRNOS = (errno.ENOSPC, errno.EIO, errno.EFBIG, errno.EDQUOT, errno.EROFS)
 
 
 def output_failed(prog: str, e: BaseException) -> int | None:

@@ -43,6 +43,7 @@ class Row:
     port: str | None = None  # None | "silent" | "garbage" | "vanish" (streams for 0.5 s, then is unplugged)
     stdout: str | None = None  # where stdout goes (/dev/full: a full disk); None: a file the test reads
     timeout: float = 20.0
+    broad: bool = False  # needs the BROAD trials (skips, saying so, where they are absent)
 
     @property
     def id(self):
@@ -304,6 +305,20 @@ ROWS = [
     S(["device", "keys"], 1, "no space left", stdout="/dev/full"),
     S(["service", "print"], 1, "no space left", stdout="/dev/full"),
     M(["--print-config"], 1, "no space left", stdout="/dev/full"),
+    # every command that writes a file, into a full disk: one line, exit 1, never a hang (sim used to read
+    # /dev/full back forever)
+    S(["sim", "--trace", "synthetic:tour", "--seconds", "1", "--capture", "/dev/full"], 1, "no space left"),
+    S(["sim", "--trace", "synthetic:tour", "--seconds", "1", "--stats", "/dev/full"], 1, "no space left"),
+    S(["sim", "--trace", "synthetic:tour", "--seconds", "1", "--json", "/dev/full"], 1, "no space left"),
+    S(["eval", "--filters", "madgwick", "--only", "07", "--seconds", "30", "--json", "/dev/full"], 1, "no space left",
+      broad=True),
+    S(["hybrid-eval", "--trials", "07", "--seconds", "9", "--json", "/dev/full"], 1, "no space left", timeout=60,
+      broad=True),
+    S(["hybrid-sim", "--json", "/dev/full"], 1, "no space left"),
+    S(["bench", "decode", "--seconds", "0.2", "--repeat", "1", "--json", "/dev/full"], 1, "no space left"),
+    S(["bench", "pointer", "--seeds", "1", "--seconds", "2", "--no-tune", "--filters", "none", "--json", "/dev/full"],
+      1, "no space left", timeout=60, broad=True),
+    S(["camera", "render", "--seconds", "1", "-o", "/dev/full"], 1, "cannot write", timeout=60, broad=True),
     S(["service", "install"], 2, "xdg", files={"xdg": b"a file where a folder belongs"}),
     S(["protocol", "explode"], 2, "invalid choice"),
 ]
@@ -451,6 +466,13 @@ def _imports():
 
 @pytest.mark.parametrize("row", ROWS, ids=[r.id for r in ROWS])
 def test_bad_input(row, tmp_path):
+    if row.broad:
+        from sphere import broad
+
+        try:
+            broad.trial_paths()
+        except broad.BroadMissing as e:
+            pytest.skip(f"BROAD trials not available: {e}")
     status, err, out = run_row(row, str(tmp_path))
     assert "Traceback" not in err, err
     assert status == row.code, (status, err)

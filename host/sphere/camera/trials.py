@@ -94,7 +94,7 @@ def rendered_trial(name: str, start_s: float, seconds: float, distance_m: float 
     path = broad.find_trial(name, directory)
     full = broad.load_trial(path)
     total = len(full) / full.rate_hz
-    if not (0 <= start_s < total) or seconds <= 0.5 or start_s + seconds > total:
+    if not (0 <= start_s < total) or seconds < 0.5 or start_s + seconds > total:
         raise ValueError(f"trial {full.name} is {total:.1f} s long; choose --start and --seconds inside it "
                          f"(at least 0.5 s)")
     pos = load_positions(path)

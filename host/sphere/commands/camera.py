@@ -173,6 +173,7 @@ def _render(args) -> int:
         print(f"sphere camera render: {e}", file=sys.stderr)
         return 1
     cam = rt.scene.camera
+    cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_SILENT)  # our own line says what went wrong
     out = cv2.VideoWriter(args.output, cv2.VideoWriter_fourcc(*"MJPG"), rt.scene.fps, (cam.width, cam.height))
     if not out.isOpened():
         print(f"sphere camera render: cannot write {args.output} (use a .avi name in a writable folder)",
@@ -186,5 +187,10 @@ def _render(args) -> int:
             w.writerow([k, f"{fr.t_start:.6f}", f"{fr.t_mid:.6f}", f"{fr.t_arrival:.6f}",
                         *(f"{v:.5f}" for v in fr.truth_cam)])
     out.release()
+    # OpenCV does not report a failed write: a video shorter than its frames' headers is a full disk
+    if os.path.getsize(args.output) < 64 * (k + 1):
+        print(f"sphere camera render: cannot write {args.output}: the disk is full or read-only; make room "
+              "(or write it somewhere else)", file=sys.stderr)
+        return 1
     print(f"wrote {args.output} ({k + 1} frames, {cam.width}x{cam.height} at {rt.scene.fps:g} fps) and {args.output}.csv")
     return 0

@@ -226,15 +226,18 @@ def _one(args, source: str, elf, tmp: Path, index: int, multi: bool):
     start = args.start if args.start is not None else ("auto" if args.accuracy else 0.0)
     trace, secs, trial = prepare(source, seconds, start, args.hold, tmp / f"trace{index}.bin", args.full)
     capture = args.capture if (args.capture and not multi) else tmp / f"capture{index}.bin"
+    # the board writes its figures to a file of ours; --stats is written here, from what this run adds
     stats_out = args.stats if (args.stats and not multi) else None
     from sphere.progress import follow_capture
 
     with follow_capture(None if (multi or args.pty) else capture, secs, desc=f"sim {source}"):
         run = run_board(elf, trace, secs, capture, interactive=args.pty, pty=args.pty, realtime=args.realtime,
-                        stats=stats_out, nack=args.nack, stall=args.stall, send=args.send,
+                        nack=args.nack, stall=args.stall, send=args.send,
                         timing_pin=args.timing_pin, loop_pin=args.loop_pin, rate_hz=args.rate,
                         verbose=args.verbose, build=not args.no_build, **board_options(args))
-    summary = summarise(Path(capture)) if Path(capture).exists() else None
+    # read back only a capture the board finished writing to a file (never /dev/full, a fifo, a short file)
+    ok = run.returncode == 0 and Path(capture).is_file()
+    summary = summarise(Path(capture)) if ok else None
     stats = dict(run.stats)
     if summary is not None:
         dev = summary.as_dict()
@@ -250,7 +253,7 @@ def _one(args, source: str, elf, tmp: Path, index: int, multi: bool):
         elif summary is not None:
             acc = accuracy(summary, trial, args.hold, args.beta, bias_s=min(args.hold, 2.0),
                            follow_firmware=not args.host_independent)
-    if stats_out and Path(stats_out).exists():
+    if stats_out and run.stats:
         Path(stats_out).write_text(json.dumps(stats, indent=2) + "\n")
     return source, run, stats, acc
 
