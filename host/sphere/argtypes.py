@@ -70,7 +70,7 @@ def at_least_one(text: str) -> int:
 
 def baud(text: str) -> int:
     """A serial baud rate (50 … 4,000,000)."""
-    from sphere.serial_link import check_baud
+    from sphere.link.port import check_baud
 
     try:
         v = int(text)

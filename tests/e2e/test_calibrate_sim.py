@@ -64,8 +64,8 @@ def _start(trace: str, seconds: float, board: str | None = None, profile: str | 
 def _ask(port_path: str, packet, want=("REPLY",), timeout_s: float = 3.0):
     """Send one command on the pty through DeviceLink (as `sphere calibrate` does); return its REPLY and the
     packets that came with it until ``want`` were all seen."""
-    from sphere.device_link import DeviceLink
-    from sphere.serial_link import open_port
+    from sphere.link.device import DeviceLink
+    from sphere.link.port import open_port
 
     link = DeviceLink(open_port(port_path, reset_on_open=False))
     seen, reply = [], None

@@ -37,8 +37,8 @@ def board(tmp_path_factory):
 
 def _events_for(pty, seconds):
     """Listen (DeviceLink on the pty) for ``seconds`` of the device's clock; the events heard."""
-    from sphere.device_link import DeviceLink
-    from sphere.serial_link import open_port
+    from sphere.link.device import DeviceLink
+    from sphere.link.port import open_port
 
     ser = open_port(pty)
     try:

@@ -12,7 +12,7 @@ import time
 
 import pytest
 
-from sphere.daemon.synthetic import script_bytes
+from sphere.daemon.scripted_sphere import script_bytes
 
 pytestmark = pytest.mark.skipif(
     shutil.which("Xvfb") is None or shutil.which("xdotool") is None,

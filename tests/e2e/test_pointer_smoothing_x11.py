@@ -15,7 +15,7 @@ import time
 import numpy as np
 import pytest
 
-from sphere.daemon.synthetic import hello_packet, script_bytes
+from sphere.daemon.scripted_sphere import hello_packet, script_bytes
 from sphere.protocol import encode_frame
 from sphere.smoothing.registry import FILTERS
 from test_mouse_x11 import pointer, pytestmark, run_mouse, xdotool, xvfb  # noqa: F401  (the Xvfb fixture)

@@ -14,7 +14,7 @@ import tty
 
 import pytest
 
-from sphere.daemon.synthetic import script_bytes
+from sphere.daemon.scripted_sphere import script_bytes
 
 REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
@@ -238,7 +238,7 @@ def test_calibrate_bad_flags(tmp_path):
 
 def test_calibrate_when_the_port_goes_away(tmp_path):
     """The sphere is unplugged in the middle of the session: one line saying so, exit 1, no SerialException."""
-    from sphere.daemon.synthetic import ScriptedSphere, hello_packet
+    from sphere.daemon.scripted_sphere import ScriptedSphere, hello_packet
 
     master, slave = os.openpty()
     tty.setraw(slave)
@@ -246,7 +246,7 @@ def test_calibrate_when_the_port_goes_away(tmp_path):
     os.close(slave)
     p = subprocess.Popen([sys.executable, "-m", "sphere.cli", "calibrate", "--port", name, "--yes", "--timeout", "30"],
                          stderr=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
-    from sphere.serial_link import holders
+    from sphere.link.port import holders
 
     deadline = time.monotonic() + 60
     while p.pid not in [pid for pid, _ in holders(name)] and time.monotonic() < deadline:

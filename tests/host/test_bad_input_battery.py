@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 
 import pytest
 
-from sphere.daemon.synthetic import script_bytes
+from sphere.daemon.scripted_sphere import script_bytes
 
 GOOD = script_bytes([("still", 0.3), ("turn", (0, 0, 1), 10.0, 0.3)])
 GARBAGE = bytes((i * 167 + 13) % 256 for i in range(4000))  # no frame delimiter pattern, no valid CRC
@@ -299,6 +299,11 @@ ROWS = [
     S(["bench", "decode", "--repeat", "0"], 2, "repeat"),
     S(["bench", "decode", "--json", "{tmp}"], 2, "is a folder"),
     S(["bench", "pointer", "--json", "{tmp}"], 2, "is a folder"),
+    S(["bench", "fusion", "--scenarios", "wobble"], 2, "wobble"),
+    S(["bench", "fusion", "--seeds", "0"], 2, "seeds"),
+    S(["bench", "fusion", "--at", "-1"], 2, "at"),
+    S(["bench", "daemon", "--seconds", "0.1"], 2, "--seconds"),
+    S(["bench", "daemon", "--set", "nope.x=1"], 2, "nope"),
     S(["decode", "{tmp}/good.cap"], 1, "no space left", files=CAP, stdout="/dev/full"),
     S(["decode", "{tmp}/good.cap", "--jsonl"], 1, "no space left", files=CAP, stdout="/dev/full"),
     S(["protocol", "types"], 1, "no space left", stdout="/dev/full"),

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from sphere import calibration as cal
+from sphere.calibration import fit as cal
 from sphere import chips
 
 
@@ -157,7 +157,7 @@ def test_calibrate_command_refuses_a_missing_capture(tmp_path, capsys):
 
 # ---------------------------------------------------------------- the guided steps' detection (pure)
 
-from sphere import calibration_session as session  # noqa: E402
+from sphere.calibration import session as session  # noqa: E402
 
 
 def _series(acc, gyr, mag, rate=200.0, mag_every=3):
@@ -268,7 +268,7 @@ def test_the_virtual_spheres_script_through_the_guided_steps():
     """synthetic:calibration in chip units (no board), fed to the steps as the samples would arrive:
     each step ends where the script says, the axis check passes (an aligned board), and the fits recover
     the injected imperfections."""
-    from sphere import axis_check
+    from sphere.calibration import axis_check
     from sphere.sim import trace as T
 
     ct = T.to_chips(T.calibration(70.0))

@@ -1,4 +1,4 @@
-"""The axis check of `sphere calibrate` (sphere.axis_check) on synthetic turns: the turns about each body axis
+"""The axis check of `sphere calibrate` (sphere.calibration.axis_check) on synthetic turns: the turns about each body axis
 of `synthetic:calibration`, in chip units, with each sensor's axes put through a known signed permutation
 (what a chip mounted another way, read through the wrong board profile, reports). The fit must name the
 permutation; the verdict must name the chip and the profile that fits, for the boards of
@@ -7,8 +7,8 @@ hardware/sim/README.md (each chip's mounting there, an independent statement fro
 import numpy as np
 import pytest
 
-from sphere import axis_check as A
-from sphere import calibration_session as session
+from sphere.calibration import axis_check as A
+from sphere.calibration import session as session
 from sphere import chips
 from sphere import quaternion as quat
 from sphere.sim import trace as T

@@ -6,8 +6,8 @@ samples would arrive (no board; tests/e2e/test_calibrate_sim.py runs the real se
 import numpy as np
 import pytest
 
-from sphere import axis_check
-from sphere import calibration_session as session
+from sphere.calibration import axis_check
+from sphere.calibration import session as session
 from sphere import chips
 from sphere.sim import trace as T
 

@@ -60,7 +60,7 @@ def test_calibrate_says_what_is_wrong(tmp_path, capsys):
 
 
 def test_calibrate_with_a_charuco_board(tmp_path, capsys):
-    from sphere.camera.calibration import charuco_board
+    from sphere.camera.intrinsics import charuco_board
 
     board = charuco_board(9, 6, 0.025, 0.018).generateImage((900, 600), marginSize=0)
     _views(tmp_path, texture=board)

@@ -86,7 +86,7 @@ def test_capture_records_a_real_serial_port(tmp_path):
     import time
 
     sent = b"".join(encode_frame(Orientation(i * 10000, 1, (16384, 0, 0, 0)), i & 0xFF) for i in range(300))
-    from sphere.serial_link import holders
+    from sphere.link.port import holders
 
     deadline = time.time() + 60
     while proc.pid not in [pid for pid, _ in holders(name)] and time.time() < deadline:

@@ -1,4 +1,4 @@
-"""The daemon's latency/CPU benchmark (python -m sphere.daemon.bench): what it measures is what the kernel
+"""The daemon's latency/CPU benchmark (python -m sphere.bench.daemon): what it measures is what the kernel
 says, its side-by-side mode runs, and bad arguments get a clear line and exit 2. No timing is asserted."""
 
 from __future__ import annotations
@@ -13,13 +13,13 @@ from pathlib import Path
 
 import pytest
 
-from sphere.daemon import bench
+from sphere.bench import daemon as bench
 
 ROOT = Path(__file__).resolve().parents[2]
 
 
 def _bench(*args, timeout=240):
-    return subprocess.run([sys.executable, "-m", "sphere.daemon.bench", *args], capture_output=True, text=True,
+    return subprocess.run([sys.executable, "-m", "sphere.bench.daemon", *args], capture_output=True, text=True,
                           timeout=timeout, cwd=ROOT)
 
 

@@ -14,10 +14,10 @@ import pytest
 
 pytest.importorskip("serial")
 
-from sphere.device_link import DeviceLink, LinkLost  # noqa: E402
+from sphere.link.device import DeviceLink, LinkLost  # noqa: E402
 from sphere.protocol import GetCalibration, GetHello, PacketStream, Reply, SaveCalibration, encode_frame  # noqa: E402
-from sphere.daemon.synthetic import hello_packet  # noqa: E402
-from sphere.serial_link import open_port  # noqa: E402
+from sphere.daemon.scripted_sphere import hello_packet  # noqa: E402
+from sphere.link.port import open_port  # noqa: E402
 
 
 class Responder:

@@ -3,7 +3,7 @@ and its field ranges; what cannot be read back is filled from HELLO or the firmw
 
 import pytest
 
-from sphere.device_settings import SETTINGS, SettingError, axes_text, plan_settings
+from sphere.link.device_settings import SETTINGS, SettingError, axes_text, plan_settings
 from sphere.protocol.packets import Hello
 from sphere.protocol.vectors import load_vectors
 

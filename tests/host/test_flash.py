@@ -10,7 +10,7 @@ import subprocess
 
 import pytest
 
-from sphere import bootloader
+from sphere.link import bootloader
 from sphere.cli import main
 from sphere.commands import flash
 from sphere.paths import firmware_image

@@ -1,8 +1,8 @@
 """What `sphere monitor` shows, from a byte stream with a damaged frame in it: counts and rates per
 packet type, flags, values in physical units, events as they come, and the decoder's link counters."""
 
-from sphere.capture import DecodedPacket
-from sphere.link_monitor import LinkMonitor
+from sphere.link.capture import DecodedPacket
+from sphere.link.monitor import LinkMonitor
 from sphere.protocol import Event, FrameDecoder, Orientation, RawSample, encode_frame
 from sphere.protocol.timebase import TimeUnwrapper
 from sphere.protocol.vectors import load_vectors

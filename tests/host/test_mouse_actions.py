@@ -2,12 +2,12 @@
 
 from __future__ import annotations
 
-from sphere.capture import DecodedPacket
+from sphere.link.capture import DecodedPacket
 from sphere.daemon.actions import EventActions, MotionHistory
 from sphere.daemon.app import SphereMouse
 from sphere.daemon.backends.memory import RecordingBackend
 from sphere.daemon.config import Config
-from sphere.daemon.synthetic import script_frames
+from sphere.daemon.scripted_sphere import script_frames
 from sphere.protocol import FrameDecoder, TimeUnwrapper
 
 

@@ -7,7 +7,7 @@ import math
 import pytest
 
 from sphere import chips
-from sphere.capture import CaptureFile
+from sphere.link.capture import CaptureFile
 from sphere.daemon.app import SphereMouse
 from sphere.daemon.backends.memory import RecordingBackend
 from sphere.daemon.config import Config

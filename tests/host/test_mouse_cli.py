@@ -13,9 +13,9 @@ from sphere.daemon.backends.memory import RecordingBackend
 from sphere.daemon.config import Config
 from sphere.daemon.sources import ReplaySource, ScriptedSource
 from sphere.daemon.status import StatusLine
-from sphere.daemon.synthetic import script_bytes
+from sphere.daemon.scripted_sphere import script_bytes
 from sphere.protocol import encode_frame
-from sphere.daemon.synthetic import hello_packet
+from sphere.daemon.scripted_sphere import hello_packet
 
 
 def mouse(*args, timeout=60):

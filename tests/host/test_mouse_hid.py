@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from sphere.daemon.sources import HidSource, hid_report_bytes
-from sphere.daemon.synthetic import script_bytes
+from sphere.daemon.scripted_sphere import script_bytes
 
 
 def reports(data: bytes, size: int = 63):

@@ -15,7 +15,7 @@ import pytest
 from sphere.daemon.app import SphereMouse
 from sphere.daemon.backends.memory import RecordingBackend
 from sphere.daemon.config import Config
-from sphere.daemon.synthetic import ScriptedSphere, hello_packet
+from sphere.daemon.scripted_sphere import ScriptedSphere, hello_packet
 from sphere.protocol import PacketStream, RawSample, encode_frame
 
 
@@ -216,7 +216,7 @@ def test_open_port_is_exclusive_and_leaves_held_ports_alone(tmp_path):
     import subprocess
     import sys
 
-    from sphere.serial_link import PortBusy, open_port
+    from sphere.link.port import PortBusy, open_port
 
     master, slave, name = _pty()
     os.close(slave)

@@ -15,7 +15,7 @@ from sphere.daemon.app import SphereMouse
 from sphere.daemon.backends.memory import RecordingBackend
 from sphere.daemon.config import Config
 from sphere.daemon.sources import SerialSource, SourceError
-from sphere.daemon.synthetic import ScriptedSphere, hello_packet
+from sphere.daemon.scripted_sphere import ScriptedSphere, hello_packet
 from sphere.protocol import FrameDecoder, encode_frame
 
 

@@ -16,7 +16,7 @@ from sphere.daemon.config import Config
 
 BOARD = textwrap.dedent('''
     import os, sys, time, tty, select
-    from sphere.daemon.synthetic import ScriptedSphere, hello_packet
+    from sphere.daemon.scripted_sphere import ScriptedSphere, hello_packet
     from sphere.protocol import FrameDecoder
     master, slave = os.openpty()
     tty.setraw(slave)

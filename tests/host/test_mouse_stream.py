@@ -18,7 +18,7 @@ from sphere.daemon.backends.memory import RecordingBackend  # noqa: E402
 from sphere.daemon.config import Config  # noqa: E402
 from sphere.daemon.sources import ReplaySource  # noqa: E402
 from sphere.daemon.stream3d import OrientationStream  # noqa: E402
-from sphere.daemon.synthetic import script_bytes  # noqa: E402
+from sphere.daemon.scripted_sphere import script_bytes  # noqa: E402
 
 
 @pytest.fixture

@@ -15,7 +15,7 @@ from sphere.daemon.backends import BackendUnavailable  # noqa: E402
 from sphere.daemon.backends.uinput import UinputBackend, capabilities  # noqa: E402
 from sphere.daemon.config import Config  # noqa: E402
 from sphere.daemon.sources import ReplaySource  # noqa: E402
-from sphere.daemon.synthetic import script_bytes  # noqa: E402
+from sphere.daemon.scripted_sphere import script_bytes  # noqa: E402
 
 SYN = (e.EV_SYN, e.SYN_REPORT, 0)
 

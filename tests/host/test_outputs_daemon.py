@@ -6,7 +6,7 @@ import struct
 import subprocess
 import sys
 
-from sphere.daemon.synthetic import script_bytes
+from sphere.daemon.scripted_sphere import script_bytes
 
 
 def test_sphere_mouse_sends_opentrack_datagrams(tmp_path):

@@ -12,10 +12,10 @@ import numpy as np
 from sphere.argtypes import seconds
 
 from sphere import chips
-from sphere.axis_check import TURN_DEG
-from sphere.calibration_session import COVERAGE_BINS, COVERAGE_TARGET, FACE_S, STILL_S, TURN_MIN_S, TURN_S
-from sphere.calibration_session import FACES as _FACES
-from sphere.calibration_session import SeriesBuilder
+from sphere.calibration.axis_check import TURN_DEG
+from sphere.calibration.session import COVERAGE_BINS, COVERAGE_TARGET, FACE_S, STILL_S, TURN_MIN_S, TURN_S
+from sphere.calibration.session import FACES as _FACES
+from sphere.calibration.session import SeriesBuilder
 
 FACES = tuple(f[0] for f in _FACES)
 DEFAULT_TIMEOUT_S = 120.0
@@ -70,7 +70,7 @@ def add_arguments(p) -> None:
 
 
 def block_from(cal, base=None) -> dict:
-    """The SET_CALIBRATION fields (integers, spec §5.2) for a :class:`sphere.calibration.Calibration`;
+    """The SET_CALIBRATION fields (integers, spec §5.2) for a :class:`sphere.calibration.fit.Calibration`;
     parts that could not be computed keep ``base`` (the sphere's current block, a dict of the same
     fields), or the defaults."""
     q14 = 16384
@@ -135,7 +135,7 @@ def _finish(args, cal, mag, base=None) -> dict:
                                               indent=2))
         print(f"wrote {args.json}", file=sys.stderr)
     if args.plot and cal.mag is not None:
-        from sphere.calibration import plot_mag_cloud
+        from sphere.calibration.fit import plot_mag_cloud
 
         plot_mag_cloud(mag, cal.mag, args.plot)
         print(f"wrote {args.plot}", file=sys.stderr)
@@ -149,8 +149,8 @@ def run(args) -> int:
 
 
 def _run_capture(args) -> int:
-    from sphere import calibration_session as session
-    from sphere.capture import CaptureError, CaptureFile
+    from sphere.calibration import session as session
+    from sphere.link.capture import CaptureError, CaptureFile
 
     try:
         cap = CaptureFile(args.capture)
@@ -174,7 +174,7 @@ def _run_capture(args) -> int:
 
 def _capture_axis_check(s, cap) -> None:
     """The axis check on a whole capture (said, never fatal: nothing is sent offline)."""
-    from sphere import axis_check
+    from sphere.calibration import axis_check
 
     hellos = [p for p in (getattr(d, "packet", d) for d in cap.packets()) if p.NAME == "HELLO"]
     profile = axis_check.profile_name(hellos[-1].board_profile if hellos else None)  # the newest: in use
@@ -188,11 +188,11 @@ def _capture_axis_check(s, cap) -> None:
 
 
 class _Link:
-    """The session's link: commands and replies through :class:`sphere.device_link.DeviceLink`, and the
+    """The session's link: commands and replies through :class:`sphere.link.device.DeviceLink`, and the
     RAW_SAMPLE values kept as they arrive (device time unwrapped by its PacketStream), for the steps to judge."""
 
     def __init__(self, port, writer=None):
-        from sphere.device_link import DeviceLink
+        from sphere.link.device import DeviceLink
 
         self.values = SeriesBuilder()
         self.last_raw_wall = time.monotonic()
@@ -283,7 +283,7 @@ def _follow(link, timeout_s: float, poll, on_timeout):
 
 
 def _step_gyro(link, progress, timeout_s):
-    from sphere import calibration_session as session
+    from sphere.calibration import session as session
 
     def poll(s):
         span = session.trailing_still(s)
@@ -309,8 +309,8 @@ def _step_gyro(link, progress, timeout_s):
 
 
 def _step_axes(link, progress, timeout_s, bias, port):
-    """Step 2/4: the sphere turned about each of its axes; the three sensors must agree (sphere.axis_check)."""
-    from sphere import axis_check
+    """Step 2/4: the sphere turned about each of its axes; the three sensors must agree (sphere.calibration.axis_check)."""
+    from sphere.calibration import axis_check
 
     state = {"fit": None, "wall": 0.0}
 
@@ -355,7 +355,7 @@ def _step_axes(link, progress, timeout_s, bias, port):
 
 
 def _step_faces(link, progress, timeout_s):
-    from sphere import calibration_session as session
+    from sphere.calibration import session as session
 
     state = {"seen": {}}
 
@@ -395,7 +395,7 @@ def _step_faces(link, progress, timeout_s):
 
 
 def _step_turn(link, progress, timeout_s):
-    from sphere import calibration_session as session
+    from sphere.calibration import session as session
 
     need = int(round(COVERAGE_TARGET * COVERAGE_BINS))
 
@@ -424,9 +424,9 @@ def _step_turn(link, progress, timeout_s):
 
 
 def _run_port(args) -> int:
-    from sphere.capture import CaptureError
-    from sphere.device_link import LinkLost
-    from sphere.serial_link import PortError, open_port
+    from sphere.link.capture import CaptureError
+    from sphere.link.device import LinkLost
+    from sphere.link.port import PortError, open_port
 
     try:
         port = open_port(args.port, args.baud)
@@ -435,7 +435,7 @@ def _run_port(args) -> int:
         return 2
     writer = None
     if args.save_capture:
-        from sphere.capture import CaptureWriter
+        from sphere.link.capture import CaptureWriter
 
         try:
             writer = CaptureWriter(args.save_capture)
@@ -466,7 +466,7 @@ def _run_port(args) -> int:
 
 def _session(args, link) -> int:
     """The guided steps on an open link (``_run_port`` opens and closes it)."""
-    from sphere import calibration_session as session
+    from sphere.calibration import session as session
     from sphere.protocol import CalibrationBlock, GetCalibration, GetHello, SaveCalibration, SetCalibration
     from sphere.protocol.packets import CALIBRATION_STATE_BITS, bit_names
 

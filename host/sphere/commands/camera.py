@@ -5,6 +5,8 @@ from __future__ import annotations
 import os
 import sys
 
+from sphere.bench import camera as camera_bench
+
 HELP = "camera tools: intrinsics from chessboard images (calibrate); the virtual webcam (render); the ball in a webcam or video (track); timing (bench)"
 DESCRIPTION = """\
 calibrate: the camera's focal lengths, principal point and lens distortion from 5 or more images of a
@@ -34,12 +36,7 @@ def add_arguments(p) -> None:
     k.add_argument("--camera-file", help="intrinsics from `sphere camera calibrate` (default: a typical 60° webcam)")
     k.add_argument("--hue", type=float, default=120.0, help="the ball's hue in degrees (default 120, green)")
     k.add_argument("--seconds", type=float, default=0.0, help="stop after this long (default: until the end)")
-    b = sub.add_parser("bench", help="ms per frame of detection + fusion at 640x480 on one core")
-    b.add_argument("--trial", default="10", help="BROAD trial name or number (default 10)")
-    b.add_argument("--start", type=float, default=40.0, help="seconds into the trial (default 40)")
-    b.add_argument("--seconds", type=float, default=5.0, help="how long (default 5)")
-    b.add_argument("--distance", type=float, default=1.0, help="camera to the mean ball position, m (default 1)")
-
+    camera_bench.add_arguments(sub.add_parser("bench", help=camera_bench.HELP))
 
 def _board(text: str):
     try:
@@ -65,7 +62,7 @@ def run(args) -> int:
     if args.camera_command == "calibrate":
         return _calibrate(args)
     if args.camera_command == "bench":
-        return _bench(args)
+        return camera_bench.run(args)
     if args.camera_command == "track":
         return _track(args)
     return _render(args)
@@ -104,30 +101,8 @@ def _track(args) -> int:
     return 0
 
 
-def _bench(args) -> int:
-    from sphere import broad
-    from sphere.camera import bench
-
-    try:
-        r = bench.run(args.trial, args.start, args.seconds, args.distance)
-    except (broad.BroadMissing, ValueError) as e:
-        print(f"sphere camera bench: {e}", file=sys.stderr)
-        return 2
-    print(f"{r['trial']}: {r['frames']} frames at {r['resolution']}, one OpenCV thread; CPU time of this thread")
-    for k, label in (("detect_ms", "detection"), ("fusion_ms", "fusion (camera update)"),
-                     ("per_frame_ms", "detection + fusion"), ("per_frame_wall_ms", "  wall clock")):
-        v = r[k]
-        print(f"  {label:24} mean {v['mean']:6.2f} ms  median {v['p50']:6.2f} ms  p95 {v['p95']:6.2f} ms")
-    print(f"  IMU step (prediction)    mean {r['imu_step_us']['mean']:6.1f} µs  p95 {r['imu_step_us']['p95']:6.1f} µs "
-          f"at {r['imu_rate_hz']:.0f} Hz")
-    verdict = "met" if r["per_frame_ms"]["mean"] <= 5.0 else "MISSED"
-    print(f"  target ≤ 5 ms per frame (mean CPU time): {verdict}"
-          + (f"; load average {r['load_average_1min']:.1f} while measuring" if r["load_average_1min"] is not None else ""))
-    return 0
-
-
 def _calibrate(args) -> int:
-    from sphere.camera.calibration import CalibrationError, calibrate, read_views
+    from sphere.camera.intrinsics import CalibrationError, calibrate, read_views
 
     cols, rows = _board(args.board)
     if not args.square_mm > 0:

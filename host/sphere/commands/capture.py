@@ -8,9 +8,9 @@ import time
 import serial
 
 from sphere.argtypes import seconds
-from sphere.capture import SIDECAR_SUFFIX, CaptureError, CaptureWriter
+from sphere.link.capture import SIDECAR_SUFFIX, CaptureError, CaptureWriter
 from sphere.protocol import PacketStream
-from sphere.serial_link import DEFAULT_BAUD, PortError, open_port
+from sphere.link.port import DEFAULT_BAUD, PortError, open_port
 
 HELP = "record the sphere's serial stream into a capture file"
 DESCRIPTION = (

@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 import sys
 
-from sphere.capture import CaptureError, CaptureFile
+from sphere.link.capture import CaptureError, CaptureFile
 from sphere.protocol.packets import BY_TYPE
 
 HELP = "decode a serial capture and print its packets"

@@ -32,7 +32,7 @@ def add_arguments(p) -> None:
 
 
 def _keys() -> str:
-    from sphere.device_settings import SETTINGS, show
+    from sphere.link.device_settings import SETTINGS, show
 
     lines = []
     for key, s in SETTINGS.items():
@@ -51,8 +51,8 @@ class _Failed(Exception):
 
 
 def _open(args):
-    from sphere.device_link import DeviceLink
-    from sphere.serial_link import PortError, open_port
+    from sphere.link.device import DeviceLink
+    from sphere.link.port import PortError, open_port
 
     if not args.port:
         raise _Failed("name the sphere's port with --port (e.g. --port /dev/ttyUSB0)")
@@ -76,7 +76,7 @@ def _open(args):
 
 
 def _describe_hello(hello) -> list[str]:
-    from sphere.device_settings import current_from_hello, show
+    from sphere.link.device_settings import current_from_hello, show
 
     j = hello.to_json()
     out = [f"firmware {j['firmware_version']} (protocol {hello.protocol_version}); sensors found: "
@@ -119,7 +119,7 @@ def run(args) -> int:
 
 
 def _run(args) -> int:
-    from sphere.device_settings import SettingError, plan_settings, show
+    from sphere.link.device_settings import SettingError, plan_settings, show
 
     if args.action == "keys":
         print(_keys())
@@ -136,7 +136,7 @@ def _run(args) -> int:
         if not 1 <= seconds <= 60:
             raise _Failed(f"identify {seconds}: seconds must be 1 … 60")
     if args.action == "set":
-        from sphere.device_settings import parse_assignment
+        from sphere.link.device_settings import parse_assignment
 
         try:  # checked before the port is opened: a typo touches nothing
             for item in args.items:

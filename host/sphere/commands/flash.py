@@ -91,7 +91,7 @@ def find_port(given: str | None) -> str:
 def wait_for_hello(port: str, timeout_s: float = HELLO_TIMEOUT_S):
     """Open the port at the firmware's rate and wait for a HELLO (asking with GET_HELLO after 1.5 s)."""
     from sphere.protocol import FrameDecoder, GetHello, encode_frame
-    from sphere.serial_link import DEFAULT_BAUD, PortError, open_port
+    from sphere.link.port import DEFAULT_BAUD, PortError, open_port
 
     try:
         ser = open_port(port, DEFAULT_BAUD, timeout_s=0.1)
@@ -116,10 +116,10 @@ def wait_for_hello(port: str, timeout_s: float = HELLO_TIMEOUT_S):
 
 
 def flash(args, out=None) -> int:
-    from sphere import bootloader
+    from sphere.link import bootloader
 
     out = out or sys.stdout
-    from sphere.serial_link import PortError, open_port
+    from sphere.link.port import PortError, open_port
 
     image = find_image(args.image)
     avrdude = shutil.which(args.avrdude)

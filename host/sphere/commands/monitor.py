@@ -77,10 +77,10 @@ class _Plot:
 
 
 def run(args) -> int:
-    from sphere.device_link import DeviceLink, LinkLost
-    from sphere.link_monitor import LinkMonitor
+    from sphere.link.device import DeviceLink, LinkLost
+    from sphere.link.monitor import LinkMonitor
     from sphere.protocol import GetHello
-    from sphere.serial_link import PortError, open_port
+    from sphere.link.port import PortError, open_port
 
     try:
         ser = open_port(args.port, args.baud, timeout_s=0.05)

@@ -7,7 +7,7 @@ Pure core, fed packets, never opening a device:
 - :mod:`~sphere.daemon.motion` — :class:`MotionTracker`: bias-corrected rate, the vertical, orientation;
 - :mod:`~sphere.daemon.actions` — events → actions and the freeze around a tap;
 - :mod:`~sphere.daemon.config` — the TOML settings, validated;
-- :mod:`~sphere.daemon.synthetic` — a scripted sphere's frames.
+- :mod:`~sphere.daemon.scripted_sphere` — a scripted sphere's frames.
 
 Edges: :mod:`~sphere.daemon.sources` (a package: one reconnect loop in ``base``, then serial with
 discovery, HID, capture replay, the virtual board, the scripted sphere, and a registry),

@@ -218,7 +218,7 @@ def _usb_ids(v):
 
 
 def _baud(v):
-    from sphere.serial_link import check_baud
+    from sphere.link.port import check_baud
 
     return check_baud(v)
 

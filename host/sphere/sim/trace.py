@@ -261,7 +261,7 @@ CAL_SEED = 20261122
 #: turn each way, as the axis check of `sphere calibrate` asks), then each face up in turn (a smooth
 #: rotation, then held still), then slow tumbling through every direction for CAL_TUMBLE_S, back to z up,
 #: and again from the start, so `sphere calibrate` started at any time finds every pose it asks for within
-#: one round. Each hold is longer than the calibration's 3 s still (sphere.calibration_session.STILL_S),
+#: one round. Each hold is longer than the calibration's 3 s still (sphere.calibration.session.STILL_S),
 #: with room for its 0.25 s stillness blocks, so a session that joins after the first still phase can use
 #: a face's hold.
 CAL_STILL_S = 5.0

@@ -5,7 +5,7 @@ from __future__ import annotations
 import os
 import time
 
-from sphere.capture import CaptureError, CaptureFile
+from sphere.link.capture import CaptureError, CaptureFile
 from sphere.daemon.sources.base import Source, SourceEnded, SourceError, version_problem
 from sphere.protocol import Hello
 

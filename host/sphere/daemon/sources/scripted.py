@@ -1,4 +1,4 @@
-"""The built-in scripted sphere (sphere.daemon.synthetic), paced in real time, looping."""
+"""The built-in scripted sphere (sphere.daemon.scripted_sphere), paced in real time, looping."""
 
 from __future__ import annotations
 
@@ -8,15 +8,15 @@ from sphere.daemon.sources.base import Source, SourceEnded
 
 
 class ScriptedSource(Source):
-    """Frames of :data:`sphere.daemon.synthetic.DEMO_SCRIPT` (or ``script``), as a sphere would send them."""
+    """Frames of :data:`sphere.daemon.scripted_sphere.DEMO_SCRIPT` (or ``script``), as a sphere would send them."""
 
     NAME = "scripted"
 
     def __init__(self, script=None, speed: float = 1.0, loop: bool = True):
         super().__init__(reconnect_interval_s=0.0)
-        from sphere.daemon import synthetic
+        from sphere.daemon import scripted_sphere
 
-        self.script = script or synthetic.DEMO_SCRIPT
+        self.script = script or scripted_sphere.DEMO_SCRIPT
         self.speed = speed
         self.loop = loop
         self.state = "scripted sphere (built in)"
@@ -31,7 +31,7 @@ class ScriptedSource(Source):
         return self._done
 
     def _connect(self):
-        from sphere.daemon.synthetic import ScriptedSphere
+        from sphere.daemon.scripted_sphere import ScriptedSphere
 
         self._sphere = ScriptedSphere()
         self._t0, hello = self._sphere.hello()

@@ -4,7 +4,7 @@ Discovery (``port = "auto"``) touches only spheres:
 
 - candidates are the ports whose USB VID:PID is in ``usb_ids`` (``serial.tools.list_ports``), the
   paths in ``candidates`` (``/dev/sphere``, the udev symlink) and the glob matches among them;
-- a port another program has open is skipped and never opened (``sphere.serial_link.holders``);
+- a port another program has open is skipped and never opened (``sphere.link.port.holders``);
   every port is opened exclusively (flock + TIOCEXCL), with DTR held low where the driver allows;
 - a port is only *listened to* until it identifies itself as a sphere: a HELLO, or
   ``IDENTIFY_FRAMES`` CRC-good frames of the sphere's types in a row. Only then is GET_HELLO sent (for
@@ -21,7 +21,7 @@ import time
 
 from sphere.daemon.sources.base import LinkLost, Source, SourceError, version_problem
 from sphere.protocol import GetHello, Hello, PacketStream
-from sphere.serial_link import PortBusy, PortError, open_port, port_problem
+from sphere.link.port import PortBusy, PortError, open_port, port_problem
 
 DEFAULT_CANDIDATES = ("/dev/sphere",)
 #: USB-serial chips of the Arduino Nano and its clones: CH340, FT232R, CP2102.
@@ -139,7 +139,7 @@ class SerialSource(Source):
 
     def _try_port(self, path: str, named: bool):
         """Open ``path`` and wait for the sphere to identify itself: the packets from its HELLO on, or None."""
-        from sphere.device_link import DeviceLink
+        from sphere.link.device import DeviceLink
 
         try:
             ser = self._open(path)

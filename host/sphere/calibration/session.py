@@ -24,7 +24,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from sphere import calibration, chips
+from sphere import chips
+from sphere.calibration import fit as calibration
 
 STILL_S = 3.0  # gyro bias: still this long (device seconds)
 FACE_S = 2.0  # each face: still this long

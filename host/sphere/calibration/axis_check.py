@@ -266,7 +266,7 @@ def turned_deg(t, gyro_lsb, bias_lsb=None) -> np.ndarray:
 
 
 def fit(s, gyro_bias_lsb=None, full: bool = True) -> AxisFit:
-    """The maps from a :class:`sphere.calibration_session.Series` of the sphere turning. ``full=False``
+    """The maps from a :class:`sphere.calibration.session.Series` of the sphere turning. ``full=False``
     only measures how far each axis turned (cheap, for progress) until every axis has."""
     turned = turned_deg(s.t, s.gyro, gyro_bias_lsb)
     if not full and not all(turned >= TURN_DEG):

@@ -1,7 +1,7 @@
 """Latency and CPU benchmark of sphere-mouse's serial path (prints figures; not a unit test).
 
-    python -m sphere.daemon.bench [--seconds 10] [--rate 200] [--json]
-    python -m sphere.daemon.bench --against REV [--pairs 8] [--seconds 10]
+    python -m sphere.bench.daemon [--seconds 10] [--rate 200] [--json]
+    python -m sphere.bench.daemon --against REV [--pairs 8] [--seconds 10]
 
 1. **Latency**, in process: a writer process plays a sphere on a pty at ``--rate`` RAW_SAMPLE frames/s
    (a steady turn, so every sample moves the pointer); the daemon (SerialSource → SphereMouse) runs in
@@ -38,7 +38,10 @@ import threading
 import time
 import tty
 
-from sphere.daemon.synthetic import ScriptedSphere, hello_packet
+try:
+    from sphere.daemon.scripted_sphere import ScriptedSphere, hello_packet
+except ImportError:  # --against a revision from before the module's rename (it was sphere.daemon.synthetic)
+    from sphere.daemon.synthetic import ScriptedSphere, hello_packet
 from sphere.protocol import FrameDecoder
 
 
@@ -387,8 +390,10 @@ def against(args) -> int:
     return 0
 
 
-def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m sphere.daemon.bench", description=__doc__.split("\n\n")[0])
+HELP = "latency and CPU of sphere-mouse's serial path (also python -m sphere.bench.daemon)"
+
+
+def add_arguments(ap) -> None:
     ap.add_argument("--seconds", type=float, default=10.0, help="length of each run (default 10)")
     ap.add_argument("--rate", type=float, default=200.0, help="RAW_SAMPLE frames per second (default 200)")
     ap.add_argument("--orientation", action="store_true", help="also send ORIENTATION at half the rate")
@@ -398,13 +403,17 @@ def main(argv=None) -> int:
     ap.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
                     help="a daemon setting other than its default, as sphere-mouse's --set (repeatable), e.g. "
                          "--set gyro.auto_bias=false")
-    args = ap.parse_args(argv)
+
+
+def run(args, prog: str = "sphere bench daemon") -> int:
     if not 0.5 <= args.seconds <= 3600 or not 1 <= args.rate <= 2000 or not 1 <= args.pairs <= 100:
-        ap.error("--seconds must be 0.5–3600, --rate 1–2000, --pairs 1–100")
+        print(f"{prog}: --seconds must be 0.5–3600, --rate 1–2000, --pairs 1–100", file=sys.stderr)
+        return 2
     try:
         _settings(args.set)
     except Exception as e:  # ConfigError: the same one line sphere-mouse gives
-        ap.error(str(e))
+        print(f"{prog}: {e}", file=sys.stderr)
+        return 2
     if args.against:
         print(f"sphere-mouse benchmark, side by side: {args.rate:g} RAW_SAMPLE frames/s, {args.seconds:g} s per run, "
               f"{os.cpu_count()} CPUs, Python {sys.version.split()[0]}, load average before {os.getloadavg()[0]:.2f}",
@@ -412,7 +421,7 @@ def main(argv=None) -> int:
         try:
             return against(args)
         except UsageError as e:
-            print(f"python -m sphere.daemon.bench: {e}", file=sys.stderr)
+            print(f"{prog}: {e}", file=sys.stderr)
             return 2
     if not args.json:
         print(f"sphere-mouse benchmark: {args.rate:g} RAW_SAMPLE frames/s" + (" + ORIENTATION" if args.orientation else "")
@@ -424,6 +433,12 @@ def main(argv=None) -> int:
     else:
         report(r)
     return 0
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m sphere.bench.daemon", description=__doc__.split("\n\n")[0])
+    add_arguments(ap)
+    return run(ap.parse_args(argv), prog="python -m sphere.bench.daemon")
 
 
 if __name__ == "__main__":
