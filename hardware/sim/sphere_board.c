@@ -28,6 +28,7 @@
 #include <limits.h>
 #ifdef __linux__
 #include <sys/prctl.h>
+#include <termios.h>
 #endif
 
 #include "sim_avr.h"
@@ -181,6 +182,10 @@ typedef struct {
 	uint8_t pend[64];
 	avr_cycle_count_t latency_cycles, last_packet;
 	avr_irq_t *pty_in;
+	/* FTDI: the latency timer the driver sets (--latency-timer, 16 ms by default) and the one it sets when the
+	 * host asks for low latency (1 ms), read from the pty's termios (pty_fd: the master; "The host's requests") */
+	int ftdi, pty_fd, host_low_latency;
+	uint32_t latency_ms;
 } uart_out_t;
 
 static uart_out_t uart_out;
@@ -231,12 +236,34 @@ static void adapter_flush(uart_out_t *u)
 	u->last_packet = u->avr->cycle;
 }
 
+/* The host's low-latency request (ASYNC_LOW_LATENCY) reaches a pty as termios CMSPAR without PARENB (the kernel
+ * keeps CMSPAR on a pty and clears PARENB; tcgetattr on the master reads the slave's termios): ftdi_sio then
+ * writes 1 ms into the FT232R's latency timer, so the model does the same. A host that opens the port again
+ * without asking gets the default back, as pyserial's open rewrites the termios without CMSPAR. */
+#ifndef CMSPAR
+#define CMSPAR 010000000000
+#endif
+static void host_latency_request(uart_out_t *u)
+{
+	struct termios tio;
+	if (tcgetattr(u->pty_fd, &tio) != 0)
+		return;
+	int low = (tio.c_cflag & CMSPAR) && !(tio.c_cflag & PARENB);
+	if (low == u->host_low_latency)
+		return;
+	u->host_low_latency = low;
+	u->latency_cycles = (avr_cycle_count_t)(low ? 1 : u->latency_ms) * (u->avr->frequency / 1000);
+	log_fault((double)u->avr->cycle / u->avr->frequency, low ? "host_low_latency" : "host_default_latency", -1);
+}
+
 /* FTDI FT232R (AN232B-04): a packet when 62 data bytes are waiting, or when the latency timer (16 ms) runs
  * out with data waiting. CH340: no latency timer in its datasheet; the model sends a 32-byte packet when
  * full, or what is waiting at each 1 ms USB frame. */
 static avr_cycle_count_t adapter_timer(avr_t *avr, avr_cycle_count_t when, void *param)
 {
 	uart_out_t *u = param;
+	if (u->ftdi && u->pty_fd > 0)
+		host_latency_request(u);
 	if (u->pending && when - u->last_packet >= u->latency_cycles)
 		adapter_flush(u);
 	return when + avr->frequency / 1000;
@@ -506,6 +533,8 @@ static void usage(FILE *f)
 		"  --adapter NAME       the USB-serial adapter between the UART and the host (capture, pty): ftdi (62-byte\n"
 		"                       packets, 16 ms latency timer, 256-byte buffer) or ch340 (32-byte packets each 1 ms\n"
 		"                       frame, 32-byte buffer); default none: bytes reach the host as they are sent\n"
+		"  --latency-timer MS   the FTDI's latency timer as the driver sets it (default 16; the udev rule's 1); a\n"
+		"                       host that asks for low latency on the pty gets 1 ms\n"
 		"  --drdy-pin PIN       wire the HMC5883L's DRDY to PIN (e.g. D3; not wired on the sphere)\n"
 		"  --capture-times FILE at each frame delimiter in the capture: u64 bytes captured so far, f64 simulated s\n"
 		"  --simavr-i2c-timing  simavr's 1 us per I2C step (default: 9 SCL periods a byte at the TWBR rate)\n"
@@ -549,6 +578,7 @@ int main(int argc, char **argv)
 	int clocks_random = 0, sda_held = 0, n_brownouts = 0, n_stalls = 0, n_resets_mid = 0, n_resets_at = 0, n_power_offs = 0;
 	double glitch_rate = 0, power_offs[MAX_FAULTS], brownouts[MAX_FAULTS], resets_mid[MAX_FAULTS], host_stalls[MAX_FAULTS][2], resets_at[MAX_FAULTS];
 	const char *adapter = NULL, *times_path = NULL;
+	uint32_t latency_timer_ms = 16; /* the FT232R latency timer as ftdi_sio leaves it (since Linux 4.x) */
 	char tpin_port = 'B', lpin_port = 0, dpin_port = 0;
 	int tpin_bit = 5, lpin_bit = 0, dpin_bit = 0;
 	fault_t faults[MAX_FAULTS];
@@ -567,6 +597,7 @@ int main(int argc, char **argv)
 		{"glitch", required_argument, 0, 'g'}, {"reset-mid-read", required_argument, 0, 'm'},
 		{"brownout", required_argument, 0, 'b'}, {"sda-held", no_argument, 0, 'H'},
 		{"host-stall", required_argument, 0, 'o'}, {"adapter", required_argument, 0, 'a'},
+		{"latency-timer", required_argument, 0, 'Y'},
 		{"simavr-i2c-timing", no_argument, 0, 'U'}, {"capture-times", required_argument, 0, 'X'},
 		{"reset-at", required_argument, 0, 'A'}, {"drdy-pin", required_argument, 0, 'D'},
 		{"power-off", required_argument, 0, 'O'}, {0, 0, 0, 0}};
@@ -597,6 +628,13 @@ int main(int argc, char **argv)
 			if (strcmp(optarg, "ftdi") && strcmp(optarg, "ch340")) { fprintf(stderr, "--adapter ftdi or ch340, not %s\n", optarg); return 2; }
 			adapter = optarg;
 			break;
+		case 'Y': {
+			char *end;
+			long ms = strtol(optarg, &end, 10);
+			if (*end || ms < 1 || ms > 255) { fprintf(stderr, "--latency-timer takes 1 to 255 ms (the FT232R's range), not %s\n", optarg); return 2; }
+			latency_timer_ms = (uint32_t)ms;
+			break;
+		}
 		case 'C':
 			if (strcmp(optarg, "random")) { fprintf(stderr, "--clocks random (or --clock-ppm CHIP:PPM)\n"); return 2; }
 			clocks_random = 1;
@@ -737,7 +775,9 @@ int main(int argc, char **argv)
 	if (adapter) {
 		int ftdi = !strcmp(adapter, "ftdi");
 		uart_out.packet = ftdi ? 62 : 32;
-		uart_out.latency_cycles = ftdi ? avr->frequency / 1000 * 16 : 0; /* CH340: every 1 ms frame */
+		uart_out.ftdi = ftdi;
+		uart_out.latency_ms = latency_timer_ms;
+		uart_out.latency_cycles = ftdi ? avr->frequency / 1000 * latency_timer_ms : 0; /* CH340: every 1 ms frame */
 		avr_cycle_timer_register(avr, avr->frequency / 1000, adapter_timer, &uart_out);
 	}
 
@@ -770,6 +810,7 @@ int main(int argc, char **argv)
 			avr_unconnect_irq(avr_io_getirq(avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_OUTPUT), pty.irq + IRQ_UART_PTY_BYTE_IN);
 			uart_out.pty_in = pty.irq + IRQ_UART_PTY_BYTE_IN;
 		}
+		uart_out.pty_fd = pty.port[0].s;
 		printf("sphere-board: UART on %s\n", pty.port[0].slavename);
 		fflush(stdout);
 	}

@@ -4,6 +4,9 @@ These need no firmware, so they guard the board while the firmware changes."""
 
 from __future__ import annotations
 
+import json
+import time
+
 import pytest
 
 from simscenarios import sketch_scenario
@@ -211,6 +214,63 @@ def test_usb_serial_adapters_deliver_in_packets(tmp_path):
         delay = t - wire
         assert delay.min() >= 0 and delay.max() <= most and delay.mean() >= least, (adapter, delay.max(), delay.mean())
     assert len(np.unique(got["ftdi"][1])) < 0.6 * len(wire)  # frames share packets
+
+
+def test_ftdi_model_flushes_at_1_ms_once_the_host_asks_for_low_latency(tmp_path):
+    """The seam of the low-latency request (hardware/sim/README.md, "The host's requests"): the host opens the
+    board's pty the way sphere-mouse does (``open_port(low_latency=True)``: ASYNC_LOW_LATENCY, which a pty
+    refuses, then CMSPAR in its termios); from then on the FTDI model's latency timer is 1 ms instead of 16 ms,
+    as ftdi_sio sets it. Frames are compared with the same firmware's UART times (no adapter, no pty)."""
+    import subprocess
+
+    import numpy as np
+    import serial
+
+    from sphere.serial_link import open_port
+    from sphere.sim import trace as T
+    from sphere.sim.board import board_command, run_board
+    from simscenarios import need_board, need_testfw
+
+    need_board()
+    elf = need_testfw()
+    trace = T.to_chips(T.still(3.0)).write(tmp_path / "still.bin")
+    wire_cap, wire_times = tmp_path / "wire.cap", tmp_path / "wire.times"
+    r = run_board(elf, trace, 3.0, wire_cap, capture_times=wire_times)
+    assert r.returncode == 0, r.stderr
+    cap, times, stats = tmp_path / "ftdi.cap", tmp_path / "ftdi.times", tmp_path / "stats.json"
+    cmd = board_command(elf, trace, 3.0, capture=cap, capture_times=times, pty=True, adapter="ftdi", stats=stats)
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        line = ""
+        while "UART on /dev/pts/" not in line:
+            line = proc.stdout.readline()
+            assert line, proc.stderr.read()
+        time.sleep(1.2)  # the driver's default first
+        ser = open_port(line.split()[-1], reset_on_open=False, low_latency=True)
+        assert ser.low_latency_problem is None
+        deadline = time.monotonic() + 10
+        try:
+            while proc.poll() is None and time.monotonic() < deadline:
+                ser.read(4096)
+        except serial.SerialException:  # the board ended: its pty went away
+            pass
+        ser.close()
+        assert proc.wait(10) == 0, proc.stderr.read()
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    events = [f for f in json.loads(stats.read_text())["faults"] if f["kind"].startswith("host_")]
+    assert [e["kind"] for e in events] == ["host_low_latency"], events
+    asked = events[0]["t"]
+    assert 0.3 < asked < 2.7  # simulated time: a loaded machine runs the board slower than the wall clock
+    assert cap.read_bytes() == wire_cap.read_bytes()
+    rec = np.dtype([("off", "<u8"), ("t", "<f8")])
+    wire, host = np.fromfile(wire_times, rec)["t"], np.fromfile(times, rec)["t"]
+    delay = host - wire
+    before, after = delay[wire < asked - 0.02], delay[wire > asked + 0.02]
+    assert before.max() > 0.008  # frames waited for the 16 ms timer
+    assert after.max() <= 0.0021, after.max()  # the 1 ms timer, counted from the last packet, at 1 ms USB frames
+    assert before.max() > 4 * after.max()
 
 
 def test_pty_leaves_the_fixed_simavr_name_alone(tmp_path):

@@ -324,6 +324,19 @@ def test_udev_rule_for_a_port():
     assert 'ATTRS{idVendor}=="0403", ATTRS{idProduct}=="6001", ATTRS{serial}=="A50285BI"' in \
         udev_rule("/dev/ttyUSB0", lambda: [ftdi, ch340])
     assert 'KERNELS=="1-1.2:1.0"' in udev_rule("/dev/ttyUSB1", lambda: [ftdi, ch340])
+    # the FTDI's latency timer to 1 ms for this adapter only; the CH340 has no such timer
+    ftdi_lines = udev_rule("/dev/ttyUSB0", lambda: [ftdi, ch340]).splitlines()
+    assert len(ftdi_lines) == 2 and ftdi_lines[1].startswith('ACTION=="add", SUBSYSTEM=="usb-serial", DRIVER=="ftdi_sio"')
+    assert 'ATTRS{serial}=="A50285BI"' in ftdi_lines[1] and ftdi_lines[1].endswith('ATTR{latency_timer}="1"')
+    assert "latency_timer" not in udev_rule("/dev/ttyUSB1", lambda: [ftdi, ch340])
+
+
+def test_udev_rules_set_the_sphere_ftdi_latency_timer_only():
+    rules = [line for line in open(os.path.join(os.path.dirname(__file__), "..", "..", "host", "packaging",
+                                                "70-sphere-mouse.rules")).read().splitlines()
+             if "latency_timer" in line and not line.startswith("#")]
+    assert len(rules) == 1 and 'ATTR{latency_timer}="1"' in rules[0] and 'DRIVER=="ftdi_sio"' in rules[0]
+    assert "ATTRS{serial}" in rules[0]  # this sphere's adapter, not every FTDI chip
 
 
 def test_a_connection_flood_does_not_cost_the_sphere(tmp_path):

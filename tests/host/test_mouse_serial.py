@@ -210,3 +210,65 @@ def test_frame_bytes_in_any_chunking_and_junk_before_hello(tmp_path):
     os.close(master)
     assert got[0].packet.NAME == "HELLO"
     assert source.connects == 1
+
+
+def test_serial_source_asks_the_port_for_low_latency(tmp_path):
+    """sphere-mouse asks every port it opens for low latency (an FTDI's latency timer 16 → 1 ms); on a pty the
+    request is CMSPAR in the termios, which the device end (the virtual board) reads on its master;
+    ``[source] low_latency = false`` leaves the driver's default."""
+    import termios
+
+    from sphere.serial_link import CMSPAR
+
+    for asked in (True, False):
+        master, slave = os.openpty()
+        path = os.ttyname(slave)
+        os.close(slave)
+        src = fast_serial(path, low_latency=asked)
+        ser = src._open(path)
+        try:
+            assert bool(termios.tcgetattr(master)[2] & CMSPAR) is asked
+            assert ser.low_latency_problem is None
+        finally:
+            ser.close()
+            os.close(master)
+
+
+def test_a_driver_without_low_latency_is_said_once_at_debug(caplog):
+    """A driver that refuses the request (a CH340's ch341, Bluetooth rfcomm) costs latency, not function: one
+    DEBUG line (shown by ``sphere-mouse -v``), once per port, and the port is used."""
+    import logging
+
+    from sphere import serial_link
+
+    class Refusing:
+        port = "/dev/ttyUSB7"
+
+        def set_low_latency_mode(self, on):
+            raise ValueError("Failed to update ASYNC_LOW_LATENCY flag to True: [Errno 25] Inappropriate ioctl")
+
+    problem = serial_link.request_low_latency(Refusing())
+    assert problem.startswith("/dev/ttyUSB7: the driver offers no low-latency mode") and "latency_timer" in problem
+    src = fast_serial("/dev/ttyUSB7")  # no log callable: the "sphere.daemon.source" logger
+    caplog.set_level(logging.DEBUG, logger="sphere.daemon.source")
+    opened = []
+
+    def fake_open_port(path, *a, **kw):
+        assert kw["low_latency"] is True
+        ser = Refusing()
+        ser.low_latency_problem = problem
+        opened.append(ser)
+        ser.reset_input_buffer = lambda: None
+        return ser
+
+    import sphere.daemon.sources.serial as serial_mod
+
+    real = serial_mod.open_port
+    serial_mod.open_port = fake_open_port
+    try:
+        src._open("/dev/ttyUSB7")
+        src._open("/dev/ttyUSB7")
+    finally:
+        serial_mod.open_port = real
+    lines = [r for r in caplog.records if "low-latency" in r.getMessage()]
+    assert len(opened) == 2 and len(lines) == 1 and lines[0].levelno == logging.DEBUG

@@ -83,7 +83,7 @@ def run(args) -> int:
     from sphere.link.port import PortError, open_port
 
     try:
-        ser = open_port(args.port, args.baud, timeout_s=0.05)
+        ser = open_port(args.port, args.baud, timeout_s=0.05, low_latency=True)
     except PortError as e:  # the port named is not there or not usable: a usage error
         print(f"sphere monitor: {e}", file=sys.stderr)
         return 2

@@ -45,6 +45,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--status", action="store_true", help="print the status line every second even when "
                    "stderr is not a terminal")
     p.add_argument("--quiet", action="store_true", help="no status line")
+    p.add_argument("-v", "--verbose", action="store_true", help="also log details: e.g. a serial driver that "
+                   "offers no low-latency mode")
     p.add_argument("--check-config", action="store_true", help="validate the config and exit")
     p.add_argument("--print-config", action="store_true",
                    help="print every setting with its default and meaning (a config file to start from) and exit")
@@ -56,9 +58,13 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+FTDI_VID = 0x0403
+
+
 def udev_rule(port: str, comports=None) -> str:
     """The host/packaging/70-sphere-mouse.rules line for the USB-serial adapter on ``port``: its VID:PID and its
-    serial number, or, for an adapter without one (CH340), the USB socket it is plugged into."""
+    serial number, or, for an adapter without one (CH340), the USB socket it is plugged into; for an FTDI
+    adapter a second line that sets its latency timer to 1 ms."""
     if comports is None:
         from serial.tools.list_ports import comports
     real = os.path.realpath(port)
@@ -69,8 +75,11 @@ def udev_rule(port: str, comports=None) -> str:
             break
         ident = (f'ATTRS{{serial}}=="{info.serial_number}"' if info.serial_number
                  else f'KERNELS=="{info.location}"')
-        return (f'SUBSYSTEM=="tty", ATTRS{{idVendor}}=="{info.vid:04x}", ATTRS{{idProduct}}=="{info.pid:04x}", '
-                f'{ident}, SYMLINK+="sphere", MODE="0660", TAG+="uaccess"')
+        ids = f'ATTRS{{idVendor}}=="{info.vid:04x}", ATTRS{{idProduct}}=="{info.pid:04x}", {ident}'
+        rule = f'SUBSYSTEM=="tty", {ids}, SYMLINK+="sphere", MODE="0660", TAG+="uaccess"'
+        if info.vid == FTDI_VID:  # its latency timer to 1 ms (the rules file says why)
+            rule += f'\nACTION=="add", SUBSYSTEM=="usb-serial", DRIVER=="ftdi_sio", {ids}, ATTR{{latency_timer}}="1"'
+        return rule
     raise ConfigError(f"{port} is not a USB serial port this machine lists (python3 -m serial.tools.list_ports); "
                       "a Bluetooth port needs no rule: name it with --port")
 
@@ -145,7 +154,7 @@ def _stderr_is_journal() -> bool:
         return False
 
 
-def setup_logging() -> logging.Logger:
+def setup_logging(verbose: bool = False) -> logging.Logger:
     """The daemon's messages (logger "sphere.daemon" and its children) on stderr, one line each."""
     logger = logging.getLogger("sphere.daemon")
     for h in list(logger.handlers):
@@ -155,7 +164,7 @@ def setup_logging() -> logging.Logger:
     handler._sphere_mouse = True
     handler.setFormatter(_JournalFormatter(_stderr_is_journal()))
     logger.addHandler(handler)
-    logger.setLevel(logging.INFO)
+    logger.setLevel(logging.DEBUG if verbose else logging.INFO)
     logger.propagate = False
     return logger
 
@@ -183,7 +192,7 @@ def _main(argv=None) -> int:
 
         sys.stdout.write(defaults_toml())
         return 0
-    logger = setup_logging()
+    logger = setup_logging(args.verbose)
 
     def log(msg: str) -> None:
         logger.info(msg)

@@ -264,6 +264,8 @@ class SourceSettings:
     reset_on_open: bool = option(False, "let opening the port reset a USB Nano through DTR; false holds DTR low "
                                  "(Linux still raises it for a moment on open, so a Nano with its auto-reset "
                                  "capacitor may reset anyway)")
+    low_latency: bool = option(True, "ask the serial driver to pass bytes on at once (ASYNC_LOW_LATENCY: an FTDI "
+                               "adapter's latency timer goes from 16 ms to 1 ms); false leaves the driver's default")
     hello_timeout_s: float = option(0.5, "send GET_HELLO to a named port if no HELLO came within this time (Bluetooth "
                                     "links do not reset the board)", _range(0.01, 60.0))
     discovery_timeout_s: float = option(3.0, "give up on a candidate port that did not identify itself within this "

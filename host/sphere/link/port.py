@@ -15,6 +15,10 @@ import serial
 
 DEFAULT_BAUD = 115200
 MAX_BAUD = 4_000_000  # well above anything the sphere's UART or an SPP module does
+#: termios ``c_cflag`` bit CMSPAR (Linux asm-generic/termbits.h, 010000000000; Python's termios lacks it).
+#: Mark/space parity only means something together with PARENB, so CMSPAR without PARENB changes nothing on
+#: any serial line; on a pseudo-terminal it is the low-latency request (:func:`request_low_latency`).
+CMSPAR = 0o10000000000
 
 
 class PortError(Exception):
@@ -166,13 +170,50 @@ def _set_exclusive(ser) -> None:
         pass
 
 
+def request_low_latency(ser) -> str | None:
+    """Ask the port to pass received bytes on at once instead of holding them; None when asked, else why
+    not (one line, for the log).
+
+    - A USB-serial or UART port: the ``ASYNC_LOW_LATENCY`` flag (TIOCSSERIAL, pyserial's
+      ``set_low_latency_mode``). The FT232R's driver (ftdi_sio) then sets the chip's latency timer to 1 ms
+      instead of 16 ms; a driver without the flag (ch341: the CH340 has no such timer; Bluetooth rfcomm)
+      refuses it, which costs nothing there.
+    - A pseudo-terminal (the virtual board, ``sphere sim --pty``) has no driver to ask: the request is
+      written into the pty's termios as :data:`CMSPAR` without PARENB, which the kernel keeps and the
+      device end reads with ``tcgetattr`` on its master (hardware/sim/README.md, "The host's requests").
+      Setting the baud rate rewrites the termios, so call this again after it.
+    """
+    try:
+        ser.set_low_latency_mode(True)
+        return None
+    except AttributeError:  # pyserial offers it on Linux only
+        return f"{ser.port}: this platform has no low-latency request; bytes may wait for the adapter's timer"
+    except (ValueError, OSError) as e:
+        why = str(e)
+    if _pty_index(ser.port) is not None:
+        try:
+            import termios
+
+            attrs = termios.tcgetattr(ser.fileno())
+            attrs[2] |= CMSPAR
+            termios.tcsetattr(ser.fileno(), termios.TCSANOW, attrs)
+            return None
+        except (ImportError, OSError, termios.error) as e:
+            why = str(e)
+    return (f"{ser.port}: the driver offers no low-latency mode ({why}); bytes may wait for the adapter's own "
+            "timer (an FTDI adapter: the udev rule in host/packaging sets its latency_timer to 1 ms)")
+
+
 def open_port(port: str, baud: int = DEFAULT_BAUD, timeout_s: float = 0.1, *, reset_on_open: bool = True,
-              write_timeout_s: float | None = None, exclusive: bool = True, allow_pids=()) -> serial.Serial:
+              write_timeout_s: float | None = None, exclusive: bool = True, allow_pids=(),
+              low_latency: bool = False) -> serial.Serial:
     """Open a port for reading frames: 8N1, no flow control, a short read timeout, exclusively.
 
     ``reset_on_open=False`` holds DTR low while opening, so a USB Nano is not reset where the driver
     allows it (the Linux tty layer raises DTR on every open, which resets a Nano whose auto-reset
-    capacitor is fitted); Bluetooth SPP ports have no DTR to pulse. Raises :class:`PortBusy` when another
+    capacitor is fitted); Bluetooth SPP ports have no DTR to pulse. ``low_latency``: ask the driver to
+    pass bytes on at once (:func:`request_low_latency`); why it could not is in ``ser.low_latency_problem``
+    (None when asked). Raises :class:`PortBusy` when another
     program has the port open (it is not opened at all then), :class:`PortError` otherwise.
     """
     problem = check_baud(baud)
@@ -207,4 +248,5 @@ def open_port(port: str, baud: int = DEFAULT_BAUD, timeout_s: float = 0.1, *, re
         raise PortError(f"cannot open {port}: {text}; {_hint(text)}") from None
     if exclusive:
         _set_exclusive(ser)
+    ser.low_latency_problem = request_low_latency(ser) if low_latency else None
     return ser

@@ -84,7 +84,9 @@ class Source:
         return self.stream.hello
 
     def log(self, msg: str, level: int = logging.INFO) -> None:
-        if self._log_fn is not None:
+        """One line: to the ``log`` callable given, or the logger; a DEBUG line (what `sphere-mouse -v` adds)
+        always goes to the logger, which drops it unless -v."""
+        if self._log_fn is not None and level >= logging.INFO:
             self._log_fn(msg)
         else:
             log.log(level, msg)

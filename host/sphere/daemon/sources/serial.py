@@ -15,6 +15,7 @@ Discovery (``port = "auto"``) touches only spheres:
 from __future__ import annotations
 
 import glob
+import logging
 import os
 import select
 import time
@@ -93,7 +94,7 @@ class SerialSource(Source):
     def __init__(self, port: str = "auto", candidates=DEFAULT_CANDIDATES, baud: int = 115200,
                  reset_on_open: bool = False, hello_timeout_s: float = 0.5, discovery_timeout_s: float = 3.0,
                  link_timeout_s: float = 2.0, reconnect_interval_s: float = 1.0, log=None,
-                 read_timeout_s: float = 0.02, usb_ids=DEFAULT_USB_IDS, comports=None):
+                 read_timeout_s: float = 0.02, usb_ids=DEFAULT_USB_IDS, comports=None, low_latency: bool = True):
         super().__init__(reconnect_interval_s=reconnect_interval_s, link_timeout_s=link_timeout_s, log=log)
         self.port = port
         self.candidates = list(candidates)
@@ -103,6 +104,7 @@ class SerialSource(Source):
         self.hello_timeout_s = hello_timeout_s
         self.discovery_timeout_s = discovery_timeout_s
         self.read_timeout_s = read_timeout_s
+        self.low_latency = low_latency
         self.serial = None
         self.port_name = None
         self.link = None
@@ -115,12 +117,15 @@ class SerialSource(Source):
     def from_config(cls, cfg, log):
         s = cfg.source
         return cls(s.port, s.candidates, reset_on_open=s.reset_on_open, log=log, usb_ids=s.usb_ids,
-                   **serial_timing(s))
+                   low_latency=s.low_latency, **serial_timing(s))
 
     # -- connecting --
     def _open(self, path: str):
         ser = open_port(path, self.baud, self.read_timeout_s, reset_on_open=self.reset_on_open, write_timeout_s=0.5,
-                        allow_pids=self.allow_pids)
+                        allow_pids=self.allow_pids, low_latency=self.low_latency)
+        if ser.low_latency_problem and "low-latency:" + path not in self._warned:
+            self._warned.add("low-latency:" + path)  # once per port, at -v: it costs latency, not function
+            self.log(ser.low_latency_problem, logging.DEBUG)
         try:
             ser.reset_input_buffer()  # bytes from before the (DTR) reset belong to an older session
         except Exception:
