@@ -226,7 +226,7 @@ def test_ftdi_model_flushes_at_1_ms_once_the_host_asks_for_low_latency(tmp_path)
     import numpy as np
     import serial
 
-    from sphere.serial_link import open_port
+    from sphere.link.port import open_port
     from sphere.sim import trace as T
     from sphere.sim.board import board_command, run_board
     from simscenarios import need_board, need_testfw

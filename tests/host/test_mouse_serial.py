@@ -218,7 +218,7 @@ def test_serial_source_asks_the_port_for_low_latency(tmp_path):
     ``[source] low_latency = false`` leaves the driver's default."""
     import termios
 
-    from sphere.serial_link import CMSPAR
+    from sphere.link.port import CMSPAR
 
     for asked in (True, False):
         master, slave = os.openpty()
@@ -239,7 +239,7 @@ def test_a_driver_without_low_latency_is_said_once_at_debug(caplog):
     DEBUG line (shown by ``sphere-mouse -v``), once per port, and the port is used."""
     import logging
 
-    from sphere import serial_link
+    from sphere.link import port as serial_link
 
     class Refusing:
         port = "/dev/ttyUSB7"
