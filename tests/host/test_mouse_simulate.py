@@ -69,4 +69,4 @@ def test_simulator_that_fails_says_why(tmp_path, monkeypatch):
 def test_simulator_command_is_sphere_sim_pty():
     cmd = sources.simulator_command("", 60)
     assert sources.simulator_command()[-1] == "600"
-    assert cmd[1:] == ["-m", "sphere.cli", "sim", "--trace", "synthetic:rotation:15", "--pty", "--seconds", "60"]
+    assert cmd[1:] == ["-m", "sphere.cli", "sim", "--trace", "synthetic:tour", "--pty", "--seconds", "60"]

@@ -283,7 +283,7 @@ class SourceSettings:
     sim_seconds: float = option(600.0, "how long the virtual board runs with `--simulate` (the daemon ends with it)",
                                 _range(1.0, 86400.0))
     sim_trace: str = option("", "motion the virtual board plays with `--simulate`: a BROAD trial (.mat, name or "
-                            "number) or `synthetic:NAME` (see `sphere sim --help`); empty = `synthetic:rotation:15`")
+                            "number) or `synthetic:NAME` (see `sphere sim --help`); empty = the tour, `synthetic:tour`")
 
     def check(self):
         if self.kind == "replay" and not self.replay:

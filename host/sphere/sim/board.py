@@ -13,6 +13,7 @@ import shutil
 import subprocess
 import sys
 import tempfile
+import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -59,12 +60,17 @@ def board_path(build: bool = True) -> Path:
             raise BoardUnavailable(
                 "simavr's headers are missing: install Debian's `simavr libsimavr-dev libelf-dev pkg-config` "
                 + (f"and run `{BUILD_BOARD_CMD}`" if paths.in_checkout() else "and run this command again"))
-        if SIM_DIR != paths.sim_source_dir():  # installed: first use builds a copy in the user's cache
-            print(f"sphere: building the virtual board in {SIM_DIR} (first use)", file=sys.stderr)
+        first_use = SIM_DIR != paths.sim_source_dir()
+        if first_use:  # installed: first use builds a copy in the user's cache
+            print(f"sphere: building the virtual board in {SIM_DIR} (first use only) ...", file=sys.stderr, flush=True)
             SIM_DIR.mkdir(parents=True, exist_ok=True)
             for name in BOARD_SOURCES:
                 shutil.copy2(paths.sim_source_dir() / name, SIM_DIR / name)
+        t0 = time.monotonic()
         _make(SIM_DIR, BUILD_BOARD_CMD)
+        if first_use:
+            print(f"sphere: the virtual board is built ({time.monotonic() - t0:.1f} s; kept for next time)",
+                  file=sys.stderr, flush=True)
     return BOARD
 
 

@@ -166,14 +166,29 @@ def _from_orientation(q_enu: np.ndarray, gyr_rad_s: np.ndarray, rate_hz: float, 
 
 
 def _integrate(gyr_rad_s: np.ndarray, rate_hz: float, q0=(1.0, 0.0, 0.0, 0.0)) -> np.ndarray:
-    q = np.empty((len(gyr_rad_s), 4))
-    cur = np.array(q0, dtype=float)
-    dt = 1.0 / rate_hz
-    for i, w in enumerate(gyr_rad_s):
-        q[i] = cur
-        n = np.linalg.norm(w)
-        if n > 0:
-            cur = quat.normalize(quat.multiply(cur, quat.from_axis_angle(w / n, n * dt)))
+    """Orientation before each sample: q[i] = q0 ⊗ Δq_0 ⊗ … ⊗ Δq_(i-1), Δq_k the turn of sample k's rate over
+    1/rate_hz. The running product is a prefix scan (log2 N batched products, Hillis–Steele), not a loop
+    per sample: 600 s at 1 kHz in well under a second instead of 40 s (the wait before --simulate starts)."""
+    w = np.asarray(gyr_rad_s, dtype=float)
+    n = len(w)
+    q = np.empty((n, 4))
+    if n == 0:
+        return q
+    angle = np.linalg.norm(w, axis=1)
+    half = angle / (2.0 * rate_hz)
+    scale = np.divide(np.sin(half), angle, out=np.zeros_like(angle), where=angle > 0)
+    step = np.concatenate([np.cos(half)[:, None], w * scale[:, None]], axis=1)  # Δq_k
+    prefix = np.concatenate([np.asarray(q0, dtype=float)[None, :], step[:-1]])  # q0, Δq_0 … Δq_(n-2)
+    k = 1
+    while k < n:  # prefix[i] ← prefix[i-k] ⊗ prefix[i]: after the pass, each holds the product of 2k terms
+        a, b = prefix[:-k].T, prefix[k:].T
+        prefix[k:] = np.column_stack([  # quat.multiply written on columns: no per-pass moveaxis/stack copies
+            a[0] * b[0] - a[1] * b[1] - a[2] * b[2] - a[3] * b[3],
+            a[0] * b[1] + a[1] * b[0] + a[2] * b[3] - a[3] * b[2],
+            a[0] * b[2] - a[1] * b[3] + a[2] * b[0] + a[3] * b[1],
+            a[0] * b[3] + a[1] * b[2] - a[2] * b[1] + a[3] * b[0]])
+        k *= 2
+    q[:] = quat.normalize(prefix)
     return q
 
 

@@ -20,7 +20,8 @@ from sphere.daemon.sources.base import SourceError
 from sphere.daemon.sources.serial import SerialSource, serial_timing
 
 PTY_RE = re.compile(r"(/dev/pts/\d+)")
-DEFAULT_SIM_TRACE = "synthetic:rotation:15"
+#: what --simulate plays when no trace is named: the tour shows the product (pointer, clicks, the three modes)
+DEFAULT_SIM_TRACE = "synthetic:tour"
 PR_SET_PDEATHSIG = 1
 
 
@@ -71,6 +72,8 @@ def start_simulator(trace: str = "", log=None, timeout_s: float = 120.0, seconds
                 break
             continue
         tail = (tail + [line.rstrip()])[-8:]
+        if log and line.startswith("sphere: "):  # what `sphere sim` says of its first use (building the board)
+            log(line.rstrip()[len("sphere: "):])
         m = PTY_RE.search(line)
         if m and os.path.exists(m.group(1)):
             threading.Thread(target=lambda: [None for _ in proc.stdout], daemon=True).start()
@@ -112,6 +115,10 @@ class SimulatorSource(SerialSource):
     NAME = "simulate"
 
     def __init__(self, trace: str = "", log=None, seconds: float = 600.0, **serial_kwargs):
+        if log:  # said before the board's first start, which prepares the motion and may build the board
+            log(f"simulated sphere: starting the virtual board with {trace} ({seconds:g} s)" if trace else
+                f"simulated sphere: no trace named, playing the tour ({DEFAULT_SIM_TRACE}: the pointer, a click, "
+                f"a double click, tosses through tilt and 3-D mode; --trace to choose another), {seconds:g} s")
         self.proc, path = start_simulator(trace, log, seconds=seconds)
         serial_kwargs.setdefault("reset_on_open", False)
         super().__init__(port=path, log=log, **serial_kwargs)

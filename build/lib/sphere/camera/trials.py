@@ -1,0 +1,142 @@
+"""BROAD trials as the virtual webcam sees them: the ball (8 cm) at the trial's optical positions
+(``opt_pos``), a camera placed beside the motion, the trial's IMU samples for the sensor side.
+
+The camera stands ``distance_m`` from the slice's mean position, at the same height + 10 cm, looking
+at it horizontally (slightly down) from 45° off the main direction of the motion, so the ball moves both
+across the image and in depth. BROAD's optical frame is the trial's ENU frame; the tracker is not told
+how the camera stands: it estimates the camera-to-earth rotation itself.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from sphere import broad
+from sphere.camera import render
+from sphere.camera.model import Camera
+
+
+@dataclass
+class Frame:
+    index: int
+    image: np.ndarray  # BGR uint8
+    t_start: float  # exposure start (s, trial-slice time)
+    t_mid: float  # middle of the exposure
+    t_arrival: float  # when the host receives it
+    exposure_s: float
+    truth_cam: np.ndarray  # ball centre at t_mid, camera frame (m)
+
+
+@dataclass
+class RenderedTrial:
+    name: str
+    trial: broad.Trial  # the slice (IMU at trial.rate_hz)
+    t: np.ndarray  # (N,) slice time of each IMU sample
+    pos_world: np.ndarray  # (N, 3) ball centre (opt_pos, gaps interpolated)
+    pos_valid: np.ndarray  # (N,) optical reference present
+    scene: render.Scene
+    q_host_enu: np.ndarray = field(default=None)  # (N, 4) the host filter's orientation (sensor → ENU)
+
+    @property
+    def duration_s(self) -> float:
+        return float(len(self.t) / self.trial.rate_hz)
+
+    def ball_world(self, t) -> np.ndarray:
+        t = np.asarray(t, float)
+        return np.stack([np.interp(t, self.t, self.pos_world[:, i]) for i in range(3)], axis=-1)
+
+    def truth_cam(self, t) -> np.ndarray:
+        return self.scene.to_camera(self.ball_world(t))
+
+    def frame_times(self):
+        return self.scene.frame_times(0.05, self.duration_s - 0.05)
+
+    def frames(self):
+        start, mid, arrival, exposure = self.frame_times()
+        for k in range(len(start)):
+            img = self.scene.render(start[k], exposure[k], self.ball_world, k)
+            yield Frame(k, img, float(start[k]), float(mid[k]), float(arrival[k]), float(exposure[k]),
+                        self.truth_cam(mid[k]))
+
+
+def load_positions(path) -> np.ndarray:
+    """BROAD's ``opt_pos`` (N, 3), metres (not part of :class:`sphere.broad.Trial`)."""
+    from scipy.io import loadmat
+
+    d = loadmat(str(path), variable_names=["opt_pos"])
+    if "opt_pos" not in d:
+        raise ValueError(f"{path} has no opt_pos (optical positions); it is not a BROAD trial file")
+    return np.asarray(d["opt_pos"], float)
+
+
+def placement(pos: np.ndarray, distance_m: float, azimuth_off_deg: float = 45.0, height_m: float = 0.1):
+    """(camera position, camera → world rotation) for a slice of positions."""
+    ok = np.all(np.isfinite(pos), axis=1)
+    m = pos[ok].mean(axis=0)
+    xy = pos[ok, :2] - m[:2]
+    w, v = np.linalg.eigh(xy.T @ xy)
+    main = v[:, -1]
+    a = np.radians(azimuth_off_deg)
+    view = np.array([main[0] * np.cos(a) - main[1] * np.sin(a), main[0] * np.sin(a) + main[1] * np.cos(a), 0.0])
+    cam = m - distance_m * view + np.array([0.0, 0.0, height_m])
+    return cam, render.look_at(cam, m)
+
+
+def rendered_trial(name: str, start_s: float, seconds: float, distance_m: float = 1.0, camera: Camera | None = None,
+                   occlusions=(), hue_deg: float = 120.0, seed: int = 1, directory=None,
+                   marker=None, jpeg_quality: int | None = None) -> RenderedTrial:
+    """A slice of a BROAD trial, with the host filter's orientation (run from the trial's start, as the
+    device would have been running) and the virtual camera placed beside it."""
+    from sphere.fusion import registry
+
+    path = broad.find_trial(name, directory)
+    full = broad.load_trial(path)
+    total = len(full) / full.rate_hz
+    if not (0 <= start_s < total) or seconds < 0.5 or start_s + seconds > total:
+        raise ValueError(f"trial {full.name} is {total:.1f} s long; choose --start and --seconds inside it "
+                         f"(at least 0.5 s)")
+    pos = load_positions(path)
+    a = int(round(start_s * full.rate_hz))
+    b = a + int(round(seconds * full.rate_hz))
+    f = registry.make("sphere", full.dt_s, full.acc_m_s2[0], full.mag_uT[0])
+    q = f.update_batch(full.gyr_rad_s[:b], full.acc_m_s2[:b], full.mag_uT[:b], full.dt_s)[a:b]
+    sl = full.seconds(start_s, seconds)
+    p = pos[a:b]
+    valid = np.all(np.isfinite(p), axis=1)
+    if valid.sum() < 0.8 * len(p):
+        raise ValueError(f"trial {full.name} has optical positions for only {100 * valid.mean():.0f} % of "
+                         f"{start_s:g}-{start_s + seconds:g} s; choose another stretch")
+    t = np.arange(len(p)) / full.rate_hz
+    pf = np.stack([np.interp(t, t[valid], p[valid, i]) for i in range(3)], axis=1)
+    cam_pos, R_wc = placement(pf, distance_m)
+    body = None
+    if marker is not None:  # the marker turns with the sensor: BROAD's optical orientation, gaps held
+        from sphere.fusion.hybrid import _rot
+
+        qo = sl.opt_quat.copy()
+        good = np.all(np.isfinite(qo), axis=1)
+        if not good.any():
+            raise ValueError(f"trial {full.name} has no optical orientation in this stretch for the marker")
+        idx = np.maximum.accumulate(np.where(good, np.arange(len(qo)), 0))
+        idx[: np.argmax(good)] = np.argmax(good)
+        qo = qo[idx]
+
+        def body(tt, _q=qo, _rate=full.rate_hz):
+            return _rot(_q[int(np.clip(round(tt * _rate), 0, len(_q) - 1))])
+
+        if marker.face == "auto":  # on the face of the sensor that is turned to the camera most of the time
+            from dataclasses import replace
+
+            view = R_wc[:, 2]  # the camera's optical axis in the world
+            faces = {f"{sg}{ax}": 0.0 for sg in "+-" for ax in "xyz"}
+            for k in range(0, len(qo), 10):
+                Rb = _rot(qo[k])
+                for f in faces:
+                    v = Rb[:, "xyz".index(f[1])] * (1 if f[0] == "+" else -1)
+                    faces[f] += float(-v @ view > 0.5)
+            marker = replace(marker, face=max(faces, key=faces.get))
+    scene = render.Scene(camera or Camera.webcam(), R_wc, cam_pos, hue_deg=hue_deg, seed=seed,
+                         occlusions=list(occlusions), marker=marker, body_rotation=body, jpeg_quality=jpeg_quality)
+    return RenderedTrial(full.name, sl, t, pf, valid, scene, q)

@@ -1,0 +1,75 @@
+"""`sphere capture --port PORT --out FILE`: record the raw byte stream from the sphere."""
+
+from __future__ import annotations
+
+import sys
+import time
+
+import serial
+
+from sphere.argtypes import seconds
+from sphere.capture import SIDECAR_SUFFIX, CaptureError, CaptureWriter
+from sphere.protocol import PacketStream
+from sphere.serial_link import DEFAULT_BAUD, PortError, open_port
+
+HELP = "record the sphere's serial stream into a capture file"
+DESCRIPTION = (
+    "Record the bytes from the sphere's serial port exactly as received. Each chunk is flushed to the "
+    "file as it arrives, so Ctrl-C or an unplug loses nothing already received."
+)
+
+
+def add_arguments(p) -> None:
+    p.add_argument("--port", required=True, help="serial port, e.g. /dev/ttyUSB0, /dev/rfcomm0, /dev/pts/3")
+    p.add_argument("--out", required=True, help="capture file to write (overwritten)")
+    p.add_argument("--baud", type=int, default=DEFAULT_BAUD, help=f"baud rate (default {DEFAULT_BAUD})")
+    p.add_argument("--seconds", type=seconds, help="stop after this long (default: until Ctrl-C or unplug)")
+    p.add_argument("--times", action="store_true", help=f"also write host receive times to FILE{SIDECAR_SUFFIX}")
+    p.add_argument("--quiet", action="store_true", help="no progress line")
+
+
+def run(args) -> int:
+    try:
+        port = open_port(args.port, args.baud)
+    except PortError as e:
+        print(f"sphere capture: {e}", file=sys.stderr)
+        return 2
+    try:
+        out = CaptureWriter(args.out, with_times=args.times)
+    except CaptureError as e:
+        port.close()
+        print(f"sphere capture: {e}", file=sys.stderr)
+        return 2
+    stream = PacketStream()  # only to show progress; the file gets every byte, good or bad
+    start = time.monotonic()
+    last_report = 0.0
+    status = 0
+    with port, out:
+        try:
+            while args.seconds is None or time.monotonic() - start < args.seconds:
+                try:
+                    data = port.read(max(1, port.in_waiting or 1))
+                except (serial.SerialException, OSError, TypeError) as e:
+                    print(f"\nsphere capture: the port went away ({e}); {out.bytes_written} bytes kept in {args.out}", file=sys.stderr)
+                    status = 1
+                    break
+                if not data:
+                    continue
+                try:
+                    out.write(data)
+                except CaptureError as e:
+                    print(f"\nsphere capture: {e}", file=sys.stderr)
+                    status = 1
+                    break
+                stream.feed(data)
+                now = time.monotonic()
+                if not args.quiet and now - last_report > 0.5:
+                    last_report = now
+                    s = stream.stats
+                    print(f"\r{out.bytes_written} bytes, {s.frames_ok} frames, {s.errors} bad, {s.frames_lost} lost   ", end="", file=sys.stderr)
+        except KeyboardInterrupt:
+            pass
+        if not args.quiet:
+            s = stream.stats
+            print(f"\r{out.bytes_written} bytes, {s.frames_ok} frames, {s.errors} bad, {s.frames_lost} lost: saved to {args.out}", file=sys.stderr)
+    return status

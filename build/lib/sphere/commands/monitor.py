@@ -1,0 +1,143 @@
+"""`sphere monitor --port P [--plot]`: a live view of a sphere, like a serial monitor that knows the protocol."""
+
+from __future__ import annotations
+
+import sys
+import time
+
+from sphere import argtypes
+
+HELP = "live view of a sphere on a port: packets and rates, sensor flags, latest values, events, link quality"
+DESCRIPTION = (
+    "Reads the sphere's port and shows what arrives: packets per type and their rate, the RAW_SAMPLE "
+    "sensor flags, the latest accelerometer, gyroscope, magnetometer and orientation values, the STATUS "
+    "counters, events as they happen, and the link's quality (CRC errors, frames lost). On a terminal the "
+    "view is redrawn in place; in a pipe it prints one summary line a second and one line per event. "
+    "--plot draws live curves with matplotlib. Sends nothing but GET_HELLO when no HELLO comes by itself "
+    "(a Bluetooth link). Ctrl-C stops it."
+)
+
+
+def add_arguments(p) -> None:
+    p.add_argument("--port", required=True, help="the sphere's serial port (/dev/ttyUSB0, /dev/rfcomm0, /dev/sphere)")
+    p.add_argument("--baud", type=argtypes.baud, default=115200)
+    p.add_argument("--seconds", type=argtypes.seconds, default=None, help="stop after this long (default: until Ctrl-C)")
+    p.add_argument("--events", type=argtypes.at_least_one, default=None, metavar="N",
+                   help="stop after N events (taps, free falls): e.g. to try a tap setting")
+    p.add_argument("--plot", action="store_true", help="live curves: accelerometer, gyroscope, magnetometer, orientation")
+    p.add_argument("--plot-out", metavar="PNG", help="with --plot: also write the last view to this image at the end")
+    p.add_argument("--refresh", type=argtypes.seconds, default=0.5, metavar="SECONDS", help="how often the view is redrawn")
+
+
+class _Plot:
+    """Four panels of the last ten seconds, redrawn from the monitor's history."""
+
+    def __init__(self, out_path=None):
+        import matplotlib
+
+        if out_path and not sys.stdout.isatty():
+            matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+
+        self.plt = plt
+        self.out_path = out_path
+        self.fig, self.axes = plt.subplots(4, 1, figsize=(9, 8), sharex=True)
+        self.fig.suptitle("MARG sphere — sphere monitor")
+        if matplotlib.get_backend().lower() != "agg":
+            plt.ion()
+            plt.show(block=False)
+
+    def update(self, mon) -> None:
+        import numpy as np
+
+        raw = np.array(mon.raw_history) if mon.raw_history else np.zeros((0, 10))
+        quat = np.array(mon.quat_history) if mon.quat_history else np.zeros((0, 5))
+        t_end = max(raw[-1, 0] if len(raw) else 0.0, quat[-1, 0] if len(quat) else 0.0)
+        raw = raw[raw[:, 0] > t_end - 10.0] if len(raw) else raw
+        quat = quat[quat[:, 0] > t_end - 10.0] if len(quat) else quat
+        panels = ((raw, 1, "accel (g)", "xyz"), (raw, 4, "gyro (°/s)", "xyz"), (raw, 7, "mag (µT)", "xyz"),
+                  (quat, 1, "orientation (quat)", "wxyz"))
+        for ax, (data, start, label, names) in zip(self.axes, panels):
+            ax.clear()
+            ax.set_ylabel(label)
+            for i, n in enumerate(names):
+                if len(data):
+                    ax.plot(data[:, 0], data[:, start + i], label=n, linewidth=1)
+            ax.legend(loc="upper left", fontsize="small", ncol=len(names))
+            ax.grid(alpha=0.3)
+        self.axes[-1].set_xlabel("device time (s)")
+        self.fig.canvas.draw_idle()
+        if self.plt.get_backend().lower() != "agg":
+            self.plt.pause(0.001)
+
+    def close(self) -> None:
+        if self.out_path:
+            self.fig.savefig(self.out_path, dpi=80)
+        self.plt.close(self.fig)
+
+
+def run(args) -> int:
+    from sphere.device_link import DeviceLink, LinkLost
+    from sphere.link_monitor import LinkMonitor
+    from sphere.protocol import GetHello
+    from sphere.serial_link import PortError, open_port
+
+    try:
+        ser = open_port(args.port, args.baud, timeout_s=0.05)
+    except PortError as e:  # the port named is not there or not usable: a usage error
+        print(f"sphere monitor: {e}", file=sys.stderr)
+        return 2
+    link = DeviceLink(ser, name=args.port)
+    mon = LinkMonitor(link.stream.stats)
+    tty = sys.stdout.isatty()
+    plot = None
+    if args.plot:
+        try:
+            plot = _Plot(args.plot_out)
+        except ImportError:
+            print("sphere monitor: --plot needs matplotlib (pip install 'marg-sphere[plot]')", file=sys.stderr)
+            ser.close()
+            return 1
+    start = time.monotonic()
+    next_draw = start + args.refresh
+    asked = False
+    code = 0
+    try:
+        while args.seconds is None or time.monotonic() - start < args.seconds:
+            for dp in link.read():
+                line = mon.packet(dp, time.monotonic())
+                if line and not tty:
+                    print(line, flush=True)
+            if args.events is not None and mon.counts["EVENT"] >= args.events and (
+                    mon.hello is not None or time.monotonic() - start > 2.0):
+                break
+            now = time.monotonic()
+            if mon.hello is None and not asked:
+                link.send(GetHello())  # the version and sensors (a USB Nano also sends HELLO when the open resets it)
+                asked = True
+            if now >= next_draw:
+                next_draw = now + args.refresh
+                if tty:
+                    sys.stdout.write("\x1b[H\x1b[J" + "\n".join(mon.lines(now)) + "\n")
+                    sys.stdout.flush()
+                elif now - start >= 1.0:
+                    print(f"{now - start:6.1f} s  {mon.summary(now)}", flush=True)
+                    next_draw = now + max(args.refresh, 1.0)
+                if plot is not None:
+                    plot.update(mon)
+    except LinkLost as e:
+        print(f"sphere monitor: {e}", file=sys.stderr)
+        code = 1
+    except KeyboardInterrupt:
+        pass
+    finally:
+        ser.close()
+        if plot is not None:
+            plot.update(mon)
+            plot.close()
+    if not tty:
+        print("\n".join(mon.lines(time.monotonic())))
+    if not mon.counts:
+        print(f"sphere monitor: nothing arrived from {args.port}: is the sphere on, and this its port?", file=sys.stderr)
+        return code or 1
+    return code

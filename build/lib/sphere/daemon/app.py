@@ -1,0 +1,308 @@
+"""The sphere-mouse daemon loop: source → motion → mode (pointer, tilt, 3-D) → backend, events → actions."""
+
+from __future__ import annotations
+
+import logging
+
+from sphere.daemon.actions import Action, EventActions
+from sphere.daemon.motion import G_M_S2, GyroBias, MotionTracker
+from sphere.daemon.pointer import PointerMapper, PointerSettings, TiltMapper, TiltSettings
+from sphere.smoothing.pose import pose_filter
+from sphere.protocol import Event, Hello, Orientation, RawSample, Status
+
+DEFAULT_SCREEN_WIDTH_PX = 1920
+BUTTONS = {"left_click": "left", "right_click": "right", "middle_click": "middle"}
+logger = logging.getLogger("sphere.daemon")
+
+#: RAW_SAMPLE flags (protocol/spec.md §4.2) of the sensors the status line reports when they stop answering.
+SENSOR_FLAGS = (("accelerometer", 0x01), ("gyroscope", 0x02), ("magnetometer", 0x04))
+GYRO_OK = 0x02
+TAP_ACTIVE = 0x10
+GYRO_STALE = 0x40  # protocol v2: the gyro value is held from the last good read
+#: What the loop does for a request a signal handler made (handlers only set a flag).
+REQUESTS = ("recentre", "pause", "stop")
+
+
+def _desktop_size():
+    """The X screen's size when an X display is reachable (uinput itself cannot know it); else None."""
+    import os
+
+    if not os.environ.get("DISPLAY"):
+        return None
+    try:
+        from sphere.daemon.backends.pynput_backend import main_screen_size
+
+        return main_screen_size()
+    except Exception:
+        return None
+
+
+class SphereMouse:
+    """Owns the state of one running daemon. ``handle(DecodedPacket)`` is the whole per-packet work;
+    ``run()`` drives it from the source until the source ends or :meth:`stop` is called."""
+
+    def __init__(self, cfg, source, backend, stream=None, status=None, log=None, camera=None):
+        self.cfg = cfg
+        self.camera = camera  # sphere.camera.daemon_source.CameraPosition: the ball's position for the stream
+        self.source = source
+        self.backend = backend
+        self.stream = stream
+        self.status = status
+        self.log = log or logger.info
+        self.warn = log or logger.warning
+        width = cfg.output.screen_width_px
+        if not width:
+            size = backend.screen_size()
+            if size is None and backend.name == "uinput":
+                size = _desktop_size()
+            width = size[0] if size else DEFAULT_SCREEN_WIDTH_PX
+        self.screen_width_px = width
+        self.mapper = PointerMapper(PointerSettings.from_config(cfg.pointer, cfg), width)
+        self.pose = pose_filter(cfg)  # the pose the stream and every output get ([stream] smoothing)
+        self.tilt = TiltMapper(TiltSettings.from_config(cfg.tilt, cfg.pointer))
+        g = cfg.gyro
+        self.motion = MotionTracker(cfg.orientation.source, cfg.orientation.use_mag, cfg.orientation.beta,
+                                    GyroBias(g.still_dps, g.still_time_s, g.auto_bias),
+                                    filter_name=cfg.orientation.filter)
+        self.motion.defer = True  # handle() runs the deferred work after each sample's move
+        self.actions = EventActions(cfg.events, cfg.freeze)
+        self.modes = list(cfg.mode.cycle)
+        if cfg.mode.start not in self.modes:
+            self.modes.insert(0, cfg.mode.start)
+        self.mode = cfg.mode.start
+        self.paused = False
+        self.battery_mv = 0
+        self.now_us = None
+        self.hello = None
+        self.moves = 0
+        self.clicks = 0
+        self.mode_changes: list[str] = []
+        self._generation = None
+        self._recentre_tilt = True
+        self._stopped = False
+        self._requests: list[str] = []
+        self.sensor_flags = None  # the last RAW_SAMPLE's sensor bits (None: none since the last HELLO)
+        self._sensors_reported = 0  # the sensors the log has said are missing (until it says they answer)
+        self.sensors_missing: tuple[str, ...] = ()
+        if stream is not None:
+            stream.mode = self.mode
+
+    # -- actions --
+    def set_mode(self, mode: str) -> None:
+        self.mode = mode
+        self.mode_changes.append(mode)
+        self.mapper.reset()
+        self._recentre_tilt = True  # tilt starts from the pose held once the pointer unfreezes
+        port = getattr(self.stream, "port", None)
+        page = f" (the 3-D view: http://{self.stream.host}:{port}/)" if mode == "3d" and port else ""
+        self.log(f"mode {mode}{page}")
+        if self.stream is not None:
+            self.stream.publish_mode(mode)
+
+    def next_mode(self) -> None:
+        i = self.modes.index(self.mode) if self.mode in self.modes else -1
+        self.set_mode(self.modes[(i + 1) % len(self.modes)])
+
+    def recentre(self) -> None:
+        if self.motion.quat is not None:
+            self.tilt.recentre(self.motion.quat)
+        if self.stream is not None:
+            self.stream.recentre()
+        if self.mode == "pointer":
+            size = self.backend.screen_size()
+            if size:
+                self.backend.move_to(size[0] // 2, size[1] // 2)
+        self.log("recentred")
+
+    def toggle_pause(self) -> None:
+        self.paused = not self.paused
+        self.mapper.reset()
+        self.log("paused" if self.paused else "resumed")
+
+    def do(self, action: Action) -> None:
+        ux, uy = action.undo
+        if (ux or uy) and self.mode != "3d":
+            self.backend.move(ux, uy)
+            self.mapper.reset()  # the smoothing forgets the motion just undone (a knock's jolt)
+        k = action.kind
+        if self.mode == "3d" and k in ("left_click", "right_click", "middle_click", "double_click",
+                                        "double_click_full", "second_click"):
+            if self.stream is not None:
+                self.stream.publish_event(action.event, action.t_us)
+            return
+        if k in BUTTONS:
+            self.backend.click(BUTTONS[k])
+            self.clicks += 1
+        elif k in ("double_click", "double_click_full"):
+            self.backend.click("left", 2)
+            self.clicks += 2
+        elif k == "second_click":
+            self.backend.click("left")
+            self.clicks += 1
+        elif k == "next_mode":
+            self.next_mode()
+        elif k == "recentre":
+            self.recentre()
+        elif k == "pause":
+            self.toggle_pause()
+        if self.stream is not None:
+            self.stream.publish_event(action.event, action.t_us)
+
+    # -- packets --
+    def _move(self, t_us, dx: int, dy: int) -> None:
+        self.backend.move(dx, dy)
+        self.moves += 1
+        self.actions.moved(t_us, dx, dy)
+
+    def _tilt_step(self, t_us, dt: float) -> None:
+        q = self.motion.quat
+        if q is None:
+            return
+        if self._recentre_tilt:
+            self.tilt.recentre(q)
+            self._recentre_tilt = False
+        dx, dy = self.tilt.update(q, dt)
+        if dx or dy:
+            self._move(t_us, dx, dy)
+
+    def handle(self, dp) -> None:
+        p = dp.packet
+        t = dp.t_us
+        typ = p.TYPE
+        if typ == RawSample.TYPE:
+            self._raw_sample(p, t)  # the pointer move first: what the hand feels
+            motion = self.motion
+            if self.stream is not None and motion.uses_host_filter:
+                self._publish_pose(t)
+            motion.run_deferred()  # the filter's bias step and the still-detection's trend sums
+        elif typ == Orientation.TYPE:
+            dt = self.motion.orientation(p, t)
+            if self.motion.uses_host_filter:
+                return
+            if self.stream is not None:
+                self.stream.publish_orientation(self.pose.at(self.motion.quat, t), t)
+            if not self.paused and not self.actions.frozen(t):
+                if self.mode == "tilt":
+                    self._tilt_step(t, dt)
+                elif self.mode == "pointer" and not self.motion.raw_seen:
+                    # orientation-only stream: the rate comes from successive orientations
+                    dx, dy = self.mapper.update(self.motion.gyro_dps, dt, self.motion.up)
+                    if dx or dy:
+                        self._move(t, dx, dy)
+        elif typ == Event.TYPE:
+            for a in self.actions.on_event(p.event_name, t):
+                self.do(a)
+        elif typ == Status.TYPE:
+            self.battery_mv = p.battery_mv
+        elif typ == Hello.TYPE:
+            self.hello = p
+            self.sensor_flags = None  # a new start: its first samples may not have every sensor yet
+            self.motion.reset_time()
+
+    def _raw_sample(self, p, t) -> None:
+        flags = p.flags
+        if flags & 0x07 != self.sensor_flags:
+            self._sensors_changed(flags & 0x07)
+        dt = self.motion.raw(p, t)
+        self.now_us = t
+        if self.actions._pending is not None:
+            for a in self.actions.due(t):
+                self.do(a)
+        if self.paused or self.actions.frozen(t) or flags & (TAP_ACTIVE | GYRO_STALE) or not flags & GYRO_OK:
+            return  # without the gyroscope nothing says how the sphere turns: the pointer holds still
+        if self.mode == "pointer":
+            dx, dy = self.mapper.update(self.motion.gyro_dps, dt, self.motion.up)
+            if dx or dy:
+                self._move(t, dx, dy)
+        elif self.mode == "tilt" and self.motion.uses_host_filter:
+            self._tilt_step(t, dt)
+
+    def _publish_pose(self, t_us) -> None:
+        """The filtered pose to the stream and every output; with a camera, the ball's position too (metres, the
+        camera's frame), fused with this sample's orientation and acceleration; None while it is unknown."""
+        if self.camera is None:
+            self.stream.publish_orientation(self.pose.at(self.motion.quat, t_us), t_us)
+            return
+        position = None
+        if self.motion.quat is not None and self.motion.accel_g is not None:
+            position = self.camera.update(self.motion.quat, [v * G_M_S2 for v in self.motion.accel_g])
+        if position is None:
+            q = self.pose.at(self.motion.quat, t_us)
+        else:
+            q, position = self.pose.at(self.motion.quat, t_us, position)
+        self.stream.position = None if position is None else [float(v) for v in position]
+        self.stream.publish_orientation(q, t_us)
+
+    def _sensors_changed(self, bits: int) -> None:
+        """A sensor stopped or started answering (RAW_SAMPLE flags): said in the log and on the status line.
+        The first samples after a HELLO may lack a sensor that is there (``mag_ok`` waits for the magnetometer's
+        first conversion, spec §4.2): that is no fault; one the HELLO says was not found at start is reported."""
+        before = self.sensor_flags
+        self.sensor_flags = bits
+        self.sensors_missing = tuple(name for name, bit in SENSOR_FLAGS if not bits & bit)
+        found = self.hello.sensors_found if self.hello is not None else 0x07
+        for name, bit in SENSOR_FLAGS:
+            extra = ": the pointer holds still until it answers again" if bit == GYRO_OK else ""
+            if bits & bit:
+                if self._sensors_reported & bit:
+                    self._sensors_reported &= ~bit
+                    self.log(f"the sphere's {name} answers again")
+            elif self._sensors_reported & bit:
+                continue
+            elif before is not None and before & bit:
+                self._sensors_reported |= bit
+                self.warn(f"the sphere reports its {name} not answering (RAW_SAMPLE flags){extra}")
+            elif before is None and not found & bit:
+                self._sensors_reported |= bit
+                self.warn(f"the sphere found no {name} at start (HELLO){extra}")
+
+    # -- requests (from signal handlers: they only call request(), the loop acts) --
+    def request(self, what: str) -> None:
+        """Ask the loop to ``recentre``, ``pause`` (toggle) or ``stop`` at its next turn: safe from a signal
+        handler (nothing but a list append; no backend, X or serial call happens in the handler)."""
+        if what == "stop":
+            self._stopped = True
+            self.source._stop = True  # a flag the source's loop checks
+        self._requests.append(what)
+
+    def _serve_requests(self) -> None:
+        while self._requests:
+            what = self._requests.pop(0)
+            if what == "recentre":
+                self.recentre()
+            elif what == "pause":
+                self.toggle_pause()
+
+    # -- loop --
+    def run(self) -> int:
+        source = self.source
+        try:
+            for batch in source:
+                if source.generation != self._generation:
+                    self._generation = source.generation
+                    self.motion.reset_time()
+                    self.mapper.reset()
+                for dp in batch:
+                    self.handle(dp)
+                if self._requests:
+                    self._serve_requests()
+                if self.status is not None:
+                    self.status.tick(self)
+                if self._stopped:
+                    break
+        finally:
+            if self.status is not None:
+                self.status.tick(self, force=True)
+                if self.status.overwrite:
+                    try:
+                        self.status.stream.write("\n")
+                    except (OSError, ValueError):
+                        pass
+        return 0
+
+    def stop(self) -> None:
+        """Stop the loop (from another thread); the source closes its device when its loop sees it."""
+        self._stopped = True
+        close = getattr(self.source, "close", None)
+        if close:
+            close()

@@ -1,0 +1,43 @@
+"""The backend interface (see :mod:`sphere.daemon.backends`)."""
+
+from __future__ import annotations
+
+BUTTONS = ("left", "right", "middle")
+
+
+class BackendUnavailable(Exception):
+    """This backend cannot start here; the message says why and what to do."""
+
+
+class Backend:
+    name = "base"
+
+    def move(self, dx: int, dy: int) -> None:
+        raise NotImplementedError
+
+    def press(self, button: str) -> None:
+        raise NotImplementedError
+
+    def release(self, button: str) -> None:
+        raise NotImplementedError
+
+    def click(self, button: str = "left", count: int = 1) -> None:
+        for _ in range(count):
+            self.press(button)
+            self.release(button)
+
+    def move_to(self, x: int, y: int) -> None:
+        """Absolute position; backends that cannot do it ignore it."""
+
+    def screen_size(self):
+        """(width, height) in pixels, or None when the backend cannot know."""
+        return None
+
+    def close(self) -> None:
+        pass
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()

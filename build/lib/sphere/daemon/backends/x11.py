@@ -1,0 +1,64 @@
+"""The ``x11`` backend: XTest fake input through python-xlib (any X server with the XTEST extension)."""
+
+from __future__ import annotations
+
+import os
+
+from sphere.daemon.backends.base import Backend, BackendUnavailable
+
+_BUTTON = {"left": 1, "middle": 2, "right": 3}
+
+
+class X11Backend(Backend):
+    name = "x11"
+
+    def __init__(self, display: str | None = None):
+        name = display or os.environ.get("DISPLAY")
+        if not name:
+            raise BackendUnavailable("no X display: DISPLAY is not set (on Wayland use the uinput backend)")
+        try:
+            from Xlib import X, display as xdisplay
+            from Xlib.ext import xtest
+        except ImportError:
+            raise BackendUnavailable("python-xlib is not installed: pip install python-xlib") from None
+        try:
+            self.display = xdisplay.Display(name)
+        except Exception as e:  # Xlib raises several kinds for a missing or refused display
+            raise BackendUnavailable(f"cannot connect to X display {name}: {e}") from None
+        if not self.display.has_extension("XTEST"):
+            self.display.close()
+            raise BackendUnavailable(f"X display {name} has no XTEST extension")
+        self._X = X
+        self._xtest = xtest
+        self.display_name = name
+        screen = self.display.screen()
+        self._size = (screen.width_in_pixels, screen.height_in_pixels)
+        self._root = screen.root
+
+    def move(self, dx: int, dy: int) -> None:
+        # Absolute motion from the current position: XTest relative motion would go through the
+        # server's pointer acceleration, which the mapper already replaces.
+        p = self._root.query_pointer()
+        self._xtest.fake_input(self.display, self._X.MotionNotify, x=p.root_x + dx, y=p.root_y + dy)
+        self.display.flush()
+
+    def move_to(self, x: int, y: int) -> None:
+        self._xtest.fake_input(self.display, self._X.MotionNotify, x=int(x), y=int(y))
+        self.display.flush()
+
+    def press(self, button: str) -> None:
+        self._xtest.fake_input(self.display, self._X.ButtonPress, _BUTTON[button])
+        self.display.flush()
+
+    def release(self, button: str) -> None:
+        self._xtest.fake_input(self.display, self._X.ButtonRelease, _BUTTON[button])
+        self.display.flush()
+
+    def screen_size(self):
+        return self._size
+
+    def close(self) -> None:
+        try:
+            self.display.close()
+        except Exception:
+            pass

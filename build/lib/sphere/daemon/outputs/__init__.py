@@ -1,0 +1,39 @@
+"""Outputs for other programs: sphere-mouse sends the sphere's orientation, position, events and mode to
+them beside the pointer and the 3-D page. Each is optional and off by default (its ``enabled`` key).
+
+- :mod:`.opentrack` — OpenTrack's "UDP over network" input: six little-endian doubles per datagram;
+- :mod:`.osc` — Open Sound Control over UDP (python-osc), for creative tools;
+- :mod:`.gamepad` — a virtual gamepad through uinput (python-evdev): tilt → sticks, taps → buttons.
+
+A new output is one module (an :class:`~sphere.daemon.outputs.base.Output` subclass with ``NAME``,
+``from_config(cfg, log)`` and its config section ``[outputs.NAME]``) and one line in :data:`REGISTRY`.
+Importing this package declares every output's section (the modules import their libraries lazily).
+
+The daemon talks to all of them through :class:`Outputs`, which has the orientation stream's interface
+(``publish_orientation``, ``publish_event``, ``publish_mode``, ``recentre``, ``position``) and passes
+each call on to the WebSocket stream (if any) and to every enabled output.
+"""
+
+from __future__ import annotations
+
+from sphere.lazy import load
+
+#: ``[outputs.NAME]`` → "module:Class". One line per output.
+REGISTRY = {
+    "opentrack": "sphere.daemon.outputs.opentrack:OpenTrackOutput",
+    "osc": "sphere.daemon.outputs.osc:OscOutput",
+    "gamepad": "sphere.daemon.outputs.gamepad:GamepadOutput",
+}
+
+
+def output_class(name: str):
+    return load(REGISTRY[name])
+
+
+for _name in REGISTRY:  # each module declares its [outputs.NAME] section
+    output_class(_name)
+
+from sphere.daemon.outputs.base import Output, OutputUnavailable  # noqa: E402
+from sphere.daemon.outputs.fanout import Outputs, attach, open_outputs  # noqa: E402
+
+__all__ = ["REGISTRY", "Output", "OutputUnavailable", "Outputs", "attach", "open_outputs", "output_class"]

@@ -1,0 +1,109 @@
+"""The daemon's side: :class:`Outputs` stands where the WebSocket stream stands and passes every call on."""
+
+from __future__ import annotations
+
+
+class Outputs:
+    """The orientation stream's interface, fanned out to the stream (may be None) and the outputs."""
+
+    def __init__(self, stream, outputs, log=None):
+        self.stream = stream
+        self.outputs = list(outputs)
+        self.log = log or (lambda m: None)
+        self._position = None
+        self._mode = None
+
+    # the stream's attributes the daemon reads or sets
+    @property
+    def host(self):
+        return getattr(self.stream, "host", None)
+
+    @property
+    def port(self):
+        return getattr(self.stream, "port", None)
+
+    @property
+    def mode(self):
+        return self._mode
+
+    @mode.setter
+    def mode(self, value):
+        self._mode = value
+        if self.stream is not None:
+            self.stream.mode = value
+
+    @property
+    def position(self):
+        return self._position
+
+    @position.setter
+    def position(self, value):  # a pose source (hybrid tracking) sets it
+        self._position = value
+        if self.stream is not None:
+            self.stream.position = value
+
+    def _each(self, call) -> None:
+        for out in list(self.outputs):
+            try:
+                call(out)
+            except Exception as e:  # one program gone must not stop the pointer or the others
+                self.log(f"output {out.NAME} stopped: {e}")
+                self.outputs.remove(out)
+                try:
+                    out.close()
+                except Exception:
+                    pass
+
+    def publish_orientation(self, quat, t_us=None) -> None:
+        if self.stream is not None:
+            self.stream.publish_orientation(quat, t_us)
+        self._each(lambda o: o.orientation(quat, t_us, self._position))
+
+    def publish_event(self, event: str, t_us=None) -> None:
+        if self.stream is not None:
+            self.stream.publish_event(event, t_us)
+        self._each(lambda o: o.event(event, t_us))
+
+    def publish_mode(self, mode: str) -> None:
+        self._mode = mode
+        if self.stream is not None:
+            self.stream.publish_mode(mode)
+        self._each(lambda o: o.mode(mode))
+
+    def recentre(self) -> None:
+        if self.stream is not None:
+            self.stream.recentre()
+        self._each(lambda o: o.recentre())
+
+    def stop(self) -> None:
+        if self.stream is not None and hasattr(self.stream, "stop"):
+            self.stream.stop()
+        self._each(lambda o: o.close())
+        self.outputs = []
+
+
+def open_outputs(cfg, log=None) -> list:
+    """The outputs enabled in ``cfg`` (``[outputs.NAME] enabled = true``), started. One that cannot start
+    is reported and left out: it must not stop the pointer."""
+    from sphere.daemon.outputs import REGISTRY, OutputUnavailable, output_class
+
+    log = log or (lambda m: None)
+    out = []
+    for name in REGISTRY:
+        settings = cfg[f"outputs.{name}"]
+        if not settings.enabled:
+            continue
+        try:
+            o = output_class(name).from_config(settings, log)
+        except OutputUnavailable as e:
+            log(f"output {name} cannot start: {e}")
+            continue
+        log(f"output {name}: {o.describe()}")
+        out.append(o)
+    return out
+
+
+def attach(stream, cfg, log=None):
+    """What the daemon publishes to: the stream alone when no output is enabled, else :class:`Outputs`."""
+    outputs = open_outputs(cfg, log)
+    return Outputs(stream, outputs, log) if outputs else stream

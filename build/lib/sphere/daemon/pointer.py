@@ -1,0 +1,246 @@
+"""From motion to pointer motion: the pure core of sphere-mouse (no device, no clock, no I/O).
+
+:class:`PointerMapper` turns angular rate into pixels the way the best gyro-mouse software does
+(JoyShockMapper's gyro settings are the model):
+
+1. **Axes.** ``world`` axes take yaw about the *vertical* (from gravity) and pitch about the horizontal
+   axis across the pointing direction, so the pointer moves the same way however the sphere is rolled
+   in the hand; ``local`` axes take the sensor's own z (yaw) and y (pitch). Sensor frame: x forward
+   (towards the screen), y left, z up when the sphere sits in its nominal pose.
+2. **Smoothing** from the registry of :mod:`sphere.smoothing` (``smoothing``, default ``tremor``: a
+   band-stop for the hand's 8–12 Hz tremor that lets fast moves through untouched; ``tiered`` is
+   JoyShockMapper's soft tiered smoothing). The filter runs on the pointer's angles in degrees (the
+   integral of the screen rates) and the rate is taken back from its output, so every filter of the
+   registry fits here and the pointer shows exactly what the filter outputs.
+3. **Tightening** of the smoothed rate. Below ``tightening_dps`` the rate is scaled by
+   ``rate/tightening_dps``: what is left of noise and tremor at rest shrinks quadratically but slow
+   deliberate motion still moves the pointer (no hard dead zone).
+4. **Sensitivity in real-world terms** (degrees of rotation per screen width) with optional
+   **acceleration**: the slow sensitivity up to ``accel_low_dps``, the fast one from ``accel_high_dps``,
+   blended linearly between them.
+5. **Sub-pixel remainders** carry over to the next sample, so slow motion is not lost to rounding.
+
+:class:`TiltMapper` makes the tilt from a recentred pose drive pointer *velocity*.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from sphere.smoothing.registry import DEFAULT as DEFAULT_SMOOTHING
+from sphere.smoothing.registry import make_filter
+
+
+@dataclass
+class PointerSettings:
+    slow_deg_per_width: float = 40.0  # ° of rotation per screen width below accel_low_dps
+    fast_deg_per_width: float = 40.0  # ° per screen width above accel_high_dps
+    accel_low_dps: float = 20.0  # °/s
+    accel_high_dps: float = 120.0  # °/s
+    tightening_dps: float = 1.0  # °/s; 0 = off
+    smoothing: str = DEFAULT_SMOOTHING  # a name from sphere.smoothing.registry.FILTERS
+    smoothing_params: dict | None = None  # the filter's parameters (None = its defaults)
+    axes: str = "world"  # "world" or "local"
+    invert_x: bool = False
+    invert_y: bool = False
+
+    @classmethod
+    def from_config(cls, section, cfg=None) -> "PointerSettings":
+        """From the [pointer] section; with the whole config, the filter's [smoothing.NAME] parameters too."""
+        settings = cls(**{k: v for k, v in section.as_dict().items() if k in cls.__dataclass_fields__})
+        if cfg is not None:
+            from sphere.smoothing.config import filter_params
+
+            settings.smoothing_params = filter_params(cfg, settings.smoothing)
+        return settings
+
+
+def _norm3(v):
+    return math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+
+
+def screen_rates_dps(gyro_dps, up_body, axes: str, last_forward=None):
+    """(yaw, pitch) in °/s: yaw positive turning left, pitch positive tipping the nose down.
+
+    ``up_body`` is the vertical (up) expressed in sensor coordinates, or None (then local axes).
+    Returns (yaw, pitch, forward) where forward is the horizontal pointing direction used (world axes).
+    """
+    wx, wy, wz = gyro_dps
+    if axes == "local" or up_body is None:
+        return wz, wy, last_forward
+    ux, uy, uz = up_body
+    n = math.sqrt(ux * ux + uy * uy + uz * uz)
+    if n < 1e-9:
+        return wz, wy, last_forward
+    ux, uy, uz = ux / n, uy / n, uz / n
+    yaw = wx * ux + wy * uy + wz * uz
+    # forward: sensor x made horizontal; when x points (nearly) straight up or down keep the last one
+    fx, fy, fz = 1.0 - ux * ux, -ux * uy, -ux * uz
+    fn = math.sqrt(fx * fx + fy * fy + fz * fz)
+    if fn < 0.2:
+        if last_forward is None:
+            return wz, wy, last_forward
+        fx, fy, fz = last_forward
+    else:
+        fx, fy, fz = fx / fn, fy / fn, fz / fn
+    # left = up × forward
+    lx, ly, lz = uy * fz - uz * fy, uz * fx - ux * fz, ux * fy - uy * fx
+    pitch = wx * lx + wy * ly + wz * lz
+    return yaw, pitch, (fx, fy, fz)
+
+
+class PointerMapper:
+    """Angular rate → integer pointer steps. Feed every gyro sample to :meth:`update`.
+
+    ``screen_width_px`` sets the scale: rotating by ``slow_deg_per_width`` degrees moves the pointer
+    by that many pixels.
+    """
+
+    def __init__(self, settings: PointerSettings | None = None, screen_width_px: int = 1920):
+        self.settings = settings or PointerSettings()
+        self.screen_width_px = int(screen_width_px)
+        self.filter = make_filter(self.settings.smoothing, **(self.settings.smoothing_params or {}))
+        self._forward = None
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget smoothing history and sub-pixel remainders (after a pause, a freeze, a mode switch)."""
+        self.filter.reset()
+        self._angle = [0.0, 0.0]  # the pointer's angles (°, right and down) fed to the filter
+        self._filtered = None
+        self.remainder = [0.0, 0.0]
+
+    def rate_px_s(self, gyro_dps, up_body=None, dt_s: float = 0.005):
+        """The pointer velocity (px/s, screen x right, y down) for one gyro sample, updating smoothing state."""
+        s = self.settings
+        yaw, pitch, self._forward = screen_rates_dps(gyro_dps, up_body, s.axes, self._forward)
+        # screen degrees/s: right and down positive
+        x, y = -yaw, pitch
+        # 2. smoothing: the filter runs on the pointer's angles; the rate comes back from its output
+        if dt_s <= 0:
+            mag = math.hypot(x, y)
+        else:
+            a = self._angle
+            a[0] += x * dt_s
+            a[1] += y * dt_s
+            out = self.filter.update(a, dt_s)
+            last = self._filtered
+            self._filtered = (float(out[0]), float(out[1]))
+            if last is None:
+                last = (a[0] - x * dt_s, a[1] - y * dt_s)
+            x, y = (self._filtered[0] - last[0]) / dt_s, (self._filtered[1] - last[1]) / dt_s
+            mag = math.hypot(x, y)
+        # 3. tightening of the smoothed rate (what is left of noise and tremor at rest)
+        if s.tightening_dps > 0 and mag < s.tightening_dps:
+            k = mag / s.tightening_dps
+            x, y = x * k, y * k
+        # 4. sensitivity with acceleration
+        width = self.screen_width_px
+        slow = width / s.slow_deg_per_width
+        fast = width / s.fast_deg_per_width
+        if slow != fast:
+            t = (mag - s.accel_low_dps) / (s.accel_high_dps - s.accel_low_dps)
+            t = 0.0 if t < 0.0 else 1.0 if t > 1.0 else t
+            px_per_deg = slow + (fast - slow) * t
+        else:
+            px_per_deg = slow
+        vx, vy = x * px_per_deg, y * px_per_deg
+        if s.invert_x:
+            vx = -vx
+        if s.invert_y:
+            vy = -vy
+        return vx, vy
+
+    def update(self, gyro_dps, dt_s: float, up_body=None) -> tuple[int, int]:
+        """One gyro sample (°/s, sensor axes) over ``dt_s`` seconds → whole-pixel steps (dx right, dy down)."""
+        vx, vy = self.rate_px_s(gyro_dps, up_body, dt_s)
+        return self.emit(vx * dt_s, vy * dt_s)
+
+    def emit(self, fx: float, fy: float) -> tuple[int, int]:
+        """Add a fractional displacement to the remainders and take out whole pixels."""
+        r = self.remainder
+        r[0] += fx
+        r[1] += fy
+        # towards zero: symmetric for left and right (a hair's allowance so 19.999999999 after many small
+        # steps of a float sum still gives its 20th pixel)
+        ix = int(r[0] + math.copysign(1e-9, r[0]))
+        iy = int(r[1] + math.copysign(1e-9, r[1]))
+        r[0] -= ix
+        r[1] -= iy
+        return ix, iy
+
+
+@dataclass
+class TiltSettings:
+    dead_zone_deg: float = 3.0
+    full_speed_deg: float = 25.0
+    max_speed_px_s: float = 1200.0
+    exponent: float = 1.5
+    invert_x: bool = False
+    invert_y: bool = False
+
+    @classmethod
+    def from_config(cls, tilt, pointer=None) -> "TiltSettings":
+        values = {k: v for k, v in tilt.as_dict().items() if k in cls.__dataclass_fields__}
+        if pointer is not None:
+            values["invert_x"] = pointer.invert_x
+            values["invert_y"] = pointer.invert_y
+        return cls(**values)
+
+
+def pointing_angles_deg(quat):
+    """Heading (° about the vertical, positive left) and elevation (° up) of the sensor x axis in the earth frame."""
+    w, x, y, z = quat
+    # first column of the rotation matrix: sensor x in earth coordinates
+    fx = 1.0 - 2.0 * (y * y + z * z)
+    fy = 2.0 * (x * y + w * z)
+    fz = 2.0 * (x * z - w * y)
+    heading = math.degrees(math.atan2(fy, fx))
+    elevation = math.degrees(math.asin(max(-1.0, min(1.0, fz))))
+    return heading, elevation
+
+
+class TiltMapper:
+    """Orientation relative to a recentred pose → pointer velocity; :meth:`update` per orientation sample."""
+
+    def __init__(self, settings: TiltSettings | None = None):
+        self.settings = settings or TiltSettings()
+        self.reference = None  # (heading, elevation) of the recentred pose
+        self.remainder = [0.0, 0.0]
+
+    def recentre(self, quat) -> None:
+        self.reference = pointing_angles_deg(quat)
+        self.remainder = [0.0, 0.0]
+
+    def _speed(self, angle_deg: float) -> float:
+        s = self.settings
+        a = abs(angle_deg)
+        if a <= s.dead_zone_deg:
+            return 0.0
+        t = min(1.0, (a - s.dead_zone_deg) / (s.full_speed_deg - s.dead_zone_deg))
+        return math.copysign(s.max_speed_px_s * t ** s.exponent, angle_deg)
+
+    def velocity_px_s(self, quat) -> tuple[float, float]:
+        if self.reference is None:
+            self.recentre(quat)
+        heading, elevation = pointing_angles_deg(quat)
+        dh = (heading - self.reference[0] + 180.0) % 360.0 - 180.0
+        de = elevation - self.reference[1]
+        vx = -self._speed(dh)  # turned left → pointer goes left
+        vy = -self._speed(de)  # nose up → pointer goes up
+        if self.settings.invert_x:
+            vx = -vx
+        if self.settings.invert_y:
+            vy = -vy
+        return vx, vy
+
+    def update(self, quat, dt_s: float) -> tuple[int, int]:
+        vx, vy = self.velocity_px_s(quat)
+        r = self.remainder
+        r[0] += vx * dt_s
+        r[1] += vy * dt_s
+        ix, iy = int(r[0]), int(r[1])
+        r[0] -= ix
+        r[1] -= iy
+        return ix, iy

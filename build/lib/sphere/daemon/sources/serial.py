@@ -1,0 +1,258 @@
+"""The sphere on a serial port (USB or Bluetooth SPP), found by what it sends and reopened when lost.
+
+Discovery (``port = "auto"``) touches only spheres:
+
+- candidates are the ports whose USB VID:PID is in ``usb_ids`` (``serial.tools.list_ports``), the
+  paths in ``candidates`` (``/dev/sphere``, the udev symlink) and the glob matches among them;
+- a port another program has open is skipped and never opened (``sphere.serial_link.holders``);
+  every port is opened exclusively (flock + TIOCEXCL), with DTR held low where the driver allows;
+- a port is only *listened to* until it identifies itself as a sphere: a HELLO, or
+  ``IDENTIFY_FRAMES`` CRC-good frames of the sphere's types in a row. Only then is GET_HELLO sent (for
+  the version handshake). A port the user named (``--port``, or a literal path in ``candidates`` such as
+  ``/dev/sphere``) is asked with GET_HELLO at once (a Bluetooth module sends nothing by itself).
+"""
+
+from __future__ import annotations
+
+import glob
+import os
+import select
+import time
+
+from sphere.daemon.sources.base import LinkLost, Source, SourceError, version_problem
+from sphere.protocol import GetHello, Hello, PacketStream
+from sphere.serial_link import PortBusy, PortError, open_port, port_problem
+
+DEFAULT_CANDIDATES = ("/dev/sphere",)
+#: USB-serial chips of the Arduino Nano and its clones: CH340, FT232R, CP2102.
+DEFAULT_USB_IDS = ("1a86:7523", "0403:6001", "10c4:ea60")
+#: An unnamed port counts as a sphere after this many CRC-good sphere frames in a row.
+IDENTIFY_FRAMES = 3
+
+
+def _is_glob(pattern: str) -> bool:
+    return any(c in pattern for c in "*?[")
+
+
+def usb_ports(usb_ids, comports=None) -> list[str]:
+    """Ports whose USB VID:PID (hex, ``"1a86:7523"``) is in ``usb_ids``."""
+    wanted = {i.lower() for i in usb_ids}
+    if not wanted:
+        return []
+    if comports is None:
+        try:
+            from serial.tools.list_ports import comports
+        except ImportError:  # pragma: no cover
+            return []
+    out = []
+    for info in comports():
+        if info.vid is not None and f"{info.vid:04x}:{info.pid:04x}" in wanted:
+            out.append(info.device)
+    return sorted(out)
+
+
+def candidate_ports(patterns, usb_ids=(), comports=None) -> list[tuple[str, bool]]:
+    """(path, named) in the order to try: literal paths (named by the user: asked with GET_HELLO), then glob
+    matches and USB VID:PID matches (not named: only listened to). Each device once."""
+    out: list[tuple[str, bool]] = []
+    seen: set[str] = set()
+
+    def add(path, named):
+        if not os.path.exists(path):
+            return
+        real = os.path.realpath(path)
+        if real in seen:
+            return
+        seen.add(real)
+        out.append((path, named))
+
+    for pattern in patterns:
+        if _is_glob(pattern):
+            for m in sorted(glob.glob(pattern)):
+                add(m, False)
+        else:
+            add(pattern, True)
+    for path in usb_ports(usb_ids, comports):
+        add(path, False)
+    return out
+
+
+def expand_candidates(patterns) -> list[str]:
+    """The paths that ``patterns`` name now (kept for callers of the older API)."""
+    return [p for p, _ in candidate_ports(patterns)]
+
+
+class SerialSource(Source):
+    """The sphere on a serial port. ``port="auto"`` discovers it (module docstring); a named port is
+    asked with GET_HELLO every ``hello_timeout_s`` until ``discovery_timeout_s``. A read error (unplug)
+    or ``link_timeout_s`` without a byte (a lost Bluetooth link) closes the port; the source then looks
+    for the sphere again every ``reconnect_interval_s`` without ending."""
+
+    NAME = "serial"
+
+    def __init__(self, port: str = "auto", candidates=DEFAULT_CANDIDATES, baud: int = 115200,
+                 reset_on_open: bool = False, hello_timeout_s: float = 0.5, discovery_timeout_s: float = 3.0,
+                 link_timeout_s: float = 2.0, reconnect_interval_s: float = 1.0, log=None,
+                 read_timeout_s: float = 0.02, usb_ids=DEFAULT_USB_IDS, comports=None):
+        super().__init__(reconnect_interval_s=reconnect_interval_s, link_timeout_s=link_timeout_s, log=log)
+        self.port = port
+        self.candidates = list(candidates)
+        self.usb_ids = list(usb_ids)
+        self.baud = baud
+        self.reset_on_open = reset_on_open
+        self.hello_timeout_s = hello_timeout_s
+        self.discovery_timeout_s = discovery_timeout_s
+        self.read_timeout_s = read_timeout_s
+        self.serial = None
+        self.port_name = None
+        self.link = None
+        self.state = "looking for the sphere"
+        self._comports = comports
+        self.allow_pids: tuple[int, ...] = ()  # processes that may hold the port (the virtual board we started)
+        self._warned: set[str] = set()
+
+    @classmethod
+    def from_config(cls, cfg, log):
+        s = cfg.source
+        return cls(s.port, s.candidates, reset_on_open=s.reset_on_open, log=log, usb_ids=s.usb_ids,
+                   **serial_timing(s))
+
+    # -- connecting --
+    def _open(self, path: str):
+        ser = open_port(path, self.baud, self.read_timeout_s, reset_on_open=self.reset_on_open, write_timeout_s=0.5,
+                        allow_pids=self.allow_pids)
+        try:
+            ser.reset_input_buffer()  # bytes from before the (DTR) reset belong to an older session
+        except Exception:
+            pass
+        return ser
+
+    def send(self, packet) -> None:
+        """Send a command to the connected sphere (no reply awaited)."""
+        if self.link is not None:
+            self.link.send(packet)
+
+    def _note_once(self, path: str, msg: str) -> None:
+        if path not in self._warned:
+            self._warned.add(path)
+            self.log(msg)
+
+    def _try_port(self, path: str, named: bool):
+        """Open ``path`` and wait for the sphere to identify itself: the packets from its HELLO on, or None."""
+        from sphere.device_link import DeviceLink
+
+        try:
+            ser = self._open(path)
+        except PortBusy as e:
+            self._note_once(path, str(e))
+            return None
+        except PortError as e:
+            self._note_once(path, str(e))
+            return None
+        self._warned.discard(path)
+        self._warned.discard("missing:" + path)
+        probe = PacketStream("device")
+        link = DeviceLink(ser, probe)
+        start = time.monotonic()
+        next_ask = start + self.hello_timeout_s if named else None
+        good_run = 0
+        try:
+            while time.monotonic() - start < self.discovery_timeout_s and not self._stop:
+                data = self._read_port(ser)
+                if data:
+                    arrival = time.perf_counter_ns()
+                    errors = probe.stats.errors
+                    decoded = probe.feed(data)
+                    if probe.stats.errors != errors:
+                        good_run = 0
+                    for i, dp in enumerate(decoded):
+                        p = dp.packet
+                        if p.TYPE == Hello.TYPE:
+                            problem = version_problem(p)
+                            if problem:
+                                ser.close()
+                                raise SourceError(f"{path}: {problem}")
+                            self.arrival_ns = arrival
+                            self.link = link
+                            return ser, [d.packet for d in decoded[i:]]
+                    good_run += len(decoded)
+                    if good_run >= IDENTIFY_FRAMES and next_ask is None:
+                        next_ask = time.monotonic()  # it speaks our protocol: now it may be asked
+                if next_ask is not None and time.monotonic() >= next_ask:
+                    next_ask += self.hello_timeout_s
+                    link.send(GetHello())
+        except (OSError, _serial_exception()):
+            pass
+        try:
+            ser.close()
+        except Exception:
+            pass
+        return None
+
+    def _connect(self):
+        if self.port != "auto":
+            paths = [(self.port, True)]
+        else:
+            paths = candidate_ports(self.candidates, self.usb_ids, self._comports)
+        if not paths:
+            self.state = "looking for the sphere (no sphere port: plug it in, or name it with --port)"
+        elif self.port != "auto" and not os.path.exists(self.port):
+            self.state = f"waiting for {self.port} to appear"
+            if "missing:" + self.port not in self._warned:
+                self._warned.add("missing:" + self.port)
+                self.log(f"{self.port} is not there (yet): waiting for it (is the sphere plugged in or paired?)")
+            return None
+        elif self.port != "auto" and port_problem(self.port):
+            raise SourceError(port_problem(self.port))
+        else:
+            self.state = f"looking for the sphere (nothing identified itself on {', '.join(p for p, _ in paths)})"
+        for path, named in paths:
+            got = self._try_port(path, named)
+            if got is None:
+                continue
+            ser, packets = got
+            self.serial = ser
+            self.port_name = path
+            self.stream.restart()
+            self.state = f"{path}"
+            self.log(f"sphere found on {path}" + (" (reconnected)" if self.connects >= 1 else ""))
+            self.link.stream = self.stream
+            return self.stream.adopt(packets)
+        return None
+
+    def _read_port(self, ser) -> bytes:
+        """Whatever has arrived, waiting at most read_timeout_s. On POSIX one select + one read of all that
+        is there (pyserial's read costs several system calls per call); elsewhere pyserial's read."""
+        fd = getattr(ser, "fd", None)
+        if fd is None or os.name != "posix":
+            return ser.read(ser.in_waiting or 1)
+        r, _, _ = select.select([fd], [], [], self.read_timeout_s)
+        if not r:
+            return b""
+        data = os.read(fd, 4096)
+        if not data:  # readable but nothing: the device went away (as pyserial reports it)
+            raise LinkLost("the port reports data but returns none (unplugged?)")
+        return data
+
+    def _read(self) -> bytes:
+        return self._read_port(self.serial)
+
+    def _lose(self, why: str) -> None:
+        super()._lose(f"on {self.port_name}: {why}")
+
+    def _disconnect(self) -> None:
+        ser, self.serial, self.link = self.serial, None, None
+        if ser is not None:
+            ser.close()
+
+
+def serial_timing(s) -> dict:
+    """The timing keys of ``[source]`` as SerialSource's keyword arguments."""
+    return dict(baud=s.baud, hello_timeout_s=s.hello_timeout_s, discovery_timeout_s=s.discovery_timeout_s,
+                link_timeout_s=s.link_timeout_s, reconnect_interval_s=s.reconnect_interval_s)
+
+
+def _serial_exception():
+    import serial
+
+    return serial.SerialException

@@ -1,0 +1,170 @@
+"""``--simulate``: the virtual board (``sphere sim --pty``) read through its pty like a real port.
+
+The board is a child of the daemon that dies with it, even when the daemon is killed with SIGKILL:
+the child asks the kernel for SIGTERM when its parent goes (``PR_SET_PDEATHSIG``), and the board
+itself stops when its own parent is gone.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import os
+import re
+import signal
+import subprocess
+import sys
+import threading
+import time
+
+from sphere.daemon.sources.base import SourceError
+from sphere.daemon.sources.serial import SerialSource, serial_timing
+
+PTY_RE = re.compile(r"(/dev/pts/\d+)")
+#: what --simulate plays when no trace is named: the tour shows the product (pointer, clicks, the three modes)
+DEFAULT_SIM_TRACE = "synthetic:tour"
+PR_SET_PDEATHSIG = 1
+
+
+def simulator_available() -> bool:
+    try:
+        import importlib.util
+
+        return importlib.util.find_spec("sphere.commands.sim") is not None
+    except Exception:
+        return False
+
+
+def simulator_command(trace: str = "", seconds: float = 600.0) -> list[str]:
+    """How --simulate starts the virtual board: ``sphere sim --trace TRACE --pty --seconds S``."""
+    return [sys.executable, "-m", "sphere.cli", "sim", "--trace", trace or DEFAULT_SIM_TRACE, "--pty",
+            "--seconds", f"{seconds:g}"]
+
+
+def die_with_parent() -> None:
+    """In a child between fork and exec: SIGTERM when the parent dies (Linux; elsewhere nothing)."""
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
+    except (OSError, AttributeError):
+        pass
+
+
+def start_simulator(trace: str = "", log=None, timeout_s: float = 120.0, seconds: float = 600.0):
+    """Start the virtual board; returns (process, pty path). The board prints ``... UART on /dev/pts/N``;
+    the rest of its output is read and dropped so that it never blocks on a full pipe. The first start
+    may build the firmware and the board (make), hence the long timeout."""
+    cmd = simulator_command(trace, seconds)
+    parent = os.getpid()
+
+    def child_setup():
+        die_with_parent()
+        if os.getppid() != parent:  # the parent died before prctl took effect
+            os._exit(1)
+
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                            preexec_fn=child_setup if sys.platform.startswith("linux") else None)
+    deadline = time.monotonic() + timeout_s
+    tail: list[str] = []
+    while time.monotonic() < deadline:
+        line = proc.stdout.readline()
+        if not line:
+            if proc.poll() is not None:
+                break
+            continue
+        tail = (tail + [line.rstrip()])[-8:]
+        if log and line.startswith("sphere: "):  # what `sphere sim` says of its first use (building the board)
+            log(line.rstrip()[len("sphere: "):])
+        m = PTY_RE.search(line)
+        if m and os.path.exists(m.group(1)):
+            threading.Thread(target=lambda: [None for _ in proc.stdout], daemon=True).start()
+            return proc, m.group(1)
+    if proc.poll() is None:
+        proc.kill()
+    raise SourceError(f"`sphere {' '.join(cmd[3:])}` did not open its pty: " + " | ".join(tail[-4:]))
+
+
+def trace_problem(trace: str) -> str | None:
+    """Why `sphere sim` could not play ``trace`` ([source] sim_trace), or None: checked before the board
+    starts, so a typo is one clear line, not a fallback to the scripted sphere."""
+    if not trace:
+        return None
+    from sphere.sim import trace as T
+
+    if trace.endswith(".bin"):
+        return None if os.path.isfile(trace) else f"--trace {trace}: no such trace file"
+    if trace.startswith("synthetic:") or trace in T.SYNTHETIC:
+        name = trace.split(":", 2)[1] if trace.startswith("synthetic:") else trace
+        return None if name in T.SYNTHETIC else (f"--trace {trace}: no synthetic motion {name!r}; one of "
+                                                  f"{', '.join(T.SYNTHETIC)}")
+    from sphere.broad import BroadMissing, find_trial
+
+    try:
+        find_trial(trace)
+    except BroadMissing as e:
+        return f"--trace: {e}"
+    return None
+
+
+class SimulatorRefused(SourceError):
+    """The trace the user named cannot be played: said at once, no fallback to the scripted sphere."""
+
+
+class SimulatorSource(SerialSource):
+    """The virtual board's UART through the pty that `sphere sim --pty` exposes."""
+
+    NAME = "simulate"
+
+    def __init__(self, trace: str = "", log=None, seconds: float = 600.0, **serial_kwargs):
+        if log:  # said before the board's first start, which prepares the motion and may build the board
+            log(f"simulated sphere: starting the virtual board with {trace} ({seconds:g} s)" if trace else
+                f"simulated sphere: no trace named, playing the tour ({DEFAULT_SIM_TRACE}: the pointer, a click, "
+                f"a double click, tosses through tilt and 3-D mode; --trace to choose another), {seconds:g} s")
+        self.proc, path = start_simulator(trace, log, seconds=seconds)
+        serial_kwargs.setdefault("reset_on_open", False)
+        super().__init__(port=path, log=log, **serial_kwargs)
+        self.allow_pids = (self.proc.pid,)  # the board holds its own pty
+        self.state = f"simulated sphere on {path}"
+
+    @classmethod
+    def from_config(cls, cfg, log):
+        """The virtual board when it can run here, else the built-in scripted sphere (said in the log)."""
+        from sphere.daemon.sources.scripted import ScriptedSource
+
+        s = cfg.source
+        problem = trace_problem(s.sim_trace)
+        if problem:
+            raise SimulatorRefused(problem)
+        if simulator_available():
+            try:
+                return cls(s.sim_trace, log=log, seconds=s.sim_seconds, **serial_timing(s))
+            except SourceError as e:
+                log(f"the virtual board cannot run here ({e}); using the built-in scripted sphere")
+        else:
+            log("the virtual board (sphere sim) is not installed here; using the built-in scripted sphere")
+        return ScriptedSource.from_config(cfg, log)
+
+    def _lose(self, why: str) -> None:
+        # the pty closes when the board's simulated seconds are over and `sphere sim` exits right after:
+        # that is the end of the run, not a lost link to look for again
+        try:
+            self.proc.wait(2.0)
+        except subprocess.TimeoutExpired:
+            super()._lose(why)
+            return
+        self._close()
+
+    def _over(self) -> bool:
+        if self.proc.poll() is None:
+            return False
+        rc = self.proc.returncode
+        self.log("the simulated sphere's run is over" if rc == 0 else f"the simulated sphere stopped (exit status {rc})")
+        return True
+
+    def close(self):
+        super().close()
+        if self.proc.poll() is None:
+            self.proc.terminate()
+            try:
+                self.proc.wait(5)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()

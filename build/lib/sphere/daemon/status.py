@@ -1,0 +1,67 @@
+"""The status line: source, link quality (frames/s, CRC errors, lost frames), mode, battery."""
+
+from __future__ import annotations
+
+import sys
+import time
+
+
+def _size(n: int) -> str:
+    return f"{n} B" if n < 10_000 else f"{n / 1000:.0f} kB"
+
+
+class StatusLine:
+    def __init__(self, stream=None, interval_s: float = 1.0, overwrite: bool | None = None, clock=time.monotonic):
+        self.stream = stream or sys.stderr
+        self.interval_s = interval_s
+        self.overwrite = self.stream.isatty() if overwrite is None else overwrite
+        self.clock = clock
+        self._last_t = None
+        self._last_frames = 0
+        self.rate_fps = 0.0
+        self.last_text = ""
+
+    def text(self, daemon) -> str:
+        """Counters of the link as it is (protocol/spec.md §2.1, §3): every kind of bad chunk (framing, CRC,
+        oversize, unknown type, bad length) counts in ``bad``, with the bytes it cost; a reconnect starts the
+        sequence count again instead of counting the frames not sent while unplugged as lost."""
+        src = daemon.source
+        s = src.stats
+        bad = f"bad {s.errors}" + (f" ({_size(s.bytes_skipped)} skipped)" if s.bytes_skipped else "")
+        parts = [src.state, f"{self.rate_fps:.0f} frames/s", bad, f"gaps {s.seq_gaps} ({s.frames_lost} lost)"]
+        duplicates = getattr(s, "duplicates", 0)
+        if duplicates:
+            parts.append(f"duplicates {duplicates}")
+        losses = getattr(src, "losses", 0)
+        if losses:
+            parts.append(f"reconnects {losses}")
+        missing = getattr(daemon, "sensors_missing", ())
+        if missing:
+            parts.append(", ".join(missing) + " not answering")
+        parts.append(f"mode {daemon.mode}" + (" (paused)" if daemon.paused else ""))
+        if daemon.battery_mv:
+            parts.append(f"battery {daemon.battery_mv / 1000:.2f} V")
+        return " · ".join(parts)
+
+    def tick(self, daemon, force: bool = False) -> str | None:
+        now = self.clock()
+        frames = daemon.source.stats.frames_ok
+        if self._last_t is None:
+            self._last_t, self._last_frames = now, frames
+            return None
+        if not force and now - self._last_t < self.interval_s:
+            return None
+        dt = now - self._last_t
+        if dt > 0:
+            self.rate_fps = (frames - self._last_frames) / dt
+        self._last_t, self._last_frames = now, frames
+        self.last_text = self.text(daemon)
+        try:
+            if self.overwrite:
+                self.stream.write("\r\x1b[K" + self.last_text)
+            else:
+                self.stream.write(self.last_text + "\n")
+            self.stream.flush()
+        except (BrokenPipeError, ValueError):
+            pass
+        return self.last_text

@@ -1,0 +1,495 @@
+"""Packet types of protocol/spec.md §4–§5, defined once from a table of fields.
+
+Each packet is a small class whose attributes are the spec's field names holding the integers as they
+travel on the wire (arrays as tuples). ``to_json()`` gives the physical values the spec defines.
+"""
+
+from __future__ import annotations
+
+import enum
+import struct
+from typing import ClassVar
+
+from sphere import chips
+
+PROTOCOL_VERSION = 2
+# Versions this host decodes: version 2 only appended fields to HELLO and STATUS (a version-1 body is
+# their prefix; the new fields then read as their defaults) and added flags and SET_BOARD.
+SUPPORTED_VERSIONS = (1, 2)
+
+Q14 = 16384.0
+
+
+class Result(enum.IntEnum):
+    """REPLY result codes (spec §5.1)."""
+
+    OK = 0
+    UNKNOWN_COMMAND = 1
+    BAD_LENGTH = 2
+    BAD_VALUE = 3
+    BUSY = 4
+    SENSOR_MISSING = 5
+    STORAGE_ERROR = 6
+    FAILED = 7
+
+
+EVENT_NAMES = {1: "single_tap", 2: "double_tap", 3: "free_fall"}
+CALIBRATION_STEPS = {0: "none", 1: "gyro_bias", 2: "accel", 3: "mag"}
+
+RAW_FLAGS = ("accel_ok", "gyro_ok", "mag_ok", "mag_fresh", "tap_active", "accel_stale", "gyro_stale", "mag_stale")
+ORIENTATION_FLAGS = ("mag_used", "accel_rejected", "mag_rejected", "converging", "gyro_missing", "prev_mag_used",
+                     "prev_accel_rejected", "prev_mag_rejected")
+RESET_CAUSE_BITS = ("power_on", "external", "brown_out", "watchdog")
+MAG_CHIPS = {0: "none", 1: "hmc5883l", 2: "qmc5883l"}
+BOARD_PROFILES = {0: "aligned", 1: "sen10724", 2: "gy85"}
+SENSOR_BITS = ("adxl345", "itg3200", "hmc5883l")
+CALIBRATION_STATE_BITS = (
+    "gyro_bias_valid",
+    "accel_calibrated",
+    "mag_calibrated",
+    "from_eeprom",
+    "eeprom_invalid",
+    "gyro_bias_estimated",
+)
+STREAM_MODE_BITS = ("raw", "orientation", "status")
+
+
+def bit_names(value: int, names: tuple[str, ...]) -> list[str]:
+    return [name for i, name in enumerate(names) if value >> i & 1]
+
+
+class Field:
+    """One spec field: struct code, element count, and how to show it in physical units."""
+
+    __slots__ = ("name", "code", "count", "scale", "show", "default")
+
+    def __init__(self, name: str, code: str, count: int = 1, scale: float | None = None, show=None, default=None):
+        self.name, self.code, self.count, self.scale, self.show = name, code, count, scale, show
+        self.default = default  # a field appended in a later version: its value when absent
+
+    def physical(self, value):
+        if self.show is not None:
+            return self.show(value)
+        if self.scale is None:
+            return list(value) if self.count > 1 else value
+        if self.count > 1:
+            return [round(v * self.scale, 6) for v in value]
+        return round(value * self.scale, 6)
+
+
+class Packet:
+    """Base of every packet type. Subclasses set TYPE, NAME, DIRECTION and FIELDS."""
+
+    TYPE: ClassVar[int]
+    NAME: ClassVar[str]
+    DIRECTION: ClassVar[str]  # "device" (device → host) or "host" (host → device)
+    FIELDS: ClassVar[tuple[Field, ...]] = ()
+    # fields of protocol version 1 when a later version appended some (None: the body never changed)
+    V1_FIELDS: ClassVar[int | None] = None
+    _struct: ClassVar[struct.Struct]
+    _v1_struct: ClassVar[struct.Struct | None]
+    _plan: ClassVar[tuple[tuple[str, int], ...]]
+    _unpack_plan: ClassVar[tuple[tuple[str, int, int], ...]]  # (name, index in the unpacked tuple, count)
+
+    def __init_subclass__(cls, **kwargs):
+        super().__init_subclass__(**kwargs)
+        cls._struct = struct.Struct("<" + "".join(f"{f.count}{f.code}" for f in cls.FIELDS))
+        cls._plan = tuple((f.name, f.count) for f in cls.FIELDS)
+        starts = [sum(f.count for f in cls.FIELDS[:k]) for k in range(len(cls.FIELDS))]
+        cls._unpack_plan = tuple((f.name, i, f.count) for f, i in zip(cls.FIELDS, starts))
+        cls._v1_struct = None
+        if cls.V1_FIELDS is not None:
+            cls._v1_struct = struct.Struct("<" + "".join(f"{f.count}{f.code}" for f in cls.FIELDS[: cls.V1_FIELDS]))
+
+    def __init__(self, *args, seq: int = 0, **kwargs):
+        names = [f.name for f in self.FIELDS]
+        if len(args) > len(names):
+            raise TypeError(f"{self.NAME} takes {len(names)} fields, got {len(args)}")
+        values = dict(zip(names, args))
+        for key, value in kwargs.items():
+            if key not in names:
+                raise TypeError(f"{self.NAME} has no field {key!r}")
+            values[key] = value
+        for f in self.FIELDS:
+            if f.name not in values and f.default is not None:
+                values[f.name] = f.default
+        missing = [n for n in names if n not in values]
+        if missing:
+            raise TypeError(f"{self.NAME} is missing {', '.join(missing)}")
+        for f in self.FIELDS:
+            v = values[f.name]
+            setattr(self, f.name, tuple(v) if f.count > 1 else v)
+        self.seq = seq
+
+    # -- wire ------------------------------------------------------------------------------------
+    @classmethod
+    def body_size(cls) -> int:
+        return cls._struct.size
+
+    @classmethod
+    def body_sizes(cls) -> tuple[int, ...]:
+        """Every body length this host decodes: the current one, and version 1's where it differed."""
+        return (cls._struct.size,) if cls._v1_struct is None else (cls._struct.size, cls._v1_struct.size)
+
+    def pack_body(self) -> bytes:
+        flat = []
+        for f in self.FIELDS:
+            v = getattr(self, f.name)
+            if f.count > 1:
+                flat.extend(v)
+            else:
+                flat.append(v)
+        return self._struct.pack(*flat)
+
+    @classmethod
+    def unpack_body(cls, body: bytes, seq: int = 0) -> "Packet":
+        v1 = cls._v1_struct is not None and len(body) == cls._v1_struct.size
+        flat = (cls._v1_struct if v1 else cls._struct).unpack(body)
+        obj = cls.__new__(cls)
+        if not v1:  # the current version (every frame of a live link): one pass over a precomputed plan
+            for name, i, count in cls._unpack_plan:
+                setattr(obj, name, flat[i] if count == 1 else flat[i : i + count])
+            obj.seq = seq
+            return obj
+        i = 0
+        for k, (name, count) in enumerate(cls._plan):
+            if v1 and k >= cls.V1_FIELDS:
+                setattr(obj, name, cls.FIELDS[k].default)
+            elif count == 1:
+                setattr(obj, name, flat[i])
+            else:
+                setattr(obj, name, flat[i : i + count])
+            i += count
+        obj.seq = seq
+        return obj
+
+    # -- people ----------------------------------------------------------------------------------
+    def fields(self) -> dict:
+        """The body fields as on the wire."""
+        return {f.name: (list(getattr(self, f.name)) if f.count > 1 else getattr(self, f.name)) for f in self.FIELDS}
+
+    def to_json(self, raw: bool = False) -> dict:
+        """``type``, ``seq`` and the fields: physical values where the spec gives a unit, unless raw."""
+        out = {"type": self.NAME.lower(), "seq": self.seq}
+        for f in self.FIELDS:
+            v = getattr(self, f.name)
+            out[f.name] = (list(v) if f.count > 1 else v) if raw else f.physical(v)
+        return out
+
+    def __eq__(self, other):
+        return type(self) is type(other) and self.seq == other.seq and self.fields() == other.fields()
+
+    def __repr__(self):
+        inner = ", ".join(f"{k}={v!r}" for k, v in self.fields().items())
+        return f"{type(self).__name__}(seq={self.seq}, {inner})"
+
+
+# ---- device → host -----------------------------------------------------------------------------
+
+
+class Hello(Packet):
+    TYPE, NAME, DIRECTION = 0x01, "HELLO", "device"
+    FIELDS = (
+        Field("protocol_version", "B"),
+        Field("firmware_version", "B", 3, show=lambda v: "%d.%d.%d" % tuple(v)),
+        Field("sensors_found", "B", show=lambda v: bit_names(v, SENSOR_BITS)),
+        Field("adxl345_devid", "B"),
+        Field("itg3200_whoami", "B"),
+        Field("hmc5883l_id", "B", 3, show=lambda v: bytes(v).decode("latin-1")),
+        Field("imu_rate_hz", "H"),
+        Field("mag_rate_hz", "B"),
+        Field("stream_mode", "B", show=lambda v: bit_names(v, STREAM_MODE_BITS)),
+        Field("raw_rate_hz", "H"),
+        Field("orientation_rate_hz", "H"),
+        Field("calibration_state", "B", show=lambda v: bit_names(v, CALIBRATION_STATE_BITS)),
+        # version 2
+        Field("reset_cause", "B", show=lambda v: bit_names(v, RESET_CAUSE_BITS), default=0),
+        Field("mag_chip", "B", show=lambda v: MAG_CHIPS.get(v, v), default=0),
+        Field("board_profile", "B", show=lambda v: BOARD_PROFILES.get(v, v), default=0),
+    )
+    V1_FIELDS = 12
+
+
+class RawSample(Packet):
+    TYPE, NAME, DIRECTION = 0x02, "RAW_SAMPLE", "device"
+    FIELDS = (
+        Field("t_us", "I"),
+        Field("flags", "B", show=lambda v: bit_names(v, RAW_FLAGS)),
+        Field("accel", "h", 3, scale=1.0 / chips.ADXL345_LSB_PER_G),
+        Field("gyro", "h", 3, scale=1.0 / chips.ITG3200_LSB_PER_DPS),
+        Field("mag", "h", 3, scale=1.0 / chips.HMC5883L_LSB_PER_UT),
+    )
+
+    @property
+    def accel_g(self):
+        return chips.accel_lsb_to_g(self.accel)
+
+    @property
+    def gyro_dps(self):
+        return chips.gyro_lsb_to_dps(self.gyro)
+
+    @property
+    def mag_uT(self):
+        return chips.mag_lsb_to_uT(self.mag)
+
+
+class Orientation(Packet):
+    TYPE, NAME, DIRECTION = 0x03, "ORIENTATION", "device"
+    FIELDS = (
+        Field("t_us", "I"),
+        Field("flags", "B", show=lambda v: bit_names(v, ORIENTATION_FLAGS)),
+        Field("quat", "h", 4, scale=1.0 / Q14),
+    )
+
+    @property
+    def quat_float(self) -> tuple[float, float, float, float]:
+        """w, x, y, z as floats, sensor-to-NWU."""
+        return tuple(v / Q14 for v in self.quat)
+
+
+def _tap_axes(status: int) -> list[str]:
+    return [axis for bit, axis in ((2, "x"), (1, "y"), (0, "z")) if status >> bit & 1]
+
+
+class Event(Packet):
+    TYPE, NAME, DIRECTION = 0x04, "EVENT", "device"
+    FIELDS = (
+        Field("t_us", "I"),
+        Field("event", "B", show=lambda v: EVENT_NAMES.get(v, v)),
+        Field("int_source", "B"),
+        Field("act_tap_status", "B"),
+        Field("tap_sign", "b"),
+    )
+
+    @property
+    def event_name(self) -> str:
+        return EVENT_NAMES.get(self.event, f"unknown_{self.event}")
+
+    @property
+    def tap_axes(self) -> list[str]:
+        return _tap_axes(self.act_tap_status)
+
+    def to_json(self, raw: bool = False) -> dict:
+        out = super().to_json(raw)
+        out["tap_axes"] = self.tap_axes
+        return out
+
+
+class Status(Packet):
+    TYPE, NAME, DIRECTION = 0x05, "STATUS", "device"
+    FIELDS = (
+        Field("t_us", "I"),
+        Field("sensors_ok", "B", show=lambda v: bit_names(v, SENSOR_BITS)),
+        Field("i2c_errors", "H", 3),
+        Field("i2c_recoveries", "H"),
+        Field("loop_overruns", "H"),
+        Field("frames_dropped", "H"),
+        Field("rx_errors", "H"),
+        Field("calibration_state", "B", show=lambda v: bit_names(v, CALIBRATION_STATE_BITS)),
+        Field("calibration_step", "B", show=lambda v: CALIBRATION_STEPS.get(v, v)),
+        Field("cpu_load", "H", scale=0.001),
+        Field("battery_mv", "H"),
+        # version 2
+        Field("probe_failures", "H", default=0),
+        Field("sensor_losses", "H", default=0),
+    )
+    V1_FIELDS = 11
+
+
+class Reply(Packet):
+    """REPLY: three fixed fields and, for GET_CALIBRATION, 43 bytes of data (spec §4.6)."""
+
+    TYPE, NAME, DIRECTION = 0x06, "REPLY", "device"
+    FIELDS = (
+        Field("cmd_seq", "B"),
+        Field("cmd_type", "B", show=lambda v: _COMMAND_NAMES.get(v, v)),
+        Field("result", "B", show=lambda v: Result(v).name.lower() if v in Result._value2member_map_ else v),
+    )
+    DATA_SIZES = (0, 43)
+
+    def __init__(self, *args, data: bytes = b"", **kwargs):
+        super().__init__(*args, **kwargs)
+        self.data = bytes(data)
+
+    def pack_body(self) -> bytes:
+        return super().pack_body() + self.data
+
+    @classmethod
+    def unpack_body(cls, body: bytes, seq: int = 0) -> "Reply":
+        obj = super().unpack_body(body[: cls._struct.size], seq)
+        obj.data = bytes(body[cls._struct.size :])
+        return obj
+
+    @classmethod
+    def body_sizes(cls) -> tuple[int, ...]:
+        return tuple(cls._struct.size + n for n in cls.DATA_SIZES)
+
+    @property
+    def ok(self) -> bool:
+        return self.result == Result.OK
+
+    def calibration(self) -> tuple["CalibrationBlock", int]:
+        """The block and calibration_state carried by a GET_CALIBRATION reply."""
+        if len(self.data) != CalibrationBlock.SIZE + 1:
+            raise ValueError(f"this REPLY carries {len(self.data)} data bytes, not a calibration")
+        return CalibrationBlock.unpack(self.data[:-1]), self.data[-1]
+
+    def fields(self) -> dict:
+        out = super().fields()
+        out["data"] = self.data.hex()
+        return out
+
+    def to_json(self, raw: bool = False) -> dict:
+        out = super().to_json(raw)
+        out["data"] = self.data.hex()
+        return out
+
+
+# ---- host → device -----------------------------------------------------------------------------
+
+
+class GetHello(Packet):
+    TYPE, NAME, DIRECTION = 0x40, "GET_HELLO", "host"
+
+
+class SetStream(Packet):
+    TYPE, NAME, DIRECTION = 0x41, "SET_STREAM", "host"
+    FIELDS = (Field("stream_mode", "B"), Field("raw_rate_hz", "H"), Field("orientation_rate_hz", "H"))
+
+
+class SetTap(Packet):
+    TYPE, NAME, DIRECTION = 0x42, "SET_TAP", "host"
+    FIELDS = (
+        Field("thresh_tap", "B", scale=0.0625),  # g
+        Field("dur", "B", scale=0.625),  # ms
+        Field("latent", "B", scale=1.25),  # ms
+        Field("window", "B", scale=1.25),  # ms
+        Field("tap_axes", "B"),
+    )
+
+
+class SetFreeFall(Packet):
+    TYPE, NAME, DIRECTION = 0x43, "SET_FREE_FALL", "host"
+    FIELDS = (Field("thresh_ff", "B", scale=0.0625), Field("time_ff", "B", scale=5.0))  # g, ms
+
+
+class SetFilter(Packet):
+    TYPE, NAME, DIRECTION = 0x44, "SET_FILTER", "host"
+    FIELDS = (Field("beta", "H", scale=0.001),)
+
+
+class CalibrationStep(Packet):
+    TYPE, NAME, DIRECTION = 0x45, "CALIBRATION_STEP", "host"
+    FIELDS = (Field("step", "B", show=lambda v: CALIBRATION_STEPS.get(v, v)), Field("action", "B"))
+
+
+_CAL_FIELDS = (
+    Field("gyro_bias", "h", 3),
+    Field("accel_offset", "h", 3),
+    Field("accel_scale", "h", 3, scale=1.0 / Q14),
+    Field("mag_offset", "h", 3),
+    Field("mag_soft_iron", "h", 9, scale=1.0 / Q14),
+)
+
+
+class SetCalibration(Packet):
+    TYPE, NAME, DIRECTION = 0x46, "SET_CALIBRATION", "host"
+    FIELDS = _CAL_FIELDS
+
+
+class CalibrationBlock:
+    """The 42-byte calibration block (spec §5.2), shared by SET_CALIBRATION and GET_CALIBRATION."""
+
+    SIZE = SetCalibration.body_size()
+
+    @staticmethod
+    def default() -> SetCalibration:
+        return SetCalibration(
+            gyro_bias=(0, 0, 0),
+            accel_offset=(0, 0, 0),
+            accel_scale=(16384,) * 3,
+            mag_offset=(0, 0, 0),
+            mag_soft_iron=(16384, 0, 0, 0, 16384, 0, 0, 0, 16384),
+        )
+
+    @staticmethod
+    def unpack(data: bytes) -> SetCalibration:
+        return SetCalibration.unpack_body(data)
+
+
+class GetCalibration(Packet):
+    TYPE, NAME, DIRECTION = 0x47, "GET_CALIBRATION", "host"
+
+
+class SaveCalibration(Packet):
+    TYPE, NAME, DIRECTION = 0x48, "SAVE_CALIBRATION", "host"
+
+
+class LoadCalibration(Packet):
+    TYPE, NAME, DIRECTION = 0x49, "LOAD_CALIBRATION", "host"
+
+
+class ResetCalibration(Packet):
+    TYPE, NAME, DIRECTION = 0x4A, "RESET_CALIBRATION", "host"
+
+
+class Identify(Packet):
+    TYPE, NAME, DIRECTION = 0x4B, "IDENTIFY", "host"
+    FIELDS = (Field("seconds", "B"),)
+
+
+REBOOT_MAGIC = 0xB007
+
+
+class Reboot(Packet):
+    TYPE, NAME, DIRECTION = 0x4C, "REBOOT", "host"
+    FIELDS = (Field("magic", "H"),)
+
+
+class GetStatus(Packet):
+    TYPE, NAME, DIRECTION = 0x4D, "GET_STATUS", "host"
+
+
+class SetBoard(Packet):
+    TYPE, NAME, DIRECTION = 0x4E, "SET_BOARD", "host"
+    FIELDS = (Field("board_profile", "B", show=lambda v: BOARD_PROFILES.get(v, v)),)
+
+
+ALL_TYPES: tuple[type[Packet], ...] = (
+    Hello,
+    RawSample,
+    Orientation,
+    Event,
+    Status,
+    Reply,
+    GetHello,
+    SetStream,
+    SetTap,
+    SetFreeFall,
+    SetFilter,
+    CalibrationStep,
+    SetCalibration,
+    GetCalibration,
+    SaveCalibration,
+    LoadCalibration,
+    ResetCalibration,
+    Identify,
+    Reboot,
+    GetStatus,
+    SetBoard,
+)
+BY_TYPE = {cls.TYPE: cls for cls in ALL_TYPES}
+BY_NAME = {cls.NAME: cls for cls in ALL_TYPES}
+_COMMAND_NAMES = {cls.TYPE: cls.NAME.lower() for cls in ALL_TYPES if cls.DIRECTION == "host"}
+
+
+def packet_class(type_or_name: int | str) -> type[Packet]:
+    """The packet class for a type number or a spec name (``"RAW_SAMPLE"``)."""
+    if isinstance(type_or_name, str):
+        return BY_NAME[type_or_name.upper()]
+    return BY_TYPE[type_or_name]
+
+
+def body_sizes(cls: type[Packet]) -> tuple[int, ...]:
+    """The body lengths a packet type may have."""
+    return cls.body_sizes()

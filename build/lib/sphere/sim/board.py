@@ -1,0 +1,206 @@
+"""Build and run the virtual board (hardware/sim/build/sphere-board) on a firmware image.
+
+    from sphere.sim.board import run_board, firmware_elf
+    result = run_board(firmware_elf(), "trace.bin", seconds=5, capture="out.bin")
+    result.stats["cycles_per_update"]["median"]
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from sphere import paths
+from sphere.paths import repo_path
+
+# Installed (not a checkout), the board is built from the package's sources in the user's cache (sphere.paths).
+SIM_DIR = paths.sim_build_root()
+BOARD = SIM_DIR / "build" / "sphere-board"
+FIRMWARE_DIR = repo_path("firmware")
+FIRMWARE_ELF = paths.firmware_image(".elf")
+BUILD_BOARD_CMD = paths.sim_build_command()
+BUILD_FIRMWARE_CMD = "make -C firmware"
+BOARD_SOURCES = ("sphere_board.c", "sensors.c", "sensors.h", "Makefile")
+
+
+class BoardUnavailable(RuntimeError):
+    """The simulator or the firmware image cannot be had; the message says which command makes it."""
+
+
+def _stale(target: Path, sources) -> bool:
+    if not target.exists():
+        return True
+    t = target.stat().st_mtime
+    return any(Path(s).exists() and Path(s).stat().st_mtime > t for s in sources)
+
+
+def _make(directory: Path, cmd_text: str, target: str | None = None, quiet: bool = True) -> None:
+    if shutil.which("make") is None:
+        raise BoardUnavailable(f"`make` is not installed; install it and run `{cmd_text}`")
+    cmd = ["make", "-C", str(directory)] + ([target] if target else [])
+    r = subprocess.run(cmd, capture_output=quiet, text=True)
+    if r.returncode != 0:
+        tail = (r.stderr or r.stdout or "")[-2000:] if quiet else ""
+        raise BoardUnavailable(f"`{cmd_text}` failed:\n{tail}")
+
+
+def board_path(build: bool = True) -> Path:
+    """The simulator binary, built first when it is missing or older than its sources."""
+    if _stale(BOARD, [paths.sim_source_dir() / s for s in BOARD_SOURCES]):
+        if not build:
+            raise BoardUnavailable(f"the simulator is not built: run `{BUILD_BOARD_CMD}`")
+        if not Path("/usr/include/simavr/sim_avr.h").exists() and not os.environ.get("SIMAVR_CFLAGS"):
+            raise BoardUnavailable(
+                "simavr's headers are missing: install Debian's `simavr libsimavr-dev libelf-dev pkg-config` "
+                + (f"and run `{BUILD_BOARD_CMD}`" if paths.in_checkout() else "and run this command again"))
+        first_use = SIM_DIR != paths.sim_source_dir()
+        if first_use:  # installed: first use builds a copy in the user's cache
+            print(f"sphere: building the virtual board in {SIM_DIR} (first use only) ...", file=sys.stderr, flush=True)
+            SIM_DIR.mkdir(parents=True, exist_ok=True)
+            for name in BOARD_SOURCES:
+                shutil.copy2(paths.sim_source_dir() / name, SIM_DIR / name)
+        t0 = time.monotonic()
+        _make(SIM_DIR, BUILD_BOARD_CMD)
+        if first_use:
+            print(f"sphere: the virtual board is built ({time.monotonic() - t0:.1f} s; kept for next time)",
+                  file=sys.stderr, flush=True)
+    return BOARD
+
+
+def firmware_elf(build: bool = True) -> Path:
+    """The firmware image, built with `make -C firmware` when it is missing and can be built."""
+    if FIRMWARE_ELF.exists():
+        return FIRMWARE_ELF
+    if os.environ.get(paths.FIRMWARE_ENV) or not paths.in_checkout():
+        raise BoardUnavailable(f"no firmware image at {FIRMWARE_ELF}: {paths.firmware_missing_hint()}")
+    if not (FIRMWARE_DIR / "Makefile").exists():
+        raise BoardUnavailable(f"no firmware image at {FIRMWARE_ELF} and no firmware/Makefile to build it")
+    if not build:
+        raise BoardUnavailable(f"no firmware image at {FIRMWARE_ELF}: run `{BUILD_FIRMWARE_CMD}`")
+    _make(FIRMWARE_DIR, BUILD_FIRMWARE_CMD)
+    if not FIRMWARE_ELF.exists():
+        raise BoardUnavailable(f"`{BUILD_FIRMWARE_CMD}` did not make {FIRMWARE_ELF}")
+    return FIRMWARE_ELF
+
+
+def _sketch_elf(name: str, build: bool) -> Path:
+    elf = SIM_DIR / "build" / f"{name}.elf"
+    if _stale(elf, [SIM_DIR / name / f"{name}.cpp", SIM_DIR / "sketch_wire.h", SIM_DIR / "Makefile"]):
+        if not build:
+            raise BoardUnavailable(f"the {name} sketch is not built: run `make -C hardware/sim {name}`")
+        _make(SIM_DIR, f"make -C hardware/sim {name}", name)
+    return elf
+
+
+def testfw_elf(build: bool = True) -> Path:
+    """The board's own test sketch (hardware/sim/testfw), for checking the board without the firmware."""
+    return _sketch_elf("testfw", build)
+
+
+def probe_elf(build: bool = True) -> Path:
+    """The bench I2C master (hardware/sim/probe): text commands on the UART, one result line each."""
+    return _sketch_elf("probe", build)
+
+
+#: The board variants sphere-board knows (hardware/sim/sensors.c, board_variants).
+BOARD_VARIANTS = ("aligned", "sen10724", "gy85", "gy85-qmc")
+
+
+@dataclass
+class BoardRun:
+    stats: dict
+    capture: Path | None
+    returncode: int
+    stderr: str = ""
+    command: list = field(default_factory=list)
+
+
+def board_command(elf, trace, seconds: float, capture=None, pty=False, realtime=False, stats=None,
+                  nack=(), stall=(), send=None, timing_pin=None, loop_pin=None, rate_hz=None,
+                  verbose=0, build=True, i2c_real_timing=True, board=None, noise=False, seed=None,
+                  clock_ppm=(), clocks_random=False, glitch=None, reset_mid_read=(), brownout=(), sda_held=False,
+                  host_stall=(), adapter=None, capture_times=None, reset_at=(), drdy_pin=None,
+                  power_off=()) -> list[str]:
+    """sphere-board's command line. I2C runs at its real 400 kHz timing unless ``i2c_real_timing=False``."""
+    cmd = [str(board_path(build)), str(elf), "--trace", str(trace), "--seconds", f"{seconds:g}"]
+    if capture:
+        cmd += ["--capture", str(capture)]
+    if pty:
+        cmd.append("--pty")
+    if realtime:
+        cmd.append("--realtime")
+    if stats:
+        cmd += ["--stats", str(stats)]
+    for n in nack:
+        cmd += ["--nack", n]
+    for s in stall:
+        cmd += ["--stall", s]
+    if send:
+        cmd += ["--send", str(send)]
+    if timing_pin:
+        cmd += ["--timing-pin", timing_pin]
+    if loop_pin:
+        cmd += ["--loop-pin", loop_pin]
+    if rate_hz:
+        cmd += ["--rate", f"{rate_hz:g}"]
+    if not i2c_real_timing:
+        cmd.append("--simavr-i2c-timing")
+    if board:
+        cmd += ["--board", board]
+    if noise:
+        cmd.append("--noise")
+    if seed is not None:
+        cmd += ["--seed", str(int(seed))]
+    for c in clock_ppm:
+        cmd += ["--clock-ppm", c]
+    if clocks_random:
+        cmd += ["--clocks", "random"]
+    if glitch:
+        cmd += ["--glitch", f"{glitch:g}"]
+    for t in reset_mid_read:
+        cmd += ["--reset-mid-read", f"{t:g}"]
+    for t in brownout:
+        cmd += ["--brownout", f"{t:g}"]
+    for t in reset_at:
+        cmd += ["--reset-at", f"{t:.6f}"]
+    for t in power_off:
+        cmd += ["--power-off", f"{t:g}"]
+    if sda_held:
+        cmd.append("--sda-held")
+    for h in host_stall:
+        cmd += ["--host-stall", h]
+    if adapter:
+        cmd += ["--adapter", adapter]
+    if capture_times:
+        cmd += ["--capture-times", str(capture_times)]
+    if drdy_pin:
+        cmd += ["--drdy-pin", drdy_pin]
+    cmd += ["-v"] * verbose
+    return cmd
+
+
+def run_board(elf, trace, seconds: float, capture=None, *, interactive: bool = False, **kw) -> BoardRun:
+    """Run the board to completion; returns its stats (the JSON the board writes) and the capture path.
+
+    ``interactive``: let the board's output (the pty path, logs) go straight to this process's streams.
+    """
+    with tempfile.TemporaryDirectory(prefix="sphere-sim-") as tmp:
+        stats_path = Path(kw.pop("stats", None) or Path(tmp) / "stats.json")
+        cmd = board_command(elf, trace, seconds, capture=capture, stats=stats_path, **kw)
+        if interactive:
+            r = subprocess.run(cmd, stderr=None, stdout=None)
+            err = ""
+        else:
+            r = subprocess.run(cmd, capture_output=True, text=True)
+            err = r.stderr
+        stats = json.loads(stats_path.read_text()) if stats_path.exists() else {}
+    return BoardRun(stats, Path(capture) if capture else None, r.returncode, err, cmd)
+
+

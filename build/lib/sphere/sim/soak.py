@@ -1,0 +1,531 @@
+"""`sphere sim --soak`: the real firmware on BROAD motion under a seeded schedule of every fault the board
+can make, judged from the device's bytes alone against a fault-free run of the same motion.
+
+The board records the simulated time of every frame delimiter it captures (``--capture-times``), so a
+frame of the stream can be placed in simulated time, and the faults it injected (its ``faults`` log);
+everything else comes from the captured bytes: sequence numbers, device timestamps, CRCs, RAW_SAMPLE flags
+and ORIENTATION quaternions. The invariants (issue 11) and their limits are in :data:`LIMITS`.
+"""
+
+from __future__ import annotations
+
+import bisect
+import json
+import math
+import struct
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from sphere.protocol.framing import MIN_PAYLOAD, crc16
+from sphere.protocol.packets import BY_TYPE, Hello, Orientation, RawSample, Status
+
+#: Limits of the invariants: stale frames and CRC errors outside injected line faults must be 0; a sensor
+#: must give fresh data within these times of a fault's end (a reset needs the firmware to start again);
+#: 2 s after a fault the device's orientation must be within this of the fault-free run's.
+LIMITS = {"recovery_ms": 100.0, "recovery_after_reset_ms": 1000.0, "orientation_excess_deg": 2.0}
+
+#: Fault kinds of the schedule (all by default); see :func:`schedule`.
+FAULT_KINDS = ("nack", "stall", "glitch", "brownout", "reset_mid_read", "sda_held", "host_stall")
+
+CHIP_BITS = {"adxl345": 0x01, "itg3200": 0x02, "hmc5883l": 0x04, "qmc5883l": 0x04}
+MAG_FRESH = 0x08
+#: RAW_SAMPLE flags of protocol v2: the value is held from the last good read (0 in v1 streams)
+STALE_BITS = {0x01: 0x20, 0x02: 0x40, 0x04: 0x80}
+LEAD_IN_S = 3.0  # still at power-up: the firmware's gyro bias window
+RESET_KINDS = ("brownout", "reset_mid_read")
+LINE_WINDOW_S = 0.05  # a reset cuts the frame on the wire; a host stall drops bytes up to its end
+
+
+@dataclass
+class Frame:
+    t_s: float  # simulated time of its delimiter
+    ok: bool
+    packet: object = None  # decoded packet (good frames of a known type)
+    type_: int | None = None
+    seq: int | None = None
+
+
+def read_frames(capture: bytes, times: bytes) -> list[Frame]:
+    """Every delimited chunk of the capture as a frame, placed in simulated time by the board's
+    --capture-times records (one per delimiter, in order)."""
+    rec = np.frombuffer(times, dtype=[("off", "<u8"), ("t", "<f8")])
+    from cobs import cobs
+
+    out = []
+    start = 0
+    for i, t in enumerate(rec["t"]):
+        end = int(rec["off"][i]) - 1  # the delimiter's index
+        chunk = capture[start:end]
+        start = end + 1
+        if not chunk:
+            continue
+        try:
+            payload = cobs.decode(chunk)
+        except cobs.DecodeError:
+            out.append(Frame(float(t), False))
+            continue
+        if len(payload) < MIN_PAYLOAD or crc16(payload[:-2]) != (payload[-2] | payload[-1] << 8):
+            out.append(Frame(float(t), False))
+            continue
+        type_, seq, body = payload[0], payload[1], payload[2:-2]
+        cls = BY_TYPE.get(type_)
+        pkt = None
+        if cls is not None and cls.DIRECTION == "device":
+            try:
+                pkt = cls.unpack_body(body, seq)
+            except (struct.error, ValueError):
+                pkt = None
+        out.append(Frame(float(t), True, pkt, type_, seq))
+    return out
+
+
+@dataclass
+class Invariant:
+    count: float = 0
+    first_s: float | None = None
+    detail: str = ""
+
+    def add(self, t_s: float, n: float = 1, detail: str = "") -> None:
+        if self.first_s is None:
+            self.first_s = round(t_s, 4)
+            self.detail = detail
+        self.count += n
+
+    def as_dict(self) -> dict:
+        return {"count": self.count, "first_s": self.first_s, "detail": self.detail}
+
+
+def _in(t, windows) -> bool:
+    return any(a <= t <= b for a, b in windows)
+
+
+def stream_checks(frames: list[Frame], line_windows, resets_t=()) -> dict:
+    """stale_frames, crc_errors (outside ``line_windows``), frames_dropped, resets, overruns. A packet whose
+    device time starts again from an injected reset (its HELLO lost while the host was not reading) is a
+    restart, not a stale frame."""
+    stale, crc, dropped = Invariant(), Invariant(), Invariant()
+    last_seq = None
+    last_t: dict[int, int] = {}
+    hellos = hellos_lost = 0
+    overruns_by_boot = [0]
+    for f in frames:
+        if not f.ok:
+            if not _in(f.t_s, line_windows):
+                crc.add(f.t_s, detail="a frame with a bad CRC or COBS code outside injected line faults")
+            continue
+        p = f.packet
+        if isinstance(p, Hello) and f.seq == 0:
+            hellos += 1
+            last_seq, last_t = None, {}
+            overruns_by_boot.append(0)
+            continue
+        t_us = getattr(p, "t_us", None)
+        prev = last_t.get(f.type_) if t_us is not None else None
+        if prev is not None and ((t_us - prev) & 0xFFFFFFFF) >= 0x80000000:
+            if any(abs(f.t_s - t_us * 1e-6 - r) < 0.5 for r in resets_t):
+                hellos_lost += 1  # the device started again at an injected reset; its HELLO was not received
+                last_seq, last_t = None, {}
+                overruns_by_boot.append(0)
+                prev = None
+            else:
+                stale.add(f.t_s, detail=f"{type(p).__name__} time {t_us} us after {prev} us without a HELLO")
+                continue
+        # 8-bit sequence numbers: a jump of 128 or more is a repeat unless the device's time moved on
+        # (then frames were lost, e.g. while the host did not read)
+        forward_in_time = prev is not None and t_us != prev
+        if last_seq is not None:
+            d = (f.seq - last_seq) & 0xFF
+            if d == 0 or (d >= 128 and not forward_in_time):
+                stale.add(f.t_s, detail=f"seq {f.seq} after {last_seq}")
+                continue
+            if d > 1:
+                dropped.add(f.t_s, d - 1)
+        last_seq = f.seq
+        if t_us is not None:
+            last_t[f.type_] = t_us
+        if isinstance(p, Status):
+            overruns_by_boot[-1] = max(overruns_by_boot[-1], p.loop_overruns)
+    return {"stale_frames": stale, "crc_errors": crc, "frames_dropped": dropped,
+            "hellos": hellos, "hellos_lost": hellos_lost, "overruns": sum(overruns_by_boot)}
+
+
+def fault_ends(faults: list[dict], chips: list[str]) -> list[dict]:
+    """The end of each injected fault, with the chips it took away: [{kind, t_end, chips, reset}]."""
+    out = []
+    starts = {}
+    for f in faults:
+        k, t, chip = f["kind"], f["t"], f.get("chip")
+        if k in ("nack_start", "stall_start", "host_stall"):
+            starts[(k.split("_")[0], chip)] = t
+        elif k == "nack_end":
+            out.append({"kind": "nack", "t_start": starts.pop(("nack", chip), t), "t_end": t, "chips": [chip]})
+        elif k == "stall_end":
+            out.append({"kind": "stall", "t_start": starts.pop(("stall", None), t), "t_end": t, "chips": chips})
+        elif k == "glitch_nack":
+            out.append({"kind": k, "t_start": t, "t_end": t, "chips": [chip]})
+        elif k == "clock_stretch":
+            out.append({"kind": k, "t_start": t, "t_end": t, "chips": chips})
+        elif k in RESET_KINDS or k == "sda_held_at_power_up":
+            out.append({"kind": k, "t_start": t, "t_end": t, "chips": chips})
+    return out
+
+
+def recovery(frames: list[Frame], ends: list[dict], host_stalls=()) -> tuple[Invariant, list]:
+    """sensor_recovery_ms: the longest time from a fault's end to its sensor's fresh data in RAW_SAMPLE: its
+    ``_ok`` flag set and its ``_stale`` flag clear (``mag_fresh`` too for the magnetometer)."""
+    raw_t = np.array([f.t_s for f in frames if isinstance(f.packet, RawSample)])
+    raw_flags = np.array([f.packet.flags for f in frames if isinstance(f.packet, RawSample)], dtype=int)
+    worst = Invariant()
+    rows = []
+    for e in ends:
+        for chip in e["chips"]:
+            bit = CHIP_BITS[chip]
+            need = bit | (MAG_FRESH if bit == 0x04 else 0)
+            # while the host was not reading, the sensor's fresh samples may have been lost on the way:
+            # count from the end of that stall
+            t0 = max([e["t_end"]] + [b for a, b in host_stalls if a <= e["t_end"] <= b])
+            i0 = np.searchsorted(raw_t, t0)
+            f = raw_flags[i0:]
+            ok = np.nonzero(((f & need) == need) & ((f & STALE_BITS[bit]) == 0))[0]
+            ms = (raw_t[i0 + ok[0]] - t0) * 1e3 if len(ok) else math.inf
+            rows.append({"kind": e["kind"], "chip": chip, "t_end": round(e["t_end"], 4), "recovery_ms": round(ms, 1)})
+            limit = LIMITS["recovery_after_reset_ms" if e["kind"] in RESET_KINDS + ("sda_held_at_power_up",)
+                          else "recovery_ms"]
+            if ms > limit:
+                worst.add(e["t_end"], 0, f"{chip} after {e['kind']} at {e['t_end']:.3f} s: {ms:.1f} ms")
+            worst.count = max(worst.count, ms)
+    return worst, rows
+
+
+#: ORIENTATION flags bit 3: the firmware's start-up convergence (after power-up, a reset or SET_BOARD)
+CONVERGING = 0x08
+
+
+def _quats(frames):
+    t = np.array([f.t_s for f in frames if isinstance(f.packet, Orientation)])
+    q = np.array([f.packet.quat_float for f in frames if isinstance(f.packet, Orientation)]).reshape(-1, 4)
+    flags = np.array([f.packet.flags for f in frames if isinstance(f.packet, Orientation)], dtype=int)
+    return t, q, flags
+
+
+def _at(t: float, tt: np.ndarray, qq: np.ndarray, gap_s: float = 0.03, near_s: float = 0.1):
+    """The orientation at simulated time ``t`` from the ORIENTATIONs on either side (normalised linear
+    interpolation of the quaternions, signs aligned) when they are within ``gap_s`` of each other; else the
+    first within ``near_s`` after ``t`` (frames lost); None when there is none. Both runs are compared at the
+    same instant: their samples are up to a period apart (a reset's boot delay moves one run's phase), and
+    in a fast turn (BROAD's reach 800 °/s) 1 ms is 0.8°."""
+    i = int(np.searchsorted(tt, t))
+    if i < len(tt) and tt[i] == t:
+        return qq[i] / np.linalg.norm(qq[i])
+    if i == 0 or i >= len(tt) or tt[i] - tt[i - 1] > gap_s:
+        return qq[i] / np.linalg.norm(qq[i]) if i < len(tt) and tt[i] - t <= near_s else None
+    u = (t - tt[i - 1]) / (tt[i] - tt[i - 1])
+    p, q = qq[i - 1], qq[i]
+    q = -q if float(np.dot(p, q)) < 0 else q
+    r = (1 - u) * p + u * q
+    return r / np.linalg.norm(r)
+
+
+def _qmul(p, q) -> np.ndarray:
+    w1, x1, y1, z1 = p
+    w2, x2, y2, z2 = q
+    return np.array([w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2, w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
+                     w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2, w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2])
+
+
+def _conj(q) -> np.ndarray:
+    return np.asarray(q, float) * np.array([1.0, -1.0, -1.0, -1.0])
+
+
+def _angle_deg(p, q) -> float:
+    return math.degrees(2 * math.acos(min(1.0, abs(float(np.dot(p, q))))))
+
+
+def line_fault_windows(log: list[dict], frames: list[Frame]) -> tuple[list, list]:
+    """The windows in which a damaged frame is an injected fault, and the host stalls, from the board's log.
+    A reset cuts the frame on the wire, and the cut frame is judged when the next delimiter comes: the rebooted
+    firmware's first byte, which may wait for the bus (a chip holding SDA after a reset mid-read) and for the host
+    to read again. A host stall drops bytes until it ends."""
+    good_t = [f.t_s for f in frames if f.ok]
+    line = [(e["t"], _first_good_after(good_t, e["t"]) + LINE_WINDOW_S) for e in log if e["kind"] in RESET_KINDS]
+    stall_t, host_stalls = None, []
+    for e in log:
+        if e["kind"] == "host_stall":
+            stall_t = e["t"]
+        elif e["kind"] == "host_reads" and stall_t is not None:
+            line.append((stall_t, e["t"] + LINE_WINDOW_S))
+            host_stalls.append((stall_t, e["t"]))
+            stall_t = None
+    return line, host_stalls
+
+
+def _first_good_after(good_t: list[float], t: float) -> float:
+    """The first of the intact frames' times ``good_t`` (ascending) after ``t`` (``t`` itself when none is)."""
+    i = bisect.bisect_right(good_t, t)
+    return good_t[i] if i < len(good_t) else t
+
+
+def orientation_excess(frames: list[Frame], ref: list[Frame], ends: list[dict], resets_t: list[float],
+                       host_stalls=(), after_s: float = 2.0,
+                       settle_after_reset_s: float = 2.5) -> tuple[Invariant, list]:
+    """orientation_excess_deg: what each fault did to the device's ORIENTATION against the reference run's (the
+    same motion and resets, no other faults), ``after_s`` after the fault ends, both runs taken at the same
+    instant (:func:`_at`): the angle between them then (``diff_deg``), unless they were already apart before the
+    fault started (``before_deg``; the reference has the resets too, and two start-ups can end degrees apart and
+    stay so): then only as far as the fault moved the device against the reference (``moved_deg``, the
+    earth-frame offset then against the one at the fault's start). ``excess_deg`` = min(diff, moved): a check
+    fails when the device is over the limit off the reference and the fault moved it that far.
+
+    Not judged: within ``settle_after_reset_s`` of a reset (the firmware's start-up is not the same to the
+    millisecond in both runs), nor while either run says it is still converging (ORIENTATION ``converging``, its
+    start-up gain) between the fault's start and the check: two start-ups are compared then, not the fault's
+    doing (rows with ``skipped``). A check that falls while the host is not reading is made when it reads again
+    (nothing the device sent in between reaches it)."""
+    ta, qa, fa = _quats(frames)
+    tb, qb, fb = _quats(ref)
+    worst = Invariant()
+    rows = []
+    for e in ends:
+        if e["kind"] in RESET_KINDS or e["kind"] == "sda_held_at_power_up":
+            continue
+        t = e["t_end"] + after_s
+        t = max([t] + [b + 0.05 for a, b in host_stalls if a <= t <= b + 0.05])
+        if not len(ta) or not len(tb) or t > min(ta[-1], tb[-1]):
+            continue  # the run ended first
+        if any(r - 0.1 <= t <= r + settle_after_reset_s for r in resets_t):
+            continue
+        row = {"kind": e["kind"], "chips": e["chips"], "t": round(t, 4)}
+        t0 = e.get("t_start", e["t_end"])
+        conv = [bool(np.any(f[(tt >= t0 - 0.1) & (tt <= t + 0.1)] & CONVERGING)) for tt, f in ((ta, fa), (tb, fb))]
+        if any(conv):
+            rows.append({**row, "excess_deg": None, "skipped": "converging ("
+                         + " and ".join(n for n, c in zip(("device", "reference"), conv) if c) + ")"})
+            continue
+        pa, pb = _at(t, ta, qa), _at(t, tb, qb)
+        ba, bb = _at(t0, ta, qa), _at(t0, tb, qb)
+        deg = _angle_deg(pa, pb) if pa is not None and pb is not None else math.inf  # no orientation then
+        row["before_deg"] = row["moved_deg"] = None
+        if ba is not None and bb is not None:
+            row["before_deg"] = round(_angle_deg(ba, bb), 2)
+            if pa is not None and pb is not None:  # how far the fault moved the device against the reference
+                moved = _angle_deg(_qmul(_qmul(pa, _conj(pb)), _qmul(bb, _conj(ba))), np.array([1.0, 0, 0, 0]))
+                row["moved_deg"] = round(moved, 2)
+                row["diff_deg"] = round(deg, 2)
+                deg = min(deg, moved)
+        row["excess_deg"] = round(deg, 2)
+        rows.append(row)
+        if deg > LIMITS["orientation_excess_deg"]:
+            worst.add(t, 0, f"{deg:.1f} deg {after_s:g} s after {e['kind']} ({','.join(e['chips'])}) ended")
+        worst.count = max(worst.count, deg)
+    return worst, rows
+
+
+def start_ups(frames: list[Frame], resets_t) -> list[dict]:
+    """How long the firmware says it is converging after power-up and after each reset: from the reset to its
+    first ORIENTATION without ``converging`` ({t, seconds}; seconds None when the next reset or the run's end
+    came first; one that ends while the host is not reading counts to the first ORIENTATION it gets). Reported
+    beside the orientation checks, which skip a start-up, so that a start-up that never ends shows."""
+    t, _, flags = _quats(frames)
+    out = []
+    starts = [0.0] + sorted(resets_t)
+    for k, r in enumerate(starts):
+        nxt = starts[k + 1] if k + 1 < len(starts) else math.inf
+        sel = np.flatnonzero((t > r) & (t < nxt) & ((flags & CONVERGING) == 0))
+        out.append({"t": round(r, 4), "seconds": round(float(t[sel[0]] - r), 3) if len(sel) else None})
+    return out
+
+
+# ---------------------------------------------------------------- the run
+
+
+def soak_motion(seconds: float, chunk_s: float = 20.0):
+    """BROAD motion for ``seconds``: a still lead-in, then ``chunk_s`` slices of the trials in turn, each
+    from 2 s before its first movement."""
+    from sphere.broad import load_trial, trial_paths
+    from sphere.sim import trace as T
+
+    paths = trial_paths()
+    if not paths:
+        raise FileNotFoundError("no BROAD trials found (SPHERE_BROAD_DIR)")
+    parts, total, i = [], LEAD_IN_S, 0
+    while total < seconds:
+        tr = load_trial(paths[i % len(paths)])
+        first = int(np.argmax(tr.movement)) / tr.rate_hz if tr.movement.any() else 0.0
+        start = max(0.0, first - 2.0)
+        sl = tr.seconds(start, min(chunk_s, len(tr) / tr.rate_hz - start, seconds - total + 1.0))
+        m = T.from_broad(sl)
+        if parts and abs(m.rate_hz - parts[0].rate_hz) > 1e-6:
+            m = T.Motion(parts[0].rate_hz, *(T.resample(x, m.rate_hz, parts[0].rate_hz)
+                                              for x in (m.acc_m_s2, m.gyr_rad_s, m.mag_uT)), m.name)
+        parts.append(m)
+        total += m.seconds
+        i += 1
+    cat = T.Motion(parts[0].rate_hz, *(np.concatenate([getattr(p, k) for p in parts])
+                                       for k in ("acc_m_s2", "gyr_rad_s", "mag_uT")), "soak")
+    return T.hold_first(cat, LEAD_IN_S), [p.name for p in parts]
+
+
+def schedule(seconds: float, seed: int, kinds=FAULT_KINDS, mag: str = "hmc5883l") -> dict:
+    """A seeded schedule of faults as run_board keywords: one fault every 4-7 s from 6 s on, each of a
+    random kind; a low rate of random glitches all through; a sensor holding SDA at power-up."""
+    rng = np.random.default_rng(seed)
+    kw = {"nack": [], "stall": [], "brownout": [], "reset_mid_read": [], "host_stall": []}
+    spaced = [k for k in kinds if k in ("nack", "stall", "brownout", "reset_mid_read", "host_stall")]
+    t, order, chips = 6.0, [], []
+    while spaced and t < seconds - 3.0:
+        if not order:  # every kind once in a random order, then again: a short soak still has each
+            order = [spaced[i] for i in rng.permutation(len(spaced))]
+        k = order.pop()
+        if k == "nack":
+            if not chips:
+                chips = [("adxl345", "itg3200", "hmc5883l")[i] for i in rng.permutation(3)]
+            chip = chips.pop()
+            d = float(rng.uniform(0.005, 0.05 if chip != "hmc5883l" else 0.2))
+            kw["nack"].append(f"{chip}:{t:.4f}:{t + d:.4f}")
+        elif k == "stall":
+            kw["stall"].append(f"{t:.4f}:{t + float(rng.uniform(0.002, 0.02)):.4f}")
+        elif k == "host_stall":
+            kw["host_stall"].append(f"{t:.4f}:{t + float(rng.uniform(0.2, 1.5)):.4f}")
+        else:
+            kw[k].append(round(t, 4))
+        t += float(rng.uniform(4.0, 7.0))
+    if "glitch" in kinds:
+        kw["glitch"] = 0.2
+    kw["sda_held"] = "sda_held" in kinds
+    return {k: v for k, v in kw.items() if v}
+
+
+def board_profile_command(board: str | None, path: Path) -> Path | None:
+    """A SET_BOARD command for the firmware at 0.5 s when the board is not the aligned one (as its owner
+    would send once; the firmware keeps it in EEPROM), so the firmware maps the chips as they are mounted.
+    None when the board is the aligned one or the host's protocol has no SET_BOARD."""
+    from sphere.protocol import packets
+
+    if not board or board == "aligned" or not hasattr(packets, "SetBoard"):
+        return None
+    number = {name: n for n, name in packets.BOARD_PROFILES.items()}.get(board.split("-")[0])
+    if number is None:
+        return None
+    from sphere.protocol import encode_frame
+
+    path.write_text(f"0.5 {encode_frame(packets.SetBoard(board_profile=number), 0).hex(' ')}\n")
+    return path
+
+
+@dataclass
+class SoakResult:
+    report: dict
+    failed: list = field(default_factory=list)
+
+    @property
+    def ok(self) -> bool:
+        return not self.failed
+
+    def summary_line(self) -> str:
+        r = self.report
+        inv = r["invariants"]
+
+        def f(k, unit=""):
+            v = inv[k]
+            first = f" first {v['first_s']:.2f} s" if v.get("first_s") is not None else ""
+            c = v["count"]
+            c = "never" if c is None or c == math.inf else (f"{c:.1f}" if isinstance(c, float) and not float(c).is_integer() else int(c))
+            return f"{k} {c}{unit}{first}"
+        return (f"sphere sim --soak {r['seconds']:g} s seed {r['seed']} board {r['board']}: "
+                + ", ".join([f("stale_frames"), f("crc_errors"), f("sensor_recovery_ms"),
+                             f("orientation_excess_deg") + (f" ({inv['orientation_excess_deg']['checks']} checks, "
+                                                            f"{inv['orientation_excess_deg']['skipped_converging']} in a "
+                                                            "start-up)" if "checks" in inv["orientation_excess_deg"] else ""),
+                             f"resets {inv['resets']['count']} ({inv['resets']['injected']} injected)",
+                             *([f"start-up longest {inv['start_up_s']['longest']:.2f} s"]
+                               if inv.get("start_up_s", {}).get("longest") is not None else []),
+                             f"overruns {inv['overruns']['count']}", f("frames_dropped")])
+                + (" -> FAIL: " + ", ".join(self.failed) if self.failed else " -> PASS")
+                + f" [x{r['speed']:.2f} real time per CPU core]")
+
+
+def run_soak(elf, seconds: float, seed: int, board: str | None = None, kinds=FAULT_KINDS,
+             tmp: Path | None = None, build: bool = True, keep: Path | None = None) -> SoakResult:
+    """Run the faulty and the fault-free board on the same motion; check the invariants."""
+    import tempfile
+
+    from sphere.sim import trace as T
+    from sphere.sim.board import run_board
+
+    with tempfile.TemporaryDirectory(prefix="sphere-soak-") as tmpd:
+        tmp = Path(tmpd)
+        motion, trials = soak_motion(seconds)
+        trace = T.to_chips(motion).write(tmp / "trace.bin")
+        common = dict(board=board, noise=True, seed=seed, clocks_random=True, build=build)
+        send = board_profile_command(board, tmp / "send.txt")
+        if send:
+            common["send"] = send
+        faults = schedule(seconds, seed, kinds)
+
+        def one(name, kw):
+            cap, times = tmp / f"{name}.cap", tmp / f"{name}.times"
+            r = run_board(elf, trace, seconds, cap, capture_times=times, **common, **kw)
+            return r, cap.read_bytes() if cap.exists() else b"", times.read_bytes() if times.exists() else b""
+
+        # the reference: the same motion, chips and clocks without the faults, but with the faulty run's
+        # resets at the same times (the firmware starts again in both), so what differs is the faults' doing
+        ra, capa, ta = one("faulty", faults)
+        log = ra.stats.get("faults", [])
+        ref_kw = {"brownout": [e["t"] for e in log if e["kind"] == "brownout"],
+                  "reset_at": [e["t"] for e in log if e["kind"] == "reset_mid_read"]}
+        rb, capb, tb = one("reference", {k: v for k, v in ref_kw.items() if v})
+        if keep:
+            keep.mkdir(parents=True, exist_ok=True)
+            for name in ("faulty.cap", "faulty.times", "reference.cap", "reference.times", "trace.bin"):
+                if (tmp / name).exists():
+                    (keep / name).write_bytes((tmp / name).read_bytes())
+    for r in (ra, rb):
+        if r.returncode != 0:
+            raise RuntimeError(f"the board exited with {r.returncode}: {r.stderr.strip()[-500:]}")
+    frames, ref = read_frames(capa, ta), read_frames(capb, tb)
+    mag = ra.stats.get("magnetometer", "hmc5883l")
+    chips = ["adxl345", "itg3200", mag]
+    for e in log:
+        if e.get("chip") == "hmc5883l":
+            e["chip"] = mag
+    ends = fault_ends(log, chips)
+    resets_t = [e["t"] for e in log if e["kind"] in RESET_KINDS]
+    line, host_stalls = line_fault_windows(log, frames)
+    s = stream_checks(frames, line, resets_t)
+    rec, rec_rows = recovery(frames, ends, host_stalls)
+    ori, ori_rows = orientation_excess(frames, ref, ends, resets_t, host_stalls)
+    ups = start_ups(frames, resets_t)
+    ended = [u["seconds"] for u in ups if u["seconds"] is not None]
+    resets = max(0, s["hellos"] + s["hellos_lost"] - 1)
+    injected = len(resets_t)
+    inv = {
+        "stale_frames": s["stale_frames"].as_dict(),
+        "crc_errors": s["crc_errors"].as_dict(),
+        "sensor_recovery_ms": rec.as_dict(),
+        "orientation_excess_deg": {**ori.as_dict(), "checks": sum(1 for r in ori_rows if "skipped" not in r),
+                                   "skipped_converging": sum(1 for r in ori_rows if "skipped" in r)},
+        "resets": {"count": resets, "injected": injected},
+        "overruns": {"count": s["overruns"], "timing_pin": ra.stats.get("overruns")},
+        "frames_dropped": s["frames_dropped"].as_dict(),
+        "start_up_s": {"longest": max(ended) if ended else None, "median": float(np.median(ended)) if ended else None,
+                       "unfinished": sum(1 for u in ups if u["seconds"] is None), "count": len(ups)},
+    }
+    failed = [k for k in ("stale_frames", "crc_errors") if inv[k]["count"] > 0]
+    if rec.first_s is not None or not rec_rows and ends:
+        failed.append("sensor_recovery_ms")
+    if ori.first_s is not None:
+        failed.append("orientation_excess_deg")
+    if resets > injected:  # a reset nobody injected (a watchdog); one during start-up may send no HELLO
+        failed.append("resets")
+    speed = [r.stats.get("speed_cpu") or r.stats.get("speed", 0) for r in (ra, rb)]
+    report = {
+        "seconds": seconds, "seed": seed, "board": ra.stats.get("board"), "magnetometer": mag,
+        "firmware": str(elf), "trials": trials, "limits": LIMITS, "invariants": inv,
+        "faults_scheduled": faults, "faults": log, "recoveries": rec_rows, "orientation_checks": ori_rows, "start_ups": ups,
+        "board_stats": {k: ra.stats.get(k) for k in ("clock_ppm", "glitches", "i2c_errors", "host_dropped_bytes",
+                                                     "hmc5883l_measurements", "hmc5883l_held_by_lock")},
+        "speed": min(speed) if speed else 0.0, "failed": failed,
+    }
+    return SoakResult(json.loads(json.dumps(report, default=float).replace("Infinity", "null")), failed)
