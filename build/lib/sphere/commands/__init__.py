@@ -1,1 +1,0 @@
-"""Subcommands of `sphere`; each module here is one subcommand (see :mod:`sphere.cli`)."""
