@@ -80,3 +80,19 @@ def test_bad_input_is_one_clear_line(capsys, broad_dir):
     assert "choose --start and --seconds inside it" in capsys.readouterr().err
     with pytest.raises(SystemExit, match="TRIAL:START_S"):
         main(["hybrid-eval", "--trials", "10:soon"])
+
+
+def test_bench_position_cross_validates_the_stream_position_filter(broad_dir, tmp_path, capsys):
+    """`sphere bench position` (issue 30): the position filters through the daemon's PoseFilter on the hybrid's
+    output, chosen on one stretch and scored on another; one short stretch each here (the full run: docs)."""
+    out = tmp_path / "p.json"
+    assert main(["bench", "position", "--train", "16:100", "--test", "10:40", "--seconds", "9", "--json", str(out)]) == 0
+    doc = json.loads(out.read_text())
+    assert doc["train"] == ["16:100"] and doc["test"] == ["10:40"]
+    none = doc["filters"]["none"]["defaults"]["figures"]
+    euro = doc["filters"]["one-euro"]["defaults"]["figures"]
+    # the default position smoothing never lags the hybrid's estimate by more than a few ms
+    assert euro["latency_ms"] - none["latency_ms"] <= 6.0
+    assert euro["rmse_lateral_m"] <= 1.3 * none["rmse_lateral_m"]
+    assert doc["choice"]["filter"] in ("none", "one-euro")
+    assert "chosen on the train stretches" in capsys.readouterr().out

@@ -220,7 +220,14 @@ def latency_ms(t, est, truth_fn, max_ms: int = 200, min_ms: int = -50) -> float 
 
 
 def figures(r: Run, rt: RenderedTrial) -> dict:
-    out = {}
+    out = {m: method_figures(r, rt, r.est[m]) for m in METHODS}
+    out["hybrid"]["output_rate_hz"] = float(1.0 / np.median(np.diff(r.t_out)))
+    out["hybrid"]["alignment_ready_s"] = r.alignment_ready_s
+    return out
+
+
+def method_figures(r: Run, rt: RenderedTrial, est: np.ndarray) -> dict:
+    """The figures of one output ``est`` (N, 3) at the run's output times ``r.t_out``."""
     in_loss = np.zeros(len(r.t_out), bool)
     for a, b in r.losses:
         in_loss |= (r.t_out >= a) & (r.t_out < b + 0.5)
@@ -228,28 +235,23 @@ def figures(r: Run, rt: RenderedTrial) -> dict:
     # the warm-up: until the hybrid has learnt how the camera stands (the same samples left out for every
     # method); the figures with it are kept as *_with_warmup
     warm = r.t_out < (r.alignment_ready_s if r.alignment_ready_s is not None else np.inf)
-    for m in METHODS:
-        e = r.est[m] - r.truth
-        ok = np.all(np.isfinite(e), axis=1)
-        use = ok & ~in_loss & ~warm
-        fig = {}
-        if use.sum() >= 10:
-            fig["rmse_lateral_m"], fig["rmse_depth_m"] = _lat_depth(e[use])
-            fig["max_error_m"] = float(np.linalg.norm(e[use], axis=1).max())
-        if (ok & ~in_loss).sum() >= 10:
-            fig["rmse_lateral_with_warmup_m"], fig["rmse_depth_with_warmup_m"] = _lat_depth(e[ok & ~in_loss])
-        jit = _jitter(r.t_out, e, ok & r.rest)
-        if jit:
-            fig["jitter_lateral_m"], fig["jitter_depth_m"] = jit
-        lat = latency_ms(r.t_out[moving & ~warm], r.est[m][moving & ~warm], rt.truth_cam)
-        fig["latency_ms"] = lat
-        fig["coverage"] = float(ok.mean())
-        steady = float(np.sqrt(np.mean(np.sum(e[use] ** 2, axis=1)))) if use.sum() >= 10 else 0.0
-        fig["losses"] = [_loss(r.t_out, e, a, b, max(0.01, 2.0 * steady)) for a, b in r.losses]
-        out[m] = fig
-    out["hybrid"]["output_rate_hz"] = float(1.0 / np.median(np.diff(r.t_out)))
-    out["hybrid"]["alignment_ready_s"] = r.alignment_ready_s
-    return out
+    e = est - r.truth
+    ok = np.all(np.isfinite(e), axis=1)
+    use = ok & ~in_loss & ~warm
+    fig = {}
+    if use.sum() >= 10:
+        fig["rmse_lateral_m"], fig["rmse_depth_m"] = _lat_depth(e[use])
+        fig["max_error_m"] = float(np.linalg.norm(e[use], axis=1).max())
+    if (ok & ~in_loss).sum() >= 10:
+        fig["rmse_lateral_with_warmup_m"], fig["rmse_depth_with_warmup_m"] = _lat_depth(e[ok & ~in_loss])
+    jit = _jitter(r.t_out, e, ok & r.rest)
+    if jit:
+        fig["jitter_lateral_m"], fig["jitter_depth_m"] = jit
+    fig["latency_ms"] = latency_ms(r.t_out[moving & ~warm], est[moving & ~warm], rt.truth_cam)
+    fig["coverage"] = float(ok.mean())
+    steady = float(np.sqrt(np.mean(np.sum(e[use] ** 2, axis=1)))) if use.sum() >= 10 else 0.0
+    fig["losses"] = [_loss(r.t_out, e, a, b, max(0.01, 2.0 * steady)) for a, b in r.losses]
+    return fig
 
 
 def _jitter(t, e, rest, min_s: float = 1.0, trim_s: float = 0.3):

@@ -37,6 +37,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
 
+from sphere.smoothing.position import DEFAULT as _POSITION_SMOOTHING
 from sphere.smoothing.registry import DEFAULT as _SMOOTHING  # the registry imports nothing of the daemon
 
 if sys.version_info >= (3, 11):
@@ -223,6 +224,12 @@ def _baud(v):
     return check_baud(v)
 
 
+def _position_smoothing_names():
+    from sphere.smoothing.position import FILTERS
+
+    return tuple(FILTERS)
+
+
 def _smoothing_names():
     from sphere.smoothing.registry import FILTERS
 
@@ -395,8 +402,12 @@ class StreamConfig:
     host: str = option("127.0.0.1", "address to listen on (keep it local)")
     port: int = option(8765, "TCP port of the WebSocket and the page (http://127.0.0.1:PORT/)", _port)
     rate_hz: float = option(60.0, "orientation messages per second", _range(1.0, 200.0))
-    smoothing: str = option(_SMOOTHING, "smoothing filter of the streamed pose, from the smoothing registry (its "
-                            "parameters in [smoothing.NAME]); `none` = the pose as measured", choices=_smoothing_names)
+    smoothing: str = option(_SMOOTHING, "smoothing filter of the streamed orientation, from the smoothing registry "
+                            "(its parameters in [smoothing.NAME], degrees); `none` = the orientation as measured",
+                            choices=_smoothing_names)
+    position_smoothing: str = option(_POSITION_SMOOTHING, "smoothing filter of the streamed position (with a camera), "
+                                     "its parameters in metres in [position_smoothing.NAME]; `none` = the hybrid "
+                                     "tracker's estimate as it is", choices=_position_smoothing_names)
     max_clients: int = option(16, "most WebSocket and page connections at once; more are refused (503)",
                               _range(1, 1000))
 

@@ -5,7 +5,8 @@ turned into a continuous rotation vector instead: each new quaternion's turn fro
 earth frame, always the short way, so never more than 180° per sample) is added to a running vector in
 degrees. The filter smooths that vector, and the output is the measured quaternion turned by the small
 difference between the smoothed and the measured vector (earth frame): it has no wrap-around at all, and
-with ``none`` it is the input exactly. Positions, when given, go through their own instance of the filter.
+with ``none`` it is the input exactly. Positions, when given, go through a filter of their own
+(:mod:`sphere.smoothing.position`: parameters in metres and m/s, never the angle filter's degrees).
 """
 
 from __future__ import annotations
@@ -48,12 +49,17 @@ def exp_deg(v):
 
 
 class PoseFilter:
-    """``update(quat, dt_s, position=None) -> (quat, position)`` with the registry filter ``name``."""
+    """``update(quat, dt_s, position=None) -> (quat, position)``: the orientation through the registry filter
+    ``name`` (``params`` in its units, degrees), the position through ``position`` = (name, params) of
+    :mod:`sphere.smoothing.position` (metres)."""
 
-    def __init__(self, name: str = "none", **params):
+    def __init__(self, name: str = "none", position=("none", None), **params):
+        from sphere.smoothing import position as position_filters
+
         self.name = name
+        self.position_name = position[0]
         self._orientation = make_filter(name, **params)
-        self._position = make_filter(name, **params)
+        self._position = position_filters.make_filter(position[0], **(position[1] or {}))
         self.reset()
 
     def reset(self) -> None:
@@ -83,14 +89,18 @@ class PoseFilter:
         if out[0] < 0:
             out = tuple(-v for v in out)
         pos = None
-        if position is not None:
+        if position is None:  # the position is unknown: when it comes back, its filter starts afresh
+            self._position.reset()
+        else:
             pos = tuple(float(v) for v in self._position.update(tuple(position), dt_s))
         return out, pos
 
 
 def pose_filter(cfg) -> PoseFilter:
-    """The daemon's pose filter from its config: ``stream.smoothing`` and its ``[smoothing.NAME]``."""
+    """The daemon's pose filter from its config: ``stream.smoothing`` and its ``[smoothing.NAME]`` for the
+    orientation, ``stream.position_smoothing`` and its ``[position_smoothing.NAME]`` for the position."""
     from sphere.smoothing.config import filter_params
 
     name = cfg.stream.smoothing
-    return PoseFilter(name, **filter_params(cfg, name))
+    pname = cfg.stream.position_smoothing
+    return PoseFilter(name, (pname, filter_params(cfg, pname, "position_smoothing")), **filter_params(cfg, name))
