@@ -41,6 +41,7 @@
 #include "avr_uart.h"
 #include "parts/uart_pty.h"
 #include "sensors.h"
+#include "mcu.h"
 
 /* per kind of scheduled fault: a soak puts one fault every 4-7 s, so an hour holds ~130 of each kind */
 #define MAX_FAULTS 1024
@@ -451,12 +452,23 @@ static void reset_avr(avr_t *avr, uint8_t kind, uint64_t seed)
 {
 	static uint32_t power_ons;
 	reset_flag = kind;
-	if (kind == MCUSR_PORF)
+	if (kind == MCUSR_PORF) {
 		mcusr_before = 0;
+		mcu_watchdog_forget_pending(avr);
+	}
 	avr_reset(avr);
 	reset_flag = 0;
 	if (kind == MCUSR_PORF)
 		sram_power_on(avr, seed, ++power_ons);
+	mcusr_before = avr->data[mcusr_addr];
+	mcu_watchdog_after_reset(avr, mcusr_before); /* WDRF still set keeps the watchdog on (mcu.c) */
+}
+
+/* the watchdog's system reset where simavr 1.6 makes none (mcu.c, (2)): as simavr's own, WDRF and WDE set */
+static void watchdog_reset_avr(avr_t *avr)
+{
+	mcu_watchdog_reset(avr);
+	avr_reset(avr);
 	mcusr_before = avr->data[mcusr_addr];
 }
 
@@ -464,6 +476,8 @@ static void on_reset(avr_t *avr)
 {
 	resets++;
 	avr->data[mcusr_addr] = (uint8_t)(mcusr_before | reset_flag);
+	mcu_on_reset();
+	avr->pc = avr->reset_pc; /* the boot loader's first address with --bootloader (BOOTRST), else 0 */
 	tm_update.have_last_rise = 0; /* the program starts again: the gap before its first update is no overrun */
 	if (the_board && !plain_reset)
 		board_avr_reset(the_board); /* the chips keep their power: one in the middle of a read holds SDA */
@@ -535,6 +549,11 @@ static void usage(FILE *f)
 		"                       frame, 32-byte buffer); default none: bytes reach the host as they are sent\n"
 		"  --latency-timer MS   the FTDI's latency timer as the driver sets it (default 16; the udev rule's 1); a\n"
 		"                       host that asks for low latency on the pty gets 1 ms\n"
+		"  --bootloader FILE.hex  a boot loader in front of the program (Intel HEX; the reset vector moves to its\n"
+		"                       first address, as the Nano's BOOTRST/BOOTSZ fuses): build/bootloader-NAME.hex,\n"
+		"                       NAME optiboot4 (the Nano's), atmegaboot (the old Nano's), optiboot8\n"
+		"  --hang T0:T1         the program hangs from T0 to T1 s: no instruction outside an interrupt handler\n"
+		"                       runs; interrupts, peripherals and the watchdog go on (a reset ends it)\n"
 		"  --drdy-pin PIN       wire the HMC5883L's DRDY to PIN (e.g. D3; not wired on the sphere)\n"
 		"  --capture-times FILE at each frame delimiter in the capture: u64 bytes captured so far, f64 simulated s\n"
 		"  --simavr-i2c-timing  simavr's 1 us per I2C step (default: 9 SCL periods a byte at the TWBR rate)\n"
@@ -577,7 +596,9 @@ int main(int argc, char **argv)
 	imp.seed = 1;
 	int clocks_random = 0, sda_held = 0, n_brownouts = 0, n_stalls = 0, n_resets_mid = 0, n_resets_at = 0, n_power_offs = 0;
 	double glitch_rate = 0, power_offs[MAX_FAULTS], brownouts[MAX_FAULTS], resets_mid[MAX_FAULTS], host_stalls[MAX_FAULTS][2], resets_at[MAX_FAULTS];
-	const char *adapter = NULL, *times_path = NULL;
+	const char *adapter = NULL, *times_path = NULL, *bootloader_path = NULL;
+	double hangs[MAX_FAULTS][2];
+	int n_hangs = 0;
 	uint32_t latency_timer_ms = 16; /* the FT232R latency timer as ftdi_sio leaves it (since Linux 4.x) */
 	char tpin_port = 'B', lpin_port = 0, dpin_port = 0;
 	int tpin_bit = 5, lpin_bit = 0, dpin_bit = 0;
@@ -600,7 +621,8 @@ int main(int argc, char **argv)
 		{"latency-timer", required_argument, 0, 'Y'},
 		{"simavr-i2c-timing", no_argument, 0, 'U'}, {"capture-times", required_argument, 0, 'X'},
 		{"reset-at", required_argument, 0, 'A'}, {"drdy-pin", required_argument, 0, 'D'},
-		{"power-off", required_argument, 0, 'O'}, {0, 0, 0, 0}};
+		{"power-off", required_argument, 0, 'O'}, {"bootloader", required_argument, 0, 'Q'},
+		{"hang", required_argument, 0, 'G'}, {0, 0, 0, 0}};
 	int o;
 	while ((o = getopt_long(argc, argv, "t:s:c:prj:vh", opts, NULL)) != -1) {
 		switch (o) {
@@ -664,6 +686,16 @@ int main(int argc, char **argv)
 			break;
 		}
 		case 'Z': simavr_status = 1; break;
+		case 'Q': bootloader_path = optarg; break;
+		case 'G': {
+			char *c = strchr(optarg, ':');
+			if (!c || n_hangs >= MAX_FAULTS) { fprintf(stderr, "--hang T0:T1\n"); return 2; }
+			hangs[n_hangs][0] = atof(optarg);
+			hangs[n_hangs][1] = atof(c + 1);
+			if (!(hangs[n_hangs][1] > hangs[n_hangs][0])) { fprintf(stderr, "--hang T0:T1 with T1 after T0, not %s\n", optarg); return 2; }
+			n_hangs++;
+			break;
+		}
 		case 'T':
 			if (parse_pin(optarg, &tpin_port, &tpin_bit)) { fprintf(stderr, "bad pin %s (e.g. B5)\n", optarg); return 2; }
 			break;
@@ -731,6 +763,17 @@ int main(int argc, char **argv)
 	avr->reset = on_reset;     /* counts resets after power-up (the watchdog's); MCUSR as the datasheet says */
 	if (avr->reset_flags.porf.reg)
 		mcusr_addr = avr->reset_flags.porf.reg;
+	mcu_mcusr_flags(avr, mcusr_addr); /* flags cleared by writing 0, not set by writing 1 (mcu.c) */
+	mcu_eeprom_timing(avr);    /* EEPE busy for the datasheet's write time (mcu.c) */
+	mcu_watchdog_init(avr);    /* the watchdog's interrupt and system reset mode as the datasheet says (mcu.c) */
+	uint32_t boot_start = 0, boot_size = 0;
+	if (bootloader_path) {
+		char berr[256];
+		if (mcu_load_bootloader(avr, bootloader_path, fw.flashsize, &boot_start, &boot_size, berr, sizeof berr)) {
+			fprintf(stderr, "sphere-board: %s\n", berr);
+			return 1;
+		}
+	}
 	sram_power_on(avr, imp.seed, 0); /* power-up: SRAM holds whatever its cells came up with */
 	avr->data[mcusr_addr] = MCUSR_PORF;
 	mcusr_before = MCUSR_PORF;
@@ -860,13 +903,31 @@ int main(int argc, char **argv)
 	double next_glitch = glitch_rate > 0 ? 0.5 : INFINITY;
 	int brown_i = 0, reset_i = 0, reset_at_i = 0, power_off_i = 0;
 	uint32_t resets_seen = resets;
+	int hang_i = 0, hang_wanted = 0, hanging = 0;
 	while (avr->cycle < end_cycle && !stop_requested) {
-		state = avr_run(avr);
-		if (state == cpu_Done || state == cpu_Crashed)
-			break;
+		if (hanging) {
+			mcu_hang_step(avr);
+		} else {
+			state = avr_run(avr);
+			if (state == cpu_Done || state == cpu_Crashed)
+				break;
+			if (hang_wanted && mcu_hang_begin(avr)) {
+				hang_wanted = 0;
+				hanging = 1;
+				log_fault(board_time_s(&board), "hang_start", -1);
+			}
+		}
 		mcusr_before = avr->data[mcusr_addr];
+		if (mcu_watchdog_poll(avr)) {
+			log_fault(board_time_s(&board), "watchdog_unserved", -1);
+			watchdog_reset_avr(avr);
+		}
 		if (resets != resets_seen) { /* simavr's reset cancelled every cycle timer: ours start again */
 			resets_seen = resets;
+			if (hanging || hang_wanted) { /* a reset ends a hang */
+				hanging = hang_wanted = 0;
+				log_fault(board_time_s(&board), "hang_end_by_reset", -1);
+			}
 			board_restart_timers(&board);
 			if (adapter) { /* the adapter is not reset with the AVR, but simavr cancelled its timer */
 				avr_cycle_timer_cancel(avr, adapter_timer, &uart_out);
@@ -916,6 +977,16 @@ int main(int argc, char **argv)
 				plain_reset = 1;
 				reset_avr(avr, MCUSR_EXTRF, imp.seed);
 				plain_reset = 0;
+			}
+			while (hang_i < n_hangs && t >= hangs[hang_i][0]) {
+				if (t < hangs[hang_i][1])
+					hang_wanted = 1;
+				hang_i++;
+			}
+			if ((hanging || hang_wanted) && hang_i > 0 && t >= hangs[hang_i - 1][1]) {
+				if (hanging)
+					log_fault(t, "hang_end", -1);
+				hanging = hang_wanted = 0;
 			}
 			while (reset_i < n_resets_mid && t >= resets_mid[reset_i]) {
 				reset_i++;
@@ -1041,6 +1112,10 @@ int main(int argc, char **argv)
 			board.chip[0].nacked, board.chip[1].nacked, board.chip[2].nacked);
 		fprintf(sf, "  \"adxl345_events\": {\"single_tap\": %u, \"double_tap\": %u, \"free_fall\": %u},\n",
 			board.events_single_tap, board.events_double_tap, board.events_free_fall);
+		fprintf(sf, "  \"bootloader\": %s%s%s,\n", bootloader_path ? "\"" : "", bootloader_path ? bootloader_path : "null", bootloader_path ? "\"" : "");
+		fprintf(sf, "  \"bootloader_start\": %u,\n  \"bootloader_bytes\": %u,\n", boot_start, boot_size);
+		fprintf(sf, "  \"eeprom_writes\": %u,\n", mcu_eeprom_writes);
+		fprintf(sf, "  \"watchdog_interrupts\": %u,\n", mcu_watchdog_interrupts);
 		fprintf(sf, "  \"simulated_seconds\": %.6f,\n", sim_s);
 		fprintf(sf, "  \"wall_seconds\": %.3f,\n", wall);
 		fprintf(sf, "  \"speed\": %.3f,\n", wall > 0 ? sim_s / wall : 0);

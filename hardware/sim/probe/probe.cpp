@@ -15,6 +15,11 @@
 //   e PIN 00 00 MS          record the level changes of digital pin PIN (hex) for MS ms (decimal), printed
 //                           after: one "<micros> e <level>" line each (at most 100)
 //   W                       the watchdog at 15 ms, then hang: a watchdog reset
+//   I                       the watchdog in interrupt and system reset mode (WDE and WDIE) at 15 ms, then hang with
+//                           interrupts off, so its interrupt is never executed                  -> "I"
+//   M VV                    write VV to MCUSR, then read it                                     -> "M <MCUSR>"
+//   x AAAA VV               write VV to EEPROM byte AAAA (erase and write), time the busy flag (EEPE) and read
+//                           the byte back                                 -> "x <busy us, decimal> <byte>"
 //   c                       bus clear: TWI off, nine SCL pulses and a STOP on the pins, TWI on -> "c"
 //   k                       leave MCUSR as it is at the next start (do not clear it)         -> "k"
 // At every start it prints "<micros> probe <MCUSR> <m0> <m1> <m2> <m3>": the reset flags as the program found
@@ -22,6 +27,7 @@
 // writes 5a a5 c3 3c there, so the next start shows whether SRAM was kept over the reset. It then clears
 // MCUSR, unless told by `k` (kept in .noinit) not to, once.
 #include <Arduino.h>
+#include <avr/eeprom.h>
 #include <avr/wdt.h>
 #include <Wire.h>
 #include "../sketch_wire.h"
@@ -141,6 +147,30 @@ static void run(char *s) {
     Serial.print(micros()); Serial.print(" W\n"); Serial.flush();
     wdt_enable(WDTO_15MS);
     for (;;) {}
+  } else if (cmd == 'I') {
+    Serial.print(micros()); Serial.print(" I\n"); Serial.flush();
+    cli();
+    WDTCSR = _BV(WDCE) | _BV(WDE);
+    WDTCSR = _BV(WDE) | _BV(WDIE);  // WDP = 0: 2K cycles of the 128 kHz oscillator, 16 ms
+    for (;;) {}
+  } else if (cmd == 'M' && n == 1) {
+    MCUSR = (uint8_t)v[0];
+    uint8_t m = MCUSR;
+    Serial.print(micros()); Serial.print(" M "); hex(m); Serial.write('\n');
+  } else if (cmd == 'x' && n == 2) {
+    eeprom_busy_wait();
+    EEAR = (uint16_t)v[0];
+    EEDR = (uint8_t)v[1];
+    EECR = 0;  // EEPM = 00: erase and write
+    uint32_t t0 = micros();
+    cli();
+    EECR |= _BV(EEMPE);
+    EECR |= _BV(EEPE);
+    sei();
+    while (EECR & _BV(EEPE)) {}
+    uint32_t busy = micros() - t0;
+    uint8_t back = eeprom_read_byte((const uint8_t *)(uint16_t)v[0]);
+    Serial.print(micros()); Serial.print(" x "); Serial.print(busy); Serial.write(' '); hex(back); Serial.write('\n');
   } else if (cmd == 'k') {
     keep_mcusr = 0x4b;
     Serial.print(micros()); Serial.print(" k\n");

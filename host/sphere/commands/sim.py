@@ -155,6 +155,11 @@ def add_arguments(p) -> None:
     p.add_argument("--adapter", choices=["ftdi", "ch340"], default=None,
                    help="a USB-serial adapter between the UART and the host: FTDI (62-byte packets, 16 ms latency "
                         "timer) or CH340 (each 1 ms USB frame); default none")
+    p.add_argument("--bootloader", choices=("optiboot4", "atmegaboot", "optiboot8", "none"), default=None,
+                   help="a boot loader in front of the firmware, as on a Nano: optiboot4 (Optiboot 4.4, the Nano's), "
+                        "atmegaboot (the old Nano bootloader), optiboot8 (a current Optiboot) or none (the default)")
+    p.add_argument("--hang", action="append", default=[], metavar="T0:T1", type=_span,
+                   help="fault: the firmware's main program hangs from T0 to T1 s (interrupts and the watchdog go on)")
     p.add_argument("--accuracy", action="store_true",
                    help="compare the firmware's quaternions with BROAD's optical reference and the host Madgwick")
     p.add_argument("--beta", type=float, default=DEFAULT_BETA, help="β of the host Madgwick (default the firmware's)")
@@ -215,7 +220,7 @@ def board_options(args) -> dict:
     return dict(i2c_real_timing=not args.simavr_i2c_timing, board=args.board, noise=args.noise, seed=args.seed,
                 clock_ppm=args.clock_ppm, clocks_random=args.clocks == "random", glitch=args.glitch,
                 brownout=args.brownout, power_off=args.power_off, reset_mid_read=args.reset_mid_read, sda_held=args.sda_held,
-                host_stall=args.host_stall, adapter=args.adapter)
+                host_stall=args.host_stall, adapter=args.adapter, bootloader=args.bootloader, hang=args.hang)
 
 
 def _one(args, source: str, elf, tmp: Path, index: int, multi: bool):

@@ -27,7 +27,8 @@ FIRMWARE_DIR = repo_path("firmware")
 FIRMWARE_ELF = paths.firmware_image(".elf")
 BUILD_BOARD_CMD = paths.sim_build_command()
 BUILD_FIRMWARE_CMD = "make -C firmware"
-BOARD_SOURCES = ("sphere_board.c", "sensors.c", "sensors.h", "Makefile")
+BOARD_SOURCES = ("sphere_board.c", "sensors.c", "sensors.h", "mcu.c", "mcu.h", "Makefile",
+                 "bootloaders/optiboot8_atmega328.hex")
 
 
 class BoardUnavailable(RuntimeError):
@@ -65,6 +66,7 @@ def board_path(build: bool = True) -> Path:
             print(f"sphere: building the virtual board in {SIM_DIR} (first use only) ...", file=sys.stderr, flush=True)
             SIM_DIR.mkdir(parents=True, exist_ok=True)
             for name in BOARD_SOURCES:
+                (SIM_DIR / name).parent.mkdir(parents=True, exist_ok=True)
                 shutil.copy2(paths.sim_source_dir() / name, SIM_DIR / name)
         t0 = time.monotonic()
         _make(SIM_DIR, BUILD_BOARD_CMD)
@@ -109,6 +111,27 @@ def probe_elf(build: bool = True) -> Path:
     return _sketch_elf("probe", build)
 
 
+#: The boot loaders the board can run in front of the firmware (hardware/sim/README.md, "Boot loaders"):
+#: the Nano's Optiboot 4.4, the old Nano's ATmegaBOOT, a current Optiboot (8.3), or none (the reset vector at 0).
+BOOTLOADERS = ("optiboot4", "atmegaboot", "optiboot8", "none")
+
+
+def bootloader_hex(name: str, build: bool = True) -> Path | None:
+    """The Intel HEX image of boot loader ``name`` (None for "none"), made by `make -C hardware/sim bootloaders`."""
+    if name not in BOOTLOADERS:
+        raise ValueError(f"unknown boot loader {name!r}: one of {', '.join(BOOTLOADERS)}")
+    if name == "none":
+        return None
+    path = SIM_DIR / "build" / f"bootloader-{name}.hex"
+    if not path.exists():
+        board_path(build)
+        if not path.exists():
+            if not build:
+                raise BoardUnavailable(f"the boot loaders are not built: run `{BUILD_BOARD_CMD} bootloaders`")
+            _make(SIM_DIR, f"{BUILD_BOARD_CMD} bootloaders", "bootloaders")
+    return path
+
+
 #: The board variants sphere-board knows (hardware/sim/sensors.c, board_variants).
 BOARD_VARIANTS = ("aligned", "sen10724", "gy85", "gy85-qmc")
 
@@ -127,7 +150,7 @@ def board_command(elf, trace, seconds: float, capture=None, pty=False, realtime=
                   verbose=0, build=True, i2c_real_timing=True, board=None, noise=False, seed=None,
                   clock_ppm=(), clocks_random=False, glitch=None, reset_mid_read=(), brownout=(), sda_held=False,
                   host_stall=(), adapter=None, capture_times=None, reset_at=(), drdy_pin=None,
-                  power_off=(), latency_timer_ms=None) -> list[str]:
+                  power_off=(), latency_timer_ms=None, bootloader=None, hang=()) -> list[str]:
     """sphere-board's command line. I2C runs at its real 400 kHz timing unless ``i2c_real_timing=False``."""
     cmd = [str(board_path(build)), str(elf), "--trace", str(trace), "--seconds", f"{seconds:g}"]
     if capture:
@@ -184,6 +207,11 @@ def board_command(elf, trace, seconds: float, capture=None, pty=False, realtime=
         cmd += ["--capture-times", str(capture_times)]
     if drdy_pin:
         cmd += ["--drdy-pin", drdy_pin]
+    hexfile = bootloader_hex(bootloader, build) if bootloader else None
+    if hexfile:
+        cmd += ["--bootloader", str(hexfile)]
+    for h in hang:
+        cmd += ["--hang", h]
     cmd += ["-v"] * verbose
     return cmd
 
