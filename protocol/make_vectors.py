@@ -91,6 +91,10 @@ def main() -> None:
                   "REPLY unknown_command to type 0x7E"))
     out.append(ok("reply_calibration", p.Reply(12, p.GetCalibration.TYPE, p.Result.OK, data=cal.pack_body() + bytes([0x0F])), 9,
                   "REPLY to GET_CALIBRATION: 42-byte block then calibration_state"))
+    saved = p.settings_block((p.SetStream(0x03, 100, 50), p.SetTap(40, 32, 0, 0, 0x01), p.SetFreeFall(8, 40), p.SetFilter(60)))
+    out.append(ok("reply_settings", p.Reply(13, p.GetSettings.TYPE, p.Result.OK, data=saved + bytes([p.SETTINGS_SAVED])), 10,
+                  "REPLY to GET_SETTINGS: 14-byte settings block (raw 100 Hz, orientation 50 Hz, no status; tap 2.5 g "
+                  "on z only, no double tap; free fall 0.5 g for 200 ms; β 0.060) then settings_state saved"))
     # host → device
     out.append(ok("cmd_get_hello", p.GetHello(), 0, "GET_HELLO"))
     out.append(ok("cmd_set_stream", p.SetStream(0x07, 200, 100), 1, "SET_STREAM: raw 200 Hz, orientation 100 Hz, status"))
@@ -109,6 +113,9 @@ def main() -> None:
     out.append(ok("cmd_reboot", p.Reboot(p.REBOOT_MAGIC), 13, "REBOOT with its magic"))
     out.append(ok("cmd_get_status", p.GetStatus(), 14, "GET_STATUS"))
     out.append(ok("cmd_set_board", p.SetBoard(1), 17, "SET_BOARD: SparkFun SEN-10724 sensor stick"))
+    out.append(ok("cmd_get_settings", p.GetSettings(), 18, "GET_SETTINGS"))
+    out.append(ok("cmd_save_settings", p.SaveSettings(), 19, "SAVE_SETTINGS"))
+    out.append(ok("cmd_clear_settings", p.ClearSettings(), 20, "CLEAR_SETTINGS"))
 
     # broken frames
     good = p.RawSample(123456789, 0x0F, (-3, 12, 256), (5, -7, 1), (210, -45, -380))

@@ -194,7 +194,7 @@ TEST_CASE("power-up: a 0x00, HELLO, gyro bias estimated while still, then the de
     CHECK(f[0][0] == PKT_HELLO);
     CHECK(f[0][1] == 0);  // seq 0 after power-up
     const uint8_t* h = f[0].data() + 2;
-    CHECK(h[0] == 2);     // protocol version
+    CHECK(h[0] == 3);     // protocol version (spec: version 3)
     CHECK(h[4] == 7);     // sensors_found
     CHECK(h[5] == 0xE5);
     CHECK(h[6] == 0x69);
@@ -284,9 +284,12 @@ TEST_CASE("every host command vector gets exactly one REPLY with the listed resu
         if (v.name == "cmd_set_free_fall") CHECK(r.bus.adxl.regs[0x29] == 30);
         if (v.name == "cmd_save_calibration") CHECK(r.hal.eeprom[0] == CALIBRATION_EEPROM_VERSION);
         if (v.name == "cmd_set_board") CHECK(r.dev.boardProfile() == BOARD_SEN10724);
+        if (v.name == "cmd_get_settings") CHECK(rep->size() == 4 + 3 + SETTINGS_BLOCK_LEN + 1);
+        if (v.name == "cmd_save_settings") CHECK(r.hal.eeprom[SETTINGS_EEPROM_ADDR] == SETTINGS_EEPROM_VERSION);
+        if (v.name == "cmd_clear_settings") CHECK(r.dev.settingsState() == SETTINGS_NONE_SAVED);
         ++n;
     }
-    CHECK(n == 18);
+    CHECK(n == 21);
 }
 
 TEST_CASE("SET_STREAM changes the streams; an invalid one changes nothing") {
@@ -354,6 +357,69 @@ TEST_CASE("calibration commands: set, get, save, load, reset; a broken EEPROM is
     // a failing EEPROM write
     r.hal.eeprom_fails = true;
     r.send(frameOf(CMD_SAVE_CALIBRATION, 8, {}));
+    CHECK(r.hal.frames().back()[4] == RESULT_STORAGE_ERROR);
+}
+
+TEST_CASE("settings: read back, saved, applied at the next power-up; a corrupt block is refused whole") {
+    Rig r;
+    r.dev.begin();
+    CHECK(r.dev.settingsState() == SETTINGS_NONE_SAVED);  // an erased EEPROM
+    r.hal.frames();
+    r.send(frameOf(CMD_SET_STREAM, 1, {3, 100, 0, 50, 0}));
+    r.send(frameOf(CMD_SET_TAP, 2, {40, 32, 0, 0, 1}));
+    r.send(frameOf(CMD_SET_FREE_FALL, 3, {8, 40}));
+    r.send(frameOf(CMD_SET_FILTER, 4, {60, 0}));
+    r.send(frameOf(CMD_GET_SETTINGS, 5, {}));
+    auto f = r.hal.frames();
+    REQUIRE(f.size() == 5);
+    const std::vector<uint8_t> expect = {3, 100, 0, 50, 0, 40, 32, 0, 0, 1, 8, 40, 60, 0};
+    REQUIRE(f[4].size() == 4 + 3 + SETTINGS_BLOCK_LEN + 1);
+    CHECK(std::vector<uint8_t>(f[4].begin() + 5, f[4].begin() + 5 + SETTINGS_BLOCK_LEN) == expect);
+    CHECK(f[4][5 + SETTINGS_BLOCK_LEN] == SETTINGS_NONE_SAVED);  // changed, nothing saved yet
+    r.send(frameOf(CMD_SAVE_SETTINGS, 6, {}));
+    CHECK(r.hal.frames().back()[4] == RESULT_OK);
+    CHECK(r.dev.settingsState() == SETTINGS_SAVED);
+    // a new power-up: the saved settings are in use, in the chip's registers too
+    Rig r2;
+    std::memcpy(r2.hal.eeprom, r.hal.eeprom, sizeof r.hal.eeprom);
+    r2.dev.begin();
+    CHECK(r2.dev.settingsState() == SETTINGS_SAVED);
+    uint8_t block[SETTINGS_BLOCK_LEN];
+    r2.dev.settingsBlock(block);
+    CHECK(std::vector<uint8_t>(block, block + SETTINGS_BLOCK_LEN) == expect);
+    CHECK(r2.bus.adxl.regs[0x1D] == 40);  // THRESH_TAP
+    CHECK(r2.bus.adxl.regs[0x2A] == 1);   // TAP_AXES: z
+    CHECK(r2.bus.adxl.regs[0x28] == 8);   // THRESH_FF
+    CHECK(r2.dev.streamMode() == 3);
+    r2.send(frameOf(CMD_SET_FILTER, 1, {41, 0}));
+    CHECK(r2.dev.settingsState() == 0);  // in use differs from saved
+    // one flipped bit: nothing of the block is used, the defaults are, and GET_SETTINGS says so
+    Rig r3;
+    std::memcpy(r3.hal.eeprom, r.hal.eeprom, sizeof r.hal.eeprom);
+    r3.hal.eeprom[SETTINGS_EEPROM_ADDR + 3] ^= 4;
+    r3.dev.begin();
+    CHECK(r3.dev.settingsState() == (SETTINGS_EEPROM_INVALID | SETTINGS_NONE_SAVED));
+    CHECK(r3.dev.streamMode() == (STREAM_RAW | STREAM_ORIENTATION | STREAM_STATUS));
+    CHECK(r3.bus.adxl.regs[0x1D] == Adxl345::DEFAULT_TAP.thresh_tap);
+    // a block with a good CRC but a value no command accepts (raw rate 30 Hz): refused whole as well
+    uint8_t bad[SETTINGS_BLOCK_LEN];
+    std::memcpy(bad, expect.data(), SETTINGS_BLOCK_LEN);
+    bad[1] = 30;
+    Rig r4;
+    writeSettingsImage(bad, r4.hal.eeprom + SETTINGS_EEPROM_ADDR);
+    r4.dev.begin();
+    CHECK(r4.dev.settingsState() == (SETTINGS_EEPROM_INVALID | SETTINGS_NONE_SAVED));
+    CHECK(r4.bus.adxl.regs[0x1D] == Adxl345::DEFAULT_TAP.thresh_tap);
+    // CLEAR_SETTINGS: the next power-up uses the defaults; a failing write is storage_error
+    r.send(frameOf(CMD_CLEAR_SETTINGS, 7, {}));
+    CHECK(r.hal.frames().back()[4] == RESULT_OK);
+    Rig r5;
+    std::memcpy(r5.hal.eeprom, r.hal.eeprom, sizeof r.hal.eeprom);
+    r5.dev.begin();
+    CHECK(r5.dev.settingsState() == SETTINGS_NONE_SAVED);
+    CHECK(r5.dev.streamMode() == (STREAM_RAW | STREAM_ORIENTATION | STREAM_STATUS));
+    r.hal.eeprom_fails = true;
+    r.send(frameOf(CMD_SAVE_SETTINGS, 8, {}));
     CHECK(r.hal.frames().back()[4] == RESULT_STORAGE_ERROR);
 }
 

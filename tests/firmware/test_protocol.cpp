@@ -60,6 +60,9 @@ const std::map<std::string, std::pair<uint8_t, std::vector<FieldSpec>>>& layouts
         {"REBOOT", {CMD_REBOOT, {{"magic", 'H', 1}}}},
         {"GET_STATUS", {CMD_GET_STATUS, {}}},
         {"SET_BOARD", {CMD_SET_BOARD, {{"board_profile", 'B', 1}}}},
+        {"GET_SETTINGS", {CMD_GET_SETTINGS, {}}},
+        {"SAVE_SETTINGS", {CMD_SAVE_SETTINGS, {}}},
+        {"CLEAR_SETTINGS", {CMD_CLEAR_SETTINGS, {}}},
     };
     return L;
 }

@@ -276,6 +276,9 @@ ROWS = [
     S(["device", "--port", "{port}", "get"], 1, "no HELLO", port="silent"),
     S(["device", "--port", "{port}", "get", "tap.threshold_g=1"], 2, "takes no KEY=VALUE", port="silent"),
     S(["device", "--port", "{port}", "set"], 2, "set what", port="silent"),
+    S(["device", "--port", "{port}", "save", "tap.threshold_g=1"], 2, "takes no KEY=VALUE", port="silent"),
+    S(["device", "--port", "{port}", "clear", "now"], 2, "takes no KEY=VALUE", port="silent"),
+    S(["device", "--port", "{port}", "save"], 1, "no HELLO", port="silent"),
     S(["device", "--port", "/dev/null", "get"], 2, "not a serial port"),
     S(["device", "explode"], 2, "invalid choice"),
     # service

@@ -86,3 +86,33 @@ def test_bad_values_say_what_is_allowed(item, message):
 def test_every_key_is_documented_with_its_range():
     for key, s in SETTINGS.items():
         assert s.doc and s.describe()
+
+
+def test_the_settings_reply_vector_reads_as_every_key():
+    """GET_SETTINGS's REPLY (spec §5.3 vector reply_settings) gives every key but the board; a set then keeps
+    what the sphere reports instead of the firmware's defaults, and says nothing about defaults."""
+    from sphere.link.device_settings import current_from_settings, settings_state_text, show
+    from sphere.protocol.decoder import decode_all
+
+    v = VECTORS["reply_settings"]
+    (reply,), _ = decode_all(v.wire)
+    packets, state = reply.settings()
+    values = current_from_settings(packets)
+    assert set(values) == set(SETTINGS) - {"board"}
+    assert {k: show(k, x) for k, x in values.items()} == {
+        "stream.raw": "on", "stream.orientation": "on", "stream.status": "off", "stream.raw_rate_hz": "100 Hz",
+        "stream.orientation_rate_hz": "50 Hz", "tap.threshold_g": "2.5 g", "tap.duration_ms": "20 ms",
+        "tap.latency_ms": "0 ms", "tap.window_ms": "0 ms", "tap.axes": "z", "free_fall.threshold_g": "0.5 g",
+        "free_fall.time_ms": "200 ms", "filter.beta": "0.06"}
+    assert "saved on the sphere" in settings_state_text(state)
+    plan = plan_settings(["tap.threshold_g=3"], _hello(protocol_version=3), values)
+    (tap,) = plan.packets
+    assert (tap.thresh_tap, tap.dur, tap.latent, tap.window, tap.tap_axes) == (48, 32, 0, 0, 1)
+    assert plan.notes == []
+
+
+@pytest.mark.parametrize("state, words", [(2 | 4, "damaged"), (4, "nothing saved"), (0, "changed since"), (1, "saved")])
+def test_settings_state_is_said(state, words):
+    from sphere.link.device_settings import settings_state_text
+
+    assert words in settings_state_text(state)

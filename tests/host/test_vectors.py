@@ -71,7 +71,7 @@ def test_version_1_bodies_still_decode():
     from sphere.protocol.framing import encode_payload
     from sphere.protocol.packets import SUPPORTED_VERSIONS, Hello, Status
 
-    assert SUPPORTED_VERSIONS == (1, 2)
+    assert SUPPORTED_VERSIONS == (1, 2, 3)  # version 3 only added commands (spec §4.1)
     v2 = Hello(2, (0, 2, 0), 7, 0xE5, 0x69, b"H43", 200, 100, 7, 200, 100, 0x21, 0x08, 1, 2)
     v1_body = v2.pack_body()[:19]
     packets, stats = decode_all(encode_payload(Hello.TYPE, 0, v1_body), "device")

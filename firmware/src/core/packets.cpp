@@ -27,6 +27,9 @@ int bodyLength(uint8_t type) {
         case CMD_REBOOT: return 2;
         case CMD_GET_STATUS: return 0;
         case CMD_SET_BOARD: return 1;
+        case CMD_GET_SETTINGS: return 0;
+        case CMD_SAVE_SETTINGS: return 0;
+        case CMD_CLEAR_SETTINGS: return 0;
         default: return -1;
     }
 }

@@ -6,8 +6,8 @@
 
 namespace sphere {
 
-const uint8_t PROTOCOL_VERSION = 2;
-const uint8_t FIRMWARE_VERSION_MAJOR = 0, FIRMWARE_VERSION_MINOR = 2, FIRMWARE_VERSION_PATCH = 0;
+const uint8_t PROTOCOL_VERSION = 3;
+const uint8_t FIRMWARE_VERSION_MAJOR = 0, FIRMWARE_VERSION_MINOR = 3, FIRMWARE_VERSION_PATCH = 0;
 
 enum PacketType : uint8_t {
     PKT_HELLO = 0x01,
@@ -31,6 +31,9 @@ enum PacketType : uint8_t {
     CMD_REBOOT = 0x4C,
     CMD_GET_STATUS = 0x4D,
     CMD_SET_BOARD = 0x4E,
+    CMD_GET_SETTINGS = 0x54,
+    CMD_SAVE_SETTINGS = 0x55,
+    CMD_CLEAR_SETTINGS = 0x56,
 };
 
 const uint8_t HELLO_LEN = 22, RAW_SAMPLE_LEN = 23, ORIENTATION_LEN = 13, EVENT_LEN = 8, STATUS_LEN = 29;

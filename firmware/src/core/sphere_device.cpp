@@ -2,6 +2,8 @@
 
 #include <string.h>
 
+#include "bytes.h"
+
 namespace sphere {
 
 // The periodic and command functions below are marked noinline. With link-time optimisation avr-gcc
@@ -50,6 +52,7 @@ bool SphereDevice::probe(uint8_t i) {
 __attribute__((noinline)) void SphereDevice::begin() {
     reset_cause_ = hal_.resetCause();
     loadBoardProfile();
+    loadSettings();  // before the probes: they write the tap and free-fall settings into the ADXL345
     for (uint8_t i = 0; i < 3; ++i) probe(i);
     sensors_found_ = sensors_ok_;
     guard_.setThreshold(tap_.thresh_tap);
@@ -84,6 +87,72 @@ void SphereDevice::loadBoardProfile() {
     uint8_t b[2];
     hal_.eepromRead(BOARD_EEPROM_ADDR, b, 2);
     board_profile_ = (b[0] < BOARD_PROFILE_COUNT && b[1] == (uint8_t)~b[0]) ? b[0] : SPHERE_DEFAULT_BOARD;
+}
+
+// The saved settings (spec §5.3), checked by the commands' own parser; a block that fails any check is not
+// used at all (the firmware defaults stay) and GET_SETTINGS says so.
+void SphereDevice::loadSettings() {
+    uint8_t image[SETTINGS_EEPROM_LEN], block[SETTINGS_BLOCK_LEN];
+    hal_.eepromRead(SETTINGS_EEPROM_ADDR, image, SETTINGS_EEPROM_LEN);
+    SettingsImage r = readSettingsImage(image, block);
+    if (r == SETTINGS_IMAGE_VALID && applySettings(block))
+        settings_state_ = SETTINGS_SAVED;
+    else
+        settings_state_ = r == SETTINGS_IMAGE_BLANK ? SETTINGS_NONE_SAVED : SETTINGS_EEPROM_INVALID | SETTINGS_NONE_SAVED;
+}
+
+// Every group of the block through CommandParser first; only when all pass are they taken (the chips get
+// them from probe()).
+bool SphereDevice::applySettings(const uint8_t block[SETTINGS_BLOCK_LEN]) {
+    Command c;
+    for (uint8_t pass = 0; pass < 2; ++pass) {
+        const uint8_t* b = block;
+        for (uint8_t g = 0; g < SETTINGS_GROUPS; ++g) {
+            uint8_t payload[2 + 5 + 2] = {SETTINGS_GROUP_TYPE[g], 0};
+            uint8_t n = SETTINGS_GROUP_LEN[g];
+            for (uint8_t i = 0; i < n; ++i) payload[2 + i] = b[i];
+            b += n;
+            if (CommandParser::parse(payload, (uint8_t)(n + 4), c) != RESULT_OK) return false;
+            if (pass == 0) continue;
+            if (g == 0) {
+                stream_mode_ = c.set_stream.stream_mode;
+                raw_rate_hz_ = c.set_stream.raw_rate_hz;
+                orientation_rate_hz_ = c.set_stream.orientation_rate_hz;
+            } else if (g == 1) {
+                tap_ = {c.set_tap.thresh_tap, c.set_tap.dur, c.set_tap.latent, c.set_tap.window, c.set_tap.tap_axes};
+            } else if (g == 2) {
+                ff_ = {c.set_free_fall.thresh_ff, c.set_free_fall.time_ff};
+            } else {
+                beta_milli_ = c.set_filter.beta;
+            }
+        }
+    }
+    return true;
+}
+
+void SphereDevice::settingsBlock(uint8_t out[SETTINGS_BLOCK_LEN]) const {
+    out[0] = stream_mode_;
+    putU16(out + 1, raw_rate_hz_);
+    putU16(out + 3, orientation_rate_hz_);
+    out[5] = tap_.thresh_tap;
+    out[6] = tap_.dur;
+    out[7] = tap_.latent;
+    out[8] = tap_.window;
+    out[9] = tap_.tap_axes;
+    out[10] = ff_.thresh_ff;
+    out[11] = ff_.time_ff;
+    putU16(out + 12, beta_milli_);
+}
+
+// Writes `data` to the EEPROM and reads it back: false when a byte did not take.
+bool SphereDevice::eepromWriteVerified(uint16_t addr, const uint8_t* data, uint8_t len) {
+    bool ok = hal_.eepromWrite(addr, data, len);
+    for (uint8_t i = 0; i < len; ++i) {
+        uint8_t back;
+        hal_.eepromRead((uint16_t)(addr + i), &back, 1);
+        if (back != data[i]) ok = false;
+    }
+    return ok;
 }
 
 void SphereDevice::loadCalibration(bool at_start) {
@@ -415,6 +484,11 @@ __attribute__((noinline)) void SphereDevice::execute(const uint8_t* payload, uin
         writeCalibrationBlock(cal_, data);
         data[CALIBRATION_BLOCK_LEN] = cal_state_;
         n = writeReply(c.seq, c.type, result, data, sizeof data, body);
+    } else if (result == RESULT_OK && c.type == CMD_GET_SETTINGS) {
+        uint8_t data[SETTINGS_BLOCK_LEN + 1];
+        settingsBlock(data);
+        data[SETTINGS_BLOCK_LEN] = settings_state_;
+        n = writeReply(c.seq, c.type, result, data, sizeof data, body);
     } else {
         n = writeReply(c.seq, c.type, result, 0, 0, body);
     }
@@ -439,6 +513,7 @@ __attribute__((noinline)) uint8_t SphereDevice::executeCommand(const Command& c)
             stream_mode_ = c.set_stream.stream_mode;
             raw_rate_hz_ = c.set_stream.raw_rate_hz;
             orientation_rate_hz_ = c.set_stream.orientation_rate_hz;
+            settings_state_ &= (uint8_t)~SETTINGS_SAVED;
             return RESULT_OK;
         case CMD_SET_TAP: {
             if (!(sensors_ok_ & SENSOR_ADXL345)) return RESULT_SENSOR_MISSING;
@@ -451,6 +526,7 @@ __attribute__((noinline)) uint8_t SphereDevice::executeCommand(const Command& c)
             }
             tap_ = t;
             guard_.setThreshold(t.thresh_tap);
+            settings_state_ &= (uint8_t)~SETTINGS_SAVED;
             return RESULT_OK;
         }
         case CMD_SET_FREE_FALL: {
@@ -462,12 +538,28 @@ __attribute__((noinline)) uint8_t SphereDevice::executeCommand(const Command& c)
                 return RESULT_FAILED;
             }
             ff_ = f;
+            settings_state_ &= (uint8_t)~SETTINGS_SAVED;
             return RESULT_OK;
         }
         case CMD_SET_FILTER:
             beta_milli_ = c.set_filter.beta;
             if (!converge_left_) filter_.setBetaMilli(beta_milli_);
+            settings_state_ &= (uint8_t)~SETTINGS_SAVED;
             return RESULT_OK;
+        case CMD_SAVE_SETTINGS:
+        case CMD_CLEAR_SETTINGS: {
+            uint8_t image[SETTINGS_EEPROM_LEN];
+            if (c.type == CMD_SAVE_SETTINGS) {
+                uint8_t block[SETTINGS_BLOCK_LEN];
+                settingsBlock(block);
+                writeSettingsImage(block, image);
+            } else {
+                memset(image, 0xFF, sizeof image);  // an erased block: the next power-up uses the defaults
+            }
+            if (!eepromWriteVerified(SETTINGS_EEPROM_ADDR, image, SETTINGS_EEPROM_LEN)) return RESULT_STORAGE_ERROR;
+            settings_state_ = c.type == CMD_SAVE_SETTINGS ? SETTINGS_SAVED : SETTINGS_NONE_SAVED;
+            return RESULT_OK;
+        }
         case CMD_CALIBRATION_STEP: {
             uint8_t step = c.calibration_step.step;
             if (c.calibration_step.action == 0) {  // stop ends any step
@@ -493,13 +585,9 @@ __attribute__((noinline)) uint8_t SphereDevice::executeCommand(const Command& c)
             updateCalState();
             return RESULT_OK;
         case CMD_SAVE_CALIBRATION: {
-            uint8_t image[CALIBRATION_EEPROM_LEN], back[CALIBRATION_EEPROM_LEN];
+            uint8_t image[CALIBRATION_EEPROM_LEN];
             writeCalibrationImage(cal_, image);
-            bool ok = hal_.eepromWrite(0, image, CALIBRATION_EEPROM_LEN);
-            hal_.eepromRead(0, back, CALIBRATION_EEPROM_LEN);
-            for (uint8_t i = 0; i < CALIBRATION_EEPROM_LEN; ++i)
-                if (back[i] != image[i]) ok = false;
-            if (!ok) return RESULT_STORAGE_ERROR;
+            if (!eepromWriteVerified(0, image, CALIBRATION_EEPROM_LEN)) return RESULT_STORAGE_ERROR;
             cal_state_ = (uint8_t)((cal_state_ & ~CAL_EEPROM_INVALID) | CAL_FROM_EEPROM);
             return RESULT_OK;
         }
@@ -524,10 +612,8 @@ __attribute__((noinline)) uint8_t SphereDevice::executeCommand(const Command& c)
             hal_.identify(c.identify.seconds);
             return RESULT_OK;
         case CMD_SET_BOARD: {
-            uint8_t b[2] = {c.set_board.board_profile, (uint8_t)~c.set_board.board_profile}, back[2];
-            bool ok = hal_.eepromWrite(BOARD_EEPROM_ADDR, b, 2);
-            hal_.eepromRead(BOARD_EEPROM_ADDR, back, 2);
-            if (!ok || back[0] != b[0] || back[1] != b[1]) return RESULT_STORAGE_ERROR;
+            uint8_t b[2] = {c.set_board.board_profile, (uint8_t)~c.set_board.board_profile};
+            if (!eepromWriteVerified(BOARD_EEPROM_ADDR, b, 2)) return RESULT_STORAGE_ERROR;
             if (board_profile_ != b[0]) {
                 // another frame for the samples: the orientation and the field reference start again
                 board_profile_ = b[0];

@@ -18,6 +18,7 @@
 #include "marg_filter.h"
 #include "packets.h"
 #include "qmc5883l.h"
+#include "settings_image.h"
 #include "tap_guard.h"
 
 namespace sphere {
@@ -91,6 +92,9 @@ public:
     uint8_t sensorsOk() const { return sensors_ok_; }
     uint8_t streamMode() const { return stream_mode_; }
     uint8_t calibrationState() const { return cal_state_; }
+    uint8_t settingsState() const { return settings_state_; }
+    // The settings in use as the block of protocol/spec.md §5.3 (GET_SETTINGS, SAVE_SETTINGS).
+    void settingsBlock(uint8_t out[SETTINGS_BLOCK_LEN]) const;
     uint8_t boardProfile() const { return board_profile_; }
     uint8_t magChip() const { return mag_chip_; }
     uint8_t rawFlags() const { return raw_flags_; }
@@ -122,6 +126,9 @@ private:
     void updateCalState();
     void endBiasEstimate();
     void loadBoardProfile();
+    void loadSettings();
+    bool applySettings(const uint8_t block[SETTINGS_BLOCK_LEN]);
+    bool eepromWriteVerified(uint16_t addr, const uint8_t* data, uint8_t len);
 
     I2cBus& bus_;
     DeviceHal& hal_;
@@ -158,6 +165,7 @@ private:
     uint16_t raw_rate_hz_, orientation_rate_hz_;
     uint16_t beta_milli_;
     uint8_t cal_state_;
+    uint8_t settings_state_;
     uint8_t cal_step_;
     bool bias_at_startup_;
     uint8_t bias_tries_;

@@ -8,18 +8,21 @@ import sys
 
 from sphere import argtypes
 
-HELP = "read or change the sphere's settings (tap, free fall, stream, filter, board), identify, reboot"
+HELP = "read, change and save the sphere's settings (tap, free fall, stream, filter, board), identify, reboot"
 DESCRIPTION = """\
   sphere device --port P get                       what the sphere reports (firmware, sensors, stream, board)
   sphere device --port P set KEY=VALUE ...         change settings, e.g. tap.threshold_g=2.5 tap.axes=z
+  sphere device --port P save                      keep the settings in use over power-off (EEPROM)
+  sphere device --port P clear                     forget the saved settings: defaults at the next power-up
   sphere device --port P identify [SECONDS]        blink the sphere's LED (default 5 s)
   sphere device --port P reboot                    restart the firmware
   sphere device keys                               every KEY, its unit and range
 
-Settings take effect at once and last until the sphere restarts (the board profile is kept in EEPROM).
-A command sets a whole group (SET_TAP carries all five tap settings): a key of the group you do not give
-keeps the value the sphere reports, or, when it cannot report it, is sent as the firmware's default — the
-output says which."""
+Settings take effect at once; `save` keeps them (the board profile is always kept). sphere-mouse applies
+the [device] section of its config at every connect, over what the sphere saved. A command sets a whole
+group (SET_TAP carries all five tap settings): a key of the group you do not give keeps the value the sphere
+reports (firmware with protocol 3 reports every setting; older firmware only the stream and the board, and
+the others are then sent as the firmware's default — the output says which)."""
 
 
 def add_arguments(p) -> None:
@@ -27,7 +30,7 @@ def add_arguments(p) -> None:
     p.add_argument("--port", help="the sphere's serial port (e.g. /dev/ttyUSB0, /dev/rfcomm0, /dev/sphere)")
     p.add_argument("--baud", type=argtypes.baud, default=115200)
     p.add_argument("--timeout", type=argtypes.seconds, default=1.0, metavar="SECONDS", help="wait this long for each REPLY")
-    p.add_argument("action", choices=("get", "set", "identify", "reboot", "keys"))
+    p.add_argument("action", choices=("get", "set", "save", "clear", "identify", "reboot", "keys"))
     p.add_argument("items", nargs="*", metavar="KEY=VALUE", help="for set: the settings; for identify: seconds")
 
 
@@ -75,17 +78,41 @@ def _open(args):
     return ser, link, hello
 
 
-def _describe_hello(hello) -> list[str]:
-    from sphere.link.device_settings import current_from_hello, show
+def _read_settings(link, hello, timeout_s: float) -> tuple[dict, int] | None:
+    """Every setting the sphere reports with GET_SETTINGS (key → LSB) and settings_state; None for firmware
+    older than protocol 3, which has no such command."""
+    from sphere.link.device_settings import current_from_settings
+    from sphere.protocol.packets import GetSettings
+
+    if hello.protocol_version < 3:
+        return None
+    reply = link.command(GetSettings(), timeout_s)
+    problem = _reply_problem(GetSettings, reply)
+    if problem:
+        raise _Failed(problem, 1)
+    try:
+        packets, state = reply.settings()
+    except ValueError as e:
+        raise _Failed(f"GET_SETTINGS: {e}", 1) from None
+    return current_from_settings(packets), state
+
+
+def _describe(hello, settings) -> list[str]:
+    from sphere.link.device_settings import SETTINGS, current_from_hello, settings_state_text, show
 
     j = hello.to_json()
     out = [f"firmware {j['firmware_version']} (protocol {hello.protocol_version}); sensors found: "
            f"{', '.join(j['sensors_found']) or 'none'}; IMU {hello.imu_rate_hz} Hz, magnetometer {hello.mag_rate_hz} Hz; "
            f"calibration: {', '.join(j['calibration_state']) or 'none'}"]
-    for key, value in current_from_hello(hello).items():
-        out.append(f"{key} = {show(key, value)}")
-    out.append("tap.*, free_fall.*, filter.beta: set with `sphere device set` (the sphere cannot report them; "
-               "`sphere device keys` gives the firmware's defaults)")
+    values = {**current_from_hello(hello), **(settings[0] if settings else {})}
+    for key in SETTINGS:
+        if key in values:
+            out.append(f"{key} = {show(key, values[key])}")
+    if settings:
+        out.append(settings_state_text(settings[1]))
+    else:
+        out.append("tap.*, free_fall.*, filter.beta: this firmware cannot report them (protocol 3 can: `sphere flash`); "
+                   "`sphere device keys` gives the firmware's defaults")
     return out
 
 
@@ -126,7 +153,7 @@ def _run(args) -> int:
         return 0
     if args.action == "set" and not args.items:
         raise _Failed("set what? give KEY=VALUE ... (`sphere device keys` lists them)")
-    if args.action in ("get", "reboot") and args.items:
+    if args.action in ("get", "save", "clear", "reboot") and args.items:
         raise _Failed(f"{args.action} takes no KEY=VALUE")
     seconds = 5
     if args.action == "identify":
@@ -146,7 +173,18 @@ def _run(args) -> int:
     ser, link, hello = _open(args)
     try:
         if args.action == "get":
-            print("\n".join(_describe_hello(hello)))
+            print("\n".join(_describe(hello, _read_settings(link, hello, args.timeout))))
+            return 0
+        if args.action in ("save", "clear"):
+            from sphere.protocol.packets import ClearSettings, SaveSettings
+
+            if hello.protocol_version < 3:
+                raise _Failed(f"this firmware (protocol {hello.protocol_version}) cannot {args.action} its settings: "
+                              "flash the current one (`sphere flash`)", 1)
+            packet = SaveSettings() if args.action == "save" else ClearSettings()
+            _ask(link, packet, max(args.timeout, 2.0))  # 17 EEPROM bytes take ~60 ms to write
+            print("saved: the sphere starts with these settings at every power-up" if args.action == "save" else
+                  "cleared: the sphere starts with its defaults at the next power-up")
             return 0
         if args.action == "identify":
             from sphere.protocol import Identify
@@ -163,8 +201,9 @@ def _run(args) -> int:
             print("rebooted" + (f"; firmware {again.to_json()['firmware_version']} is back" if again else
                                 "; no HELLO yet (a USB Nano's bootloader waits ~1 s first)"))
             return 0
+        reported = _read_settings(link, hello, args.timeout)
         try:
-            plan = plan_settings(args.items, hello)
+            plan = plan_settings(args.items, hello, reported[0] if reported else None)
         except SettingError as e:
             raise _Failed(str(e)) from None
         for i, packet in enumerate(plan.packets):
@@ -172,7 +211,8 @@ def _run(args) -> int:
         for note in plan.notes:
             print(f"note: {note}", file=sys.stderr)
         given = {item.split("=", 1)[0].strip() for item in args.items}
-        print("set: " + ", ".join(f"{k} = {show(k, v)}" for k, v in plan.values.items() if k in given))
+        print("set: " + ", ".join(f"{k} = {show(k, v)}" for k, v in plan.values.items() if k in given)
+              + ("; `sphere device save` keeps them over power-off" if reported else ""))
         return 0
     finally:
         ser.close()

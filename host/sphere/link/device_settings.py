@@ -5,10 +5,10 @@
     for packet in plan.packets: ...        # SET_TAP, SET_STREAM: one command per group of keys
     plan.notes                             # what was filled in and why
 
-A command sets every field of its group at once (SET_TAP has five), and the device can report only some of
-them (the stream's mode and rates and the board profile, in HELLO); a key not given is taken from HELLO
-when the device reports it, else from the firmware's default (firmware/src/core: adxl345.cpp
-DEFAULT_TAP and DEFAULT_FREE_FALL, marg_filter.h DEFAULT_BETA_MILLI), and the notes say so.
+A command sets every field of its group at once (SET_TAP has five); a key not given keeps what the device
+reports: every setting through GET_SETTINGS (protocol 3, spec §5.3), the stream and the board in HELLO; an
+older device cannot report the others, and they are sent as the firmware's default (firmware/src/core:
+adxl345.cpp DEFAULT_TAP and DEFAULT_FREE_FALL, marg_filter.h DEFAULT_BETA_MILLI), which the notes say.
 """
 
 from __future__ import annotations
@@ -151,6 +151,33 @@ def parse_assignment(item: str) -> tuple[str, int]:
     return key, s.to_lsb(text)
 
 
+def current_from_settings(packets) -> dict[str, int]:
+    """Every key but ``board`` from GET_SETTINGS's block (spec §5.3), as the four commands it is made of
+    (``Reply.settings()``)."""
+    stream, tap, free_fall, beta = packets
+    mode = stream.stream_mode
+    return {"stream.raw": mode & 1, "stream.orientation": mode >> 1 & 1, "stream.status": mode >> 2 & 1,
+            "stream.raw_rate_hz": stream.raw_rate_hz, "stream.orientation_rate_hz": stream.orientation_rate_hz,
+            "tap.threshold_g": tap.thresh_tap, "tap.duration_ms": tap.dur, "tap.latency_ms": tap.latent,
+            "tap.window_ms": tap.window, "tap.axes": tap.tap_axes,
+            "free_fall.threshold_g": free_fall.thresh_ff, "free_fall.time_ms": free_fall.time_ff,
+            "filter.beta": beta.beta}
+
+
+def settings_state_text(state: int) -> str:
+    """What GET_SETTINGS's settings_state means for the user (spec §5.3)."""
+    from sphere.protocol.packets import SETTINGS_EEPROM_INVALID, SETTINGS_NONE_SAVED, SETTINGS_SAVED
+
+    if state & SETTINGS_EEPROM_INVALID:
+        return ("the settings saved on the sphere were damaged (version or CRC wrong, or a value out of range): "
+                "it uses its defaults; set them again and `sphere device save`")
+    if state & SETTINGS_SAVED:
+        return "these are the settings saved on the sphere: it starts with them at every power-up"
+    if state & SETTINGS_NONE_SAVED:
+        return "nothing saved: the sphere starts with its defaults; `sphere device save` keeps these"
+    return "changed since they were saved: `sphere device save` keeps them, else the saved ones come back at power-up"
+
+
 def current_from_hello(hello) -> dict[str, int]:
     """What a HELLO tells of the settings (stream and board); the others cannot be read from the device."""
     if hello is None:
@@ -182,15 +209,17 @@ class Plan:
     notes: list = field(default_factory=list)
 
 
-def plan_settings(items: list[str], hello=None) -> Plan:
-    """The commands that set ``items`` (``KEY=VALUE``), one per group, in :data:`GROUP_ORDER`."""
+def plan_settings(items: list[str], hello=None, settings: dict | None = None) -> Plan:
+    """The commands that set ``items`` (``KEY=VALUE``), one per group, in :data:`GROUP_ORDER`. A key of a group
+    that is not given keeps the value the sphere reports (``settings``: GET_SETTINGS, protocol 3; else HELLO's
+    stream and board), or the firmware's default when it reports none (the notes say so)."""
     given: dict[str, int] = {}
     for item in items:
         key, value = parse_assignment(item)
         if key in given:
             raise SettingError(f"{key} given twice")
         given[key] = value
-    known = current_from_hello(hello)
+    known = {**current_from_hello(hello), **(settings or {})}
     plan = Plan()
     for group in GROUP_ORDER:
         keys = [k for k, s in SETTINGS.items() if s.group == group]

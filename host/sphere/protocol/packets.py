@@ -12,10 +12,10 @@ from typing import ClassVar
 
 from sphere import chips
 
-PROTOCOL_VERSION = 2
+PROTOCOL_VERSION = 3
 # Versions this host decodes: version 2 only appended fields to HELLO and STATUS (a version-1 body is
 # their prefix; the new fields then read as their defaults) and added flags and SET_BOARD.
-SUPPORTED_VERSIONS = (1, 2)
+SUPPORTED_VERSIONS = (1, 2, 3)
 
 Q14 = 16384.0
 
@@ -297,7 +297,7 @@ class Status(Packet):
 
 
 class Reply(Packet):
-    """REPLY: three fixed fields and, for GET_CALIBRATION, 43 bytes of data (spec §4.6)."""
+    """REPLY: three fixed fields and, for GET_CALIBRATION, 43 bytes of data; for GET_SETTINGS, 15 (spec §4.6)."""
 
     TYPE, NAME, DIRECTION = 0x06, "REPLY", "device"
     FIELDS = (
@@ -305,7 +305,7 @@ class Reply(Packet):
         Field("cmd_type", "B", show=lambda v: _COMMAND_NAMES.get(v, v)),
         Field("result", "B", show=lambda v: Result(v).name.lower() if v in Result._value2member_map_ else v),
     )
-    DATA_SIZES = (0, 43)
+    DATA_SIZES = (0, 43, 15)
 
     def __init__(self, *args, data: bytes = b"", **kwargs):
         super().__init__(*args, **kwargs)
@@ -333,6 +333,13 @@ class Reply(Packet):
         if len(self.data) != CalibrationBlock.SIZE + 1:
             raise ValueError(f"this REPLY carries {len(self.data)} data bytes, not a calibration")
         return CalibrationBlock.unpack(self.data[:-1]), self.data[-1]
+
+    def settings(self) -> tuple[tuple["Packet", ...], int]:
+        """The settings block (spec §5.3) as the four commands it is the bodies of (SetStream, SetTap,
+        SetFreeFall, SetFilter), and settings_state, carried by a GET_SETTINGS reply."""
+        if len(self.data) != SETTINGS_BLOCK_SIZE + 1:
+            raise ValueError(f"this REPLY carries {len(self.data)} data bytes, not the settings")
+        return settings_from_block(self.data[:-1]), self.data[-1]
 
     def fields(self) -> dict:
         out = super().fields()
@@ -455,6 +462,40 @@ class SetBoard(Packet):
     FIELDS = (Field("board_profile", "B", show=lambda v: BOARD_PROFILES.get(v, v)),)
 
 
+class GetSettings(Packet):
+    TYPE, NAME, DIRECTION = 0x54, "GET_SETTINGS", "host"
+
+
+class SaveSettings(Packet):
+    TYPE, NAME, DIRECTION = 0x55, "SAVE_SETTINGS", "host"
+
+
+class ClearSettings(Packet):
+    TYPE, NAME, DIRECTION = 0x56, "CLEAR_SETTINGS", "host"
+
+
+#: The settings block (spec §5.3): the bodies of these commands, in this order.
+SETTINGS_GROUPS: tuple[type[Packet], ...] = (SetStream, SetTap, SetFreeFall, SetFilter)
+SETTINGS_BLOCK_SIZE = sum(c.body_size() for c in SETTINGS_GROUPS)
+#: settings_state bits (spec §5.3)
+SETTINGS_SAVED, SETTINGS_EEPROM_INVALID, SETTINGS_NONE_SAVED = 1, 2, 4
+
+
+def settings_from_block(block: bytes) -> tuple[Packet, ...]:
+    """The four commands whose bodies make the settings block."""
+    out, i = [], 0
+    for cls in SETTINGS_GROUPS:
+        n = cls.body_size()
+        out.append(cls.unpack_body(block[i : i + n]))
+        i += n
+    return tuple(out)
+
+
+def settings_block(packets) -> bytes:
+    """The settings block from the four commands (in :data:`SETTINGS_GROUPS` order)."""
+    return b"".join(p.pack_body() for p in packets)
+
+
 ALL_TYPES: tuple[type[Packet], ...] = (
     Hello,
     RawSample,
@@ -477,6 +518,9 @@ ALL_TYPES: tuple[type[Packet], ...] = (
     Reboot,
     GetStatus,
     SetBoard,
+    GetSettings,
+    SaveSettings,
+    ClearSettings,
 )
 BY_TYPE = {cls.TYPE: cls for cls in ALL_TYPES}
 BY_NAME = {cls.NAME: cls for cls in ALL_TYPES}

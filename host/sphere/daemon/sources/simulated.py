@@ -34,10 +34,11 @@ def simulator_available() -> bool:
         return False
 
 
-def simulator_command(trace: str = "", seconds: float = 600.0) -> list[str]:
-    """How --simulate starts the virtual board: ``sphere sim --trace TRACE --pty --seconds S``."""
+def simulator_command(trace: str = "", seconds: float = 600.0, extra=()) -> list[str]:
+    """How --simulate starts the virtual board: ``sphere sim --trace TRACE --pty --seconds S`` (and ``extra``
+    flags of `sphere sim`, e.g. faults for a test)."""
     return [sys.executable, "-m", "sphere.cli", "sim", "--trace", trace or DEFAULT_SIM_TRACE, "--pty",
-            "--seconds", f"{seconds:g}"]
+            "--seconds", f"{seconds:g}", *extra]
 
 
 def die_with_parent() -> None:
@@ -49,11 +50,11 @@ def die_with_parent() -> None:
         pass
 
 
-def start_simulator(trace: str = "", log=None, timeout_s: float = 120.0, seconds: float = 600.0):
+def start_simulator(trace: str = "", log=None, timeout_s: float = 120.0, seconds: float = 600.0, extra=()):
     """Start the virtual board; returns (process, pty path). The board prints ``... UART on /dev/pts/N``;
     the rest of its output is read and dropped so that it never blocks on a full pipe. The first start
     may build the firmware and the board (make), hence the long timeout."""
-    cmd = simulator_command(trace, seconds)
+    cmd = simulator_command(trace, seconds, extra)
     parent = os.getpid()
 
     def child_setup():
