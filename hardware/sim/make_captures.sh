@@ -17,3 +17,4 @@ sim --trace 24 --start 49 --hold 1 --seconds 6 --capture $out/sim_24_tapping.bin
 sim --trace 07 --start 44.48 --hold 2 --seconds 6 --capture $out/sim_07_fast_rotation.bin --stats $out/sim_07_fast_rotation.stats.json
 sim --trace synthetic:toss --seconds 4 --capture $out/sim_toss.bin --stats $out/sim_toss.stats.json
 sim --trace synthetic:still --seconds 6 --nack hmc5883l:2:4 --capture $out/sim_mag_fault.bin --stats $out/sim_mag_fault.stats.json
+sim --trace synthetic:turn --seconds 9 --capture $out/sim_turn_90.bin --stats $out/sim_turn_90.stats.json

@@ -31,3 +31,14 @@ def test_install_writes_a_unit_for_this_installation(tmp_path):
     assert r.returncode == 1 and "differs" in r.stderr and "--force" in r.stderr
     assert "--sensitivity 30" in unit.read_text()
     assert service(tmp_path, "install", "--force").returncode == 0 and unit.read_text() == text
+
+
+def test_spnav_link_writes_a_tmpfiles_rule_and_says_how_to_install_it(tmp_path):
+    env_run = tmp_path / "run"
+    r = subprocess.run([sys.executable, "-m", "sphere.cli", "service", "install", "--spnav-link"], capture_output=True,
+                       text=True, timeout=60, env=dict(os.environ, XDG_CONFIG_HOME=str(tmp_path),
+                                                       XDG_RUNTIME_DIR=str(env_run), SPNAV_SOCKET=""))
+    assert r.returncode == 0, r.stderr
+    rule = (tmp_path / "sphere-mouse" / "sphere-mouse-spnav.conf").read_text()
+    assert f"\nL /run/spnav.sock - - - - {env_run}/spnav.sock\n" in rule
+    assert "sudo install -m 644" in r.stdout and "sudo systemd-tmpfiles --create" in r.stdout

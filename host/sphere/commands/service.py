@@ -4,6 +4,11 @@ The unit shipped in the package (host/packaging/sphere-mouse.service) names ``%h
 (``pip install --user``); this command writes it with the ``sphere-mouse`` that sits beside the running
 Python (a virtual environment's bin folder, wherever it is) and points ``Documentation=`` at the daemon's
 manual installed with the package.
+
+``--spnav-link`` also writes a systemd-tmpfiles rule that makes ``/run/spnav.sock`` (``/var/run/spnav.sock``,
+libspnav's default socket and the path Blender checks before it looks for a 3-D mouse) a link to the
+socket of sphere-mouse's ``[outputs.spacenav]``. The rule goes into the user's config folder; installing
+it under /etc needs root, so the command prints the two ``sudo`` lines and runs neither.
 """
 
 from __future__ import annotations
@@ -24,6 +29,9 @@ def add_arguments(p) -> None:
     p.add_argument("action", choices=("install", "print"),
                    help="install: write ~/.config/systemd/user/sphere-mouse.service; print: show it")
     p.add_argument("--force", action="store_true", help="replace a unit that differs from the one this writes")
+    p.add_argument("--spnav-link", action="store_true",
+                   help="also write a systemd-tmpfiles rule linking /run/spnav.sock (where Blender looks for a 3-D "
+                        "mouse) to sphere-mouse's [outputs.spacenav] socket, and print the sudo commands that install it")
 
 
 def daemon_executable() -> Path | None:
@@ -46,6 +54,48 @@ def unit_text(executable: Path) -> str:
 def unit_path() -> Path:
     base = os.environ.get("XDG_CONFIG_HOME") or os.path.join(os.path.expanduser("~"), ".config")
     return Path(base) / "systemd" / "user" / UNIT_NAME
+
+
+SPNAV_RULE_NAME = "sphere-mouse-spnav.conf"
+
+
+def spnav_socket() -> str:
+    """The socket sphere-mouse's [outputs.spacenav] serves when started by the user unit."""
+    from sphere.daemon.config import ConfigError, load
+    from sphere.daemon.outputs.spacenav import default_socket_path
+
+    try:
+        configured = load()["outputs.spacenav"].socket
+    except ConfigError:
+        configured = ""
+    env = dict(os.environ)
+    env.setdefault("XDG_RUNTIME_DIR", f"/run/user/{os.getuid()}")  # what systemd gives the user unit
+    return configured or default_socket_path(env)
+
+
+def write_spnav_rule() -> int:
+    from sphere.daemon.outputs.spacenav import SYSTEM_SOCKET, socket_owner
+    from sphere.paths import config_file
+
+    target = spnav_socket()
+    rule = (f"# sphere-mouse: libspnav's default socket ({SYSTEM_SOCKET}, the one Blender checks) leads to the\n"
+            f"# sphere's 3-D mouse ([outputs.spacenav]). 'L' leaves an existing {SYSTEM_SOCKET} (spacenavd's) alone.\n"
+            f"L /run/spnav.sock - - - - {target}\n")
+    dest = config_file().parent / SPNAV_RULE_NAME
+    try:
+        dest.parent.mkdir(parents=True, exist_ok=True)
+        dest.write_text(rule)
+    except OSError as e:
+        print(f"sphere service: cannot write {dest}: {e.strerror}; check $XDG_CONFIG_HOME (or ~/.config) is a "
+              "folder you can write", file=sys.stderr)
+        return 2
+    print(f"wrote {dest} (/run/spnav.sock -> {target}); to install it, as root:")
+    print(f"  sudo install -m 644 {dest} /etc/tmpfiles.d/{SPNAV_RULE_NAME}")
+    print(f"  sudo systemd-tmpfiles --create /etc/tmpfiles.d/{SPNAV_RULE_NAME}")
+    if socket_owner(SYSTEM_SOCKET) == "live":
+        print(f"sphere service: a running spacenavd owns {SYSTEM_SOCKET}; the link waits until it is stopped "
+              "(sudo systemctl disable --now spacenavd)")
+    return 0
 
 
 def run(args) -> int:
@@ -72,4 +122,4 @@ def run(args) -> int:
         return 2
     print(f"wrote {dest} (ExecStart={exe})")
     print("now: systemctl --user daemon-reload && systemctl --user enable --now sphere-mouse")
-    return 0
+    return write_spnav_rule() if args.spnav_link else 0

@@ -86,6 +86,8 @@ class SphereMouse:
         self.sensors_missing: tuple[str, ...] = ()
         if stream is not None:
             stream.mode = self.mode
+        # outputs that speak rates (a 3-D mouse, a motion server) get each sample's rate and acceleration
+        self._publish_motion = getattr(stream, "publish_motion", None)
 
     # -- actions --
     def set_mode(self, mode: str) -> None:
@@ -174,6 +176,8 @@ class SphereMouse:
             motion = self.motion
             if self.stream is not None and motion.uses_host_filter:
                 self._publish_pose(t)
+            if self._publish_motion is not None:
+                self._publish_motion(motion.gyro_dps, motion.accel_g, t)
             motion.run_deferred()  # the filter's bias step and the still-detection's trend sums
         elif typ == Orientation.TYPE:
             dt = self.motion.orientation(p, t)
@@ -181,6 +185,8 @@ class SphereMouse:
                 return
             if self.stream is not None:
                 self.stream.publish_orientation(self.pose.at(self.motion.quat, t), t)
+            if self._publish_motion is not None and not self.motion.raw_seen:
+                self._publish_motion(self.motion.gyro_dps, None, t)  # the rate from successive orientations
             if not self.paused and not self.actions.frozen(t):
                 if self.mode == "tilt":
                     self._tilt_step(t, dt)

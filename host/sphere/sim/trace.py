@@ -400,6 +400,7 @@ SYNTHETIC = {
     "calibration": lambda seconds, arg: calibration(seconds),
     "hold": "sphere.sim.hold:synthetic",
     "tour": "sphere.sim.tour:synthetic",
+    "turn": "sphere.sim.turn:synthetic",
 }
 
 

@@ -77,6 +77,11 @@ class Output:
     def mode(self, name: str) -> None:
         self.send_mode(name)
 
+    def motion(self, gyro_dps, accel_g, t_us=None) -> None:
+        """The sphere's bias-corrected angular rate (°/s) and acceleration (g, None when the accelerometer did
+        not answer), sensor axes (x towards the screen, y left, z up at the reference pose), once per sample.
+        Outputs that speak rates (a 3-D mouse, a motion server) override it; :class:`Outputs` calls only those."""
+
     # -- to the program --
     def send_pose(self, q, angles_deg, moved_m, position_m, t_us) -> None:
         raise NotImplementedError

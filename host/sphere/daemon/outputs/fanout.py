@@ -10,6 +10,7 @@ class Outputs:
         self.stream = stream
         self.outputs = list(outputs)
         self.log = log or (lambda m: None)
+        self._rates = self._rate_outputs()
         self._position = None
         self._mode = None
 
@@ -27,10 +28,16 @@ class Outputs:
         return self._mode
 
     @mode.setter
-    def mode(self, value):
+    def mode(self, value):  # the daemon sets the starting mode this way
         self._mode = value
         if self.stream is not None:
             self.stream.mode = value
+        self._each(lambda o: o.mode(value))
+
+    def _rate_outputs(self) -> list:
+        from sphere.daemon.outputs.base import Output
+
+        return [o for o in self.outputs if getattr(type(o), "motion", Output.motion) is not Output.motion]
 
     @property
     def position(self):
@@ -47,17 +54,29 @@ class Outputs:
             try:
                 call(out)
             except Exception as e:  # one program gone must not stop the pointer or the others
-                self.log(f"output {out.NAME} stopped: {e}")
-                self.outputs.remove(out)
-                try:
-                    out.close()
-                except Exception:
-                    pass
+                self._drop(out, e)
+
+    def _drop(self, out, e) -> None:
+        self.log(f"output {out.NAME} stopped: {e}")
+        self.outputs.remove(out)
+        self._rates = self._rate_outputs()
+        try:
+            out.close()
+        except Exception:
+            pass
 
     def publish_orientation(self, quat, t_us=None) -> None:
         if self.stream is not None:
             self.stream.publish_orientation(quat, t_us)
         self._each(lambda o: o.orientation(quat, t_us, self._position))
+
+    def publish_motion(self, gyro_dps, accel_g, t_us=None) -> None:
+        """Each sample's rates and acceleration, to the outputs that use them (the stream does not)."""
+        for out in self._rates:
+            try:
+                out.motion(gyro_dps, accel_g, t_us)
+            except Exception as e:
+                self._drop(out, e)
 
     def publish_event(self, event: str, t_us=None) -> None:
         if self.stream is not None:
@@ -80,6 +99,7 @@ class Outputs:
             self.stream.stop()
         self._each(lambda o: o.close())
         self.outputs = []
+        self._rates = []
 
 
 def open_outputs(cfg, log=None) -> list:
