@@ -94,7 +94,7 @@ NAXES, NBUTTONS = 6, len(BUTTONS)
 #: events, buttons and replies may go up to HARD_LIMIT, then the client is dropped
 SOFT_LIMIT = 64 * RECORD.size
 HARD_LIMIT = 256 * RECORD.size
-MAX_CLIENTS = 32
+MAX_CLIENTS = 256  # beyond: closed at once (a flood of connections must not take the daemon's descriptors)
 GRACE_S = 0.35  # a client that has not asked for a version this long after connecting is a v0 client
 
 
