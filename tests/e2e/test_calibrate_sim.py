@@ -40,7 +40,6 @@ def _start(trace: str, seconds: float, board: str | None = None, profile: str | 
     """The virtual sphere on a pty (as sphere-mouse --simulate starts it), on ``board`` with the firmware
     told ``profile`` by SET_BOARD at 0.5 s (none: the firmware's default, aligned)."""
     from sphere.daemon.sources import SourceError, start_simulator
-    from sphere.daemon.sources import simulated
     from sphere.sim.soak import board_profile_command
 
     need_board()
@@ -50,11 +49,8 @@ def _start(trace: str, seconds: float, board: str | None = None, profile: str | 
         send = board_profile_command(profile, tmp / "set_board.txt")
         assert send is not None, profile
         extra += ["--send", str(send)]
-    if extra:
-        command = simulated.simulator_command
-        monkeypatch.setattr(simulated, "simulator_command", lambda trace, seconds: command(trace, seconds) + extra)
     try:
-        return start_simulator(trace, seconds=seconds)
+        return start_simulator(trace, seconds=seconds, extra=extra)
     except SourceError as e:
         pytest.fail(str(e))
 

@@ -82,3 +82,29 @@ def test_every_setting_is_read_back_and_kept_over_a_power_cycle(capsys):
         assert cleared == saved and "nothing saved" in out
     finally:
         stop_simulator(proc)
+
+
+def test_the_daemons_device_settings_reach_the_firmware_at_connect():
+    """sphere-mouse's [device] settings are sent at every connect and the firmware acts on them: with
+    ``stream.raw_rate_hz=50`` the RAW_SAMPLEs that follow come at 50 Hz, not the 200 Hz default."""
+    from sphere.daemon.config import Config
+    from sphere.daemon.sources import SimulatorSource
+
+    need_board()
+    need_firmware()
+    cfg = Config().with_overrides({"device": {"settings": ["stream.raw_rate_hz=50", "tap.axes=z"]},
+                                   "source": {"sim_trace": "synthetic:still", "sim_seconds": 20.0}}, "test")
+    logs = []
+    src = SimulatorSource.from_config(cfg, logs.append)
+    times = []
+    try:
+        for batch in src:
+            times += [dp.t_us for dp in batch if dp.packet.NAME == "RAW_SAMPLE"]
+            if len(times) > 2 and times[-1] - times[0] > 3e6:
+                break
+    finally:
+        src.close()
+    assert any("[device] settings sent: stream.raw_rate_hz = 50 Hz, tap.axes = z" in m for m in logs), logs
+    late = [t for t in times if t > times[0] + 1e6]  # after the settings took effect
+    rate = (len(late) - 1) / ((late[-1] - late[0]) / 1e6)
+    assert abs(rate - 50) < 2, rate

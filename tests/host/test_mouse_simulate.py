@@ -40,7 +40,7 @@ def test_simulate_runs_the_board_and_ends_with_it(tmp_path, monkeypatch):
     script.write_text(BOARD)
     seen = {}
 
-    def command(trace="", seconds=0):
+    def command(trace="", seconds=0, extra=()):
         seen["trace"] = trace
         return [sys.executable, str(script)]
 
@@ -61,7 +61,7 @@ def test_simulate_runs_the_board_and_ends_with_it(tmp_path, monkeypatch):
 def test_simulator_that_fails_says_why(tmp_path, monkeypatch):
     script = tmp_path / "broken.py"
     script.write_text("print('make: *** [Makefile:68: build/sphere.elf] Error 1'); raise SystemExit(2)\n")
-    monkeypatch.setattr(sources.simulated, "simulator_command", lambda trace="", seconds=0: [sys.executable, str(script)])
+    monkeypatch.setattr(sources.simulated, "simulator_command", lambda trace="", seconds=0, extra=(): [sys.executable, str(script)])
     with pytest.raises(sources.SourceError, match="did not open its pty: make: .*Error 1"):
         sources.SimulatorSource()
 

@@ -68,7 +68,7 @@ CONTRIBUTORS: tuple[str, ...] = (
 
 #: The daemon's own sections, in the order the reference lists them (contributed ones follow).
 CORE_ORDER = ("source", "output", "mode", "pointer", "tilt", "events", "freeze", "gyro", "orientation", "stream",
-              "status")
+              "device", "status")
 
 #: Keys of earlier releases that live elsewhere now: (section, key) -> what to write instead.
 MOVED_KEYS = {
@@ -410,6 +410,29 @@ class StreamConfig:
                                      "tracker's estimate as it is", choices=_position_smoothing_names)
     max_clients: int = option(16, "most WebSocket and page connections at once; more are refused (503)",
                               _range(1, 1000))
+
+
+def _device_settings(items) -> str | None:
+    from sphere.link.device_settings import SettingError, parse_assignment  # the settings' own checks
+
+    seen = set()
+    try:
+        for item in items:
+            key, _ = parse_assignment(item)
+            if key in seen:
+                return f"{key} given twice"
+            seen.add(key)
+    except SettingError as e:
+        return str(e)
+    return None
+
+
+@section("device")
+class DeviceConfig:
+    settings: list = option([], "device settings sent to the sphere at every connect, as `sphere device set` takes "
+                            "them (`sphere device keys` lists them), e.g. [\"tap.threshold_g=2.5\", \"tap.axes=z\"]; "
+                            "they win over what the sphere saved (`sphere device save`), which it keeps for other "
+                            "programs; empty = the sphere's own", _device_settings)
 
 
 @section("status")

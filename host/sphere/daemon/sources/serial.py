@@ -94,7 +94,8 @@ class SerialSource(Source):
     def __init__(self, port: str = "auto", candidates=DEFAULT_CANDIDATES, baud: int = 115200,
                  reset_on_open: bool = False, hello_timeout_s: float = 0.5, discovery_timeout_s: float = 3.0,
                  link_timeout_s: float = 2.0, reconnect_interval_s: float = 1.0, log=None,
-                 read_timeout_s: float = 0.02, usb_ids=DEFAULT_USB_IDS, comports=None, low_latency: bool = True):
+                 read_timeout_s: float = 0.02, usb_ids=DEFAULT_USB_IDS, comports=None, low_latency: bool = True,
+                 device_settings=()):
         super().__init__(reconnect_interval_s=reconnect_interval_s, link_timeout_s=link_timeout_s, log=log)
         self.port = port
         self.candidates = list(candidates)
@@ -105,6 +106,7 @@ class SerialSource(Source):
         self.discovery_timeout_s = discovery_timeout_s
         self.read_timeout_s = read_timeout_s
         self.low_latency = low_latency
+        self.device_settings = list(device_settings)  # [device] settings: sent at every connect
         self.serial = None
         self.port_name = None
         self.link = None
@@ -117,7 +119,33 @@ class SerialSource(Source):
     def from_config(cls, cfg, log):
         s = cfg.source
         return cls(s.port, s.candidates, reset_on_open=s.reset_on_open, log=log, usb_ids=s.usb_ids,
-                   low_latency=s.low_latency, **serial_timing(s))
+                   low_latency=s.low_latency, device_settings=cfg.device.settings, **serial_timing(s))
+
+    def _apply_device_settings(self, hello) -> None:
+        """[device] settings, at every connect: the keys of a group not given keep what the sphere reports
+        (GET_SETTINGS), so the config changes only what it names; what the sphere refuses is said."""
+        from sphere.link.device_settings import SettingError, current_from_settings, plan_settings, show
+        from sphere.protocol.packets import GetSettings
+
+        current = None
+        if hello.protocol_version >= 3:
+            reply = self.link.command(GetSettings(), 1.0)
+            if reply is not None and reply.ok:
+                current = current_from_settings(reply.settings()[0])
+        try:
+            plan = plan_settings(self.device_settings, hello, current)
+        except SettingError as e:  # checked at start; a sphere without a HELLO stream rate lands here
+            self.log(f"[device] settings not sent: {e}", logging.WARNING)
+            return
+        for packet in plan.packets:
+            reply = self.link.command(packet, 1.0)
+            if reply is None or not reply.ok:
+                why = "no reply" if reply is None else f"result {reply.result}"
+                self.log(f"the sphere did not take {packet.NAME} from [device] settings ({why})", logging.WARNING)
+                return
+        given = {item.split("=", 1)[0].strip() for item in self.device_settings}
+        self.log("[device] settings sent: " + ", ".join(f"{k} = {show(k, v)}" for k, v in plan.values.items()
+                                                        if k in given))
 
     # -- connecting --
     def _open(self, path: str):
@@ -222,7 +250,10 @@ class SerialSource(Source):
             self.state = f"{path}"
             self.log(f"sphere found on {path}" + (" (reconnected)" if self.connects >= 1 else ""))
             self.link.stream = self.stream
-            return self.stream.adopt(packets)
+            adopted = self.stream.adopt(packets)
+            if self.device_settings:  # a few ms at connect; the samples read meanwhile are counted, not used
+                self._apply_device_settings(self.stream.hello)
+            return adopted
         return None
 
     def _read_port(self, ser) -> bytes:

@@ -137,7 +137,8 @@ class SimulatorSource(SerialSource):
             raise SimulatorRefused(problem)
         if simulator_available():
             try:
-                return cls(s.sim_trace, log=log, seconds=s.sim_seconds, **serial_timing(s))
+                return cls(s.sim_trace, log=log, seconds=s.sim_seconds, device_settings=cfg.device.settings,
+                           **serial_timing(s))
             except SourceError as e:
                 log(f"the virtual board cannot run here ({e}); using the built-in scripted sphere")
         else:
