@@ -20,7 +20,17 @@ and libspnav-dev's own examples/simple.c compiled with ``-lspnav -lm``. Figures:
 - the angle ``spnav_posrot_moveobj`` turned the object by (target 90 ± 5°) and about which axis;
 - the buttons (single tap 0, double tap 1, whose first knock is a single tap too).
 
-The tests (tests/host/test_spacenav.py) run the same functions and assert the targets.
+Then the DSU ("cemuhook") motion server: sphere-mouse replays the same turn (pointer mode: the server
+works in every mode) while :class:`DsuClient` — written here from the protocol's description
+(github.com/v1993/cemuhook-protocol), its own offsets and ``binascii.crc32``, nothing shared with the
+server's module — asks for the version, the controller list and pad data, and sends a foreign datagram
+and a truncated one. Figures: pad data packets a second (target ≥ 100), bad CRCs (target 0), the gyro's
+yaw over the middle of the turn against the sphere's 90 °/s (target within 2 %), the buttons seen. Last,
+10,000 hostile datagrams thrown at the server during a replay: the daemon's exit status, what it counted,
+and its pointer moves against a run without them (target: equal).
+
+The tests (tests/host/test_spacenav.py, tests/host/test_dsu.py) run the same functions and assert the
+targets.
 """
 
 from __future__ import annotations
@@ -28,8 +38,10 @@ from __future__ import annotations
 import json
 import math
 import os
+import random
 import re
 import shutil
+import struct
 import subprocess
 import sys
 import tempfile
@@ -211,6 +223,275 @@ def _print_spacenav(res: dict) -> None:
                                                           (r["button_events"] if p == "ctypes" else r[p]["button_events"])))
 
 
+# ------------------------------------------------------------------ DSU, from the protocol description
+
+class DsuClient:
+    """A cemuhook client as the description has it: every message ``"DSUC"``, u16 version 1001, u16 length
+    of what follows the 16-byte header, u32 CRC-32 of the whole message with these 4 bytes zero, u32 client
+    id, then u32 message type and its data, little-endian. Server messages are read the same way."""
+
+    def __init__(self, port: int, host: str = "127.0.0.1"):
+        import binascii
+        import socket
+
+        self._crc = binascii.crc32
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.settimeout(0.05)
+        self.server = (host, port)
+        self.client_id = 0x2626
+        self.bad_crc = 0
+        self.foreign = 0
+        self.pads: list[dict] = []
+        self.replies: list[tuple[int, bytes]] = []
+
+    def build(self, mtype: int, data: bytes) -> bytearray:
+        msg = bytearray(20 + len(data))
+        msg[0:4] = b"DSUC"
+        msg[4:6] = (1001).to_bytes(2, "little")
+        msg[6:8] = (4 + len(data)).to_bytes(2, "little")
+        msg[12:16] = self.client_id.to_bytes(4, "little")
+        msg[16:20] = mtype.to_bytes(4, "little")
+        msg[20:] = data
+        msg[8:12] = (self._crc(bytes(msg)) & 0xFFFFFFFF).to_bytes(4, "little")
+        return msg
+
+    def send(self, mtype: int, data: bytes = b"") -> None:
+        self.sock.sendto(bytes(self.build(mtype, data)), self.server)
+
+    def ask_version(self):
+        self.send(0x100000)
+
+    def ask_ports(self, slots=(0, 1, 2, 3)):
+        self.send(0x100001, len(slots).to_bytes(4, "little", signed=True) + bytes(slots))
+
+    def subscribe_all(self):
+        self.send(0x100002, bytes(8))  # flags 0: every pad
+
+    def receive(self, until: float) -> None:
+        import socket
+
+        while time.monotonic() < until:
+            try:
+                data, _ = self.sock.recvfrom(2048)
+            except (socket.timeout, ConnectionRefusedError):
+                return
+            t = time.monotonic()
+            if len(data) < 20 or data[0:4] != b"DSUS" or int.from_bytes(data[4:6], "little") != 1001:
+                self.foreign += 1
+                continue
+            length = int.from_bytes(data[6:8], "little")
+            msg = bytearray(data[:16 + length])
+            sent = int.from_bytes(msg[8:12], "little")
+            msg[8:12] = bytes(4)
+            if self._crc(bytes(msg)) & 0xFFFFFFFF != sent or len(data) < 16 + length:
+                self.bad_crc += 1
+                continue
+            mtype = int.from_bytes(msg[16:20], "little")
+            body = bytes(msg[20:])
+            if mtype != 0x100002:
+                self.replies.append((mtype, body))
+                continue
+            # after the type: 11 bytes shared, connected (11), packet number (12-15), buttons (16, 17), HOME,
+            # touch, sticks (20-23), 12 analog (24-35: dpad L D R U, Y, B, A, X, R1, L1, R2, L2), two touches
+            # (36-47), timestamp u64 (48-55), accel x y z (56-67), gyro pitch yaw roll (68-79)
+            f = struct.unpack("<3f", body[56:68]), struct.unpack("<3f", body[68:80])
+            self.pads.append({"t": t, "slot": body[0], "state": body[1], "model": body[2], "connected": body[11],
+                              "number": int.from_bytes(body[12:16], "little"), "buttons2": body[17],
+                              "analog_a": body[30], "analog_b": body[29], "sticks": list(body[20:24]),
+                              "t_us": int.from_bytes(body[48:56], "little"), "accel": f[0], "gyro": f[1],
+                              "length": len(data)})
+
+    def close(self):
+        self.sock.close()
+
+
+def free_udp_port() -> int:
+    import socket
+
+    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    s.bind(("127.0.0.1", 0))
+    port = s.getsockname()[1]
+    s.close()
+    return port
+
+
+def _daemon(folder: Path, name: str, config_text: str, capture: Path = TURN_CAPTURE, speed: str = "1"):
+    config = folder / f"{name}.toml"
+    config.write_text(config_text)
+    return subprocess.Popen([sys.executable, "-m", "sphere.mouse", "--config", str(config), "--replay", str(capture),
+                             "--speed", speed, "--backend", "log", "--no-stream"],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+
+
+def run_dsu_turn(folder: Path) -> dict:
+    port = free_udp_port()
+    daemon = _daemon(folder, "dsu", f"[outputs.dsu]\nenabled = true\nport = {port}\n")
+    client = DsuClient(port)
+    try:
+        end = time.monotonic() + 30
+        asked = 0.0
+        odd_sent = False
+        while daemon.poll() is None and time.monotonic() < end:
+            now = time.monotonic()
+            if now - asked > 0.5:  # as emulators do: ask again before the server's timeout
+                client.subscribe_all()
+                client.ask_version()
+                client.ask_ports()
+                asked = now
+                if client.pads and not odd_sent:  # a foreign datagram and a truncated request
+                    client.sock.sendto(b"GET / HTTP/1.0\r\n\r\n", client.server)
+                    client.sock.sendto(bytes(client.build(0x100002, bytes(8)))[:22], client.server)
+                    odd_sent = True
+            client.receive(now + 0.1)
+        _, err = daemon.communicate(timeout=30)
+    finally:
+        if daemon.poll() is None:
+            daemon.kill()
+        client.close()
+    return {"daemon_rc": daemon.returncode, "daemon_log": err, "pads": client.pads, "replies": client.replies,
+            "bad_crc": client.bad_crc, "foreign": client.foreign}
+
+
+def dsu_figures(run: dict) -> dict:
+    from statistics import median
+
+    pads = run["pads"]
+    t0 = pads[0]["t_us"]
+    # the turn: 3.0 s to 4.0 s of the trace; the device clock starts with the trace (the still lead-in)
+    moving = [p for p in pads if abs(p["gyro"][1]) > 10.0]
+    turn_t = [p["t_us"] for p in moving]
+    mid = [p["gyro"][1] for p in moving if turn_t[0] + 200_000 <= p["t_us"] <= turn_t[-1] - 200_000]
+    span_us = pads[-1]["t_us"] - t0
+    arrivals = pads[-1]["t"] - pads[0]["t"]
+    yaw = median(mid)
+    still = [p for p in pads if p["t_us"] < turn_t[0] - 100_000]
+    presses = []
+    for p in pads:
+        for name, bit in (("A", 0x20), ("B", 0x40)):
+            if p["buttons2"] & bit and (not presses or presses[-1][0] != name or p["t_us"] - presses[-1][1] > 200_000):
+                presses.append((name, p["t_us"]))
+    versions = [int.from_bytes(b[:2], "little") for t, b in run["replies"] if t == 0x100000]
+    ports = {b[0]: (b[1], b[2]) for t, b in run["replies"] if t == 0x100001}
+    log = run["daemon_log"]
+    ignored = re.search(r"dsu: (\d+) datagrams received, (\d+) ignored", log)
+    return {
+        "packets": len(pads), "packets_per_s_device": (len(pads) - 1) / (span_us / 1e6),
+        "packets_per_s_arrival": (len(pads) - 1) / arrivals, "bad_crc": run["bad_crc"],
+        "numbers_increasing": all(b["number"] == a["number"] + 1 for a, b in zip(pads, pads[1:])),
+        "yaw_dps": yaw, "yaw_error_pct": (yaw - 90.0) / 90.0 * 100, "turn_samples": len(mid),
+        "pitch_roll_max_dps": max(max(abs(p["gyro"][0]), abs(p["gyro"][2])) for p in moving),
+        "accel_still_g": [round(sum(p["accel"][k] for p in still) / len(still), 3) for k in range(3)],
+        "buttons": [n for n, _ in presses], "version": versions[:1], "ports": ports,
+        "server_ignored": int(ignored.group(2)) if ignored else None, "daemon_rc": run["daemon_rc"],
+    }
+
+
+def hostile_datagrams(n: int, seed: int = 26):
+    """``n`` datagrams a DSU server must ignore: random bytes, wrong magic or version, a CRC that does not
+    match, lengths beyond the datagram, truncations, unknown types, controller requests with impossible
+    counts or slots, a pad request too short."""
+    import binascii
+
+    rng = random.Random(seed)
+    client = DsuClient.__new__(DsuClient)
+    client._crc = binascii.crc32
+    client.client_id = 0xBAD
+    out = []
+    for i in range(n):
+        kind = i % 9
+        if kind == 0:
+            d = rng.randbytes(rng.randrange(0, 200))
+        elif kind == 1:
+            d = bytes(client.build(0x100002, bytes(8)))
+            d = b"DSUS" + d[4:]
+        elif kind == 2:
+            d = bytearray(client.build(0x100001, (1).to_bytes(4, "little") + b"\0"))
+            d[4:6] = (1000).to_bytes(2, "little")
+            d = bytes(d)
+        elif kind == 3:
+            d = bytearray(client.build(0x100000, b""))
+            d[8] ^= 0xFF
+            d = bytes(d)
+        elif kind == 4:
+            d = bytearray(client.build(0x100002, bytes(8)))
+            d[6:8] = (60000).to_bytes(2, "little")
+            d = bytes(d)
+        elif kind == 5:
+            d = bytes(client.build(0x100002, bytes(8)))[:rng.randrange(0, 27)]
+        elif kind == 6:
+            d = bytes(client.build(rng.choice([0, 0x100003, 0x110002, 0xFFFFFFFF]), rng.randbytes(8)))
+        elif kind == 7:
+            count = rng.choice([-1, 5, 1000, 2**31 - 1])
+            d = bytes(client.build(0x100001, count.to_bytes(4, "little", signed=True) + bytes([0, 1, 2, 3])))
+        else:
+            d = bytes(client.build(rng.choice([0x100001, 0x100002]), rng.choice([b"", b"\x01", (2).to_bytes(4, "little") + b"\x07\x09"])))
+        out.append(d)
+    return out
+
+
+def udp_drops(port: int) -> int:
+    """Datagrams the kernel dropped for the UDP socket bound to ``port`` here (/proc/net/udp, last column)."""
+    with open("/proc/net/udp") as f:
+        for line in f.readlines()[1:]:
+            cols = line.split()
+            if int(cols[1].split(":")[1], 16) == port:
+                return int(cols[-1])
+    return 0
+
+
+def run_dsu_hostile(folder: Path, n: int = 10000) -> dict:
+    """The turn replayed twice in pointer mode, the DSU server on; the second time ``n`` hostile datagrams
+    arrive while it runs. Pointer moves, exit status and the server's counts."""
+    import socket
+
+    results = {}
+    for flood in (False, True):
+        port = free_udp_port()
+        daemon = _daemon(folder, f"hostile{int(flood)}", f"[outputs.dsu]\nenabled = true\nport = {port}\n")
+        sent = 0
+        kernel_drops = 0
+        if flood:
+            s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+            time.sleep(2.0)  # the daemon up and serving (the replay's still lead-in is 3 s)
+            for d in hostile_datagrams(n):
+                s.sendto(d, ("127.0.0.1", port))
+                sent += 1
+                if sent % 200 == 0:
+                    time.sleep(0.01)  # ~0.5 s for all: within the replay
+            s.close()
+            time.sleep(0.5)
+            kernel_drops = udp_drops(port)  # a loaded machine: datagrams the socket's buffer had no room for
+        _, err = daemon.communicate(timeout=60)
+        moves = re.search(r"stopped: (\d+) pointer moves", err)
+        ignored = re.search(r"dsu: (\d+) datagrams received, (\d+) ignored", err)
+        results["flood" if flood else "calm"] = {
+            "rc": daemon.returncode, "moves": int(moves.group(1)) if moves else None, "sent": sent,
+            "received": int(ignored.group(1)) if ignored else None,
+            "ignored": int(ignored.group(2)) if ignored else None, "kernel_drops": kernel_drops,
+            "traceback": "Traceback" in err}
+    return results
+
+
+def _print_dsu(f: dict, h: dict) -> None:
+    print()
+    print("dsu output, sphere-mouse --replay sim_turn_90.bin (pointer mode), a client written from the description")
+    rows = [("pad data packets/s (sphere's clock)", ">= 100", f"{f['packets_per_s_device']:.1f}"),
+            ("  as they arrived", "", f"{f['packets_per_s_arrival']:.1f}"),
+            ("bad CRCs", "0", str(f["bad_crc"])),
+            ("gyro yaw in the turn (deg/s)", "90", f"{f['yaw_dps']:.2f}"),
+            ("  error", "within 2 %", f"{f['yaw_error_pct']:+.2f} %"),
+            ("pitch, roll in the turn (max deg/s)", "~0", f"{f['pitch_roll_max_dps']:.2f}"),
+            ("accel lying still (g)", "0 -1 0", " ".join(f"{v:+.3f}" for v in f["accel_still_g"])),
+            ("buttons", "A A B", " ".join(f["buttons"])),
+            ("foreign + truncated datagrams ignored", "2", str(f["server_ignored"])),
+            ("10,000 hostile datagrams: exit status", "0", str(h["flood"]["rc"])),
+            ("  received / ignored / kernel drops", "10000", f"{h['flood']['received']} / {h['flood']['ignored']} / "
+                                                        f"{h['flood']['kernel_drops']}"),
+            ("  pointer moves, calm / flooded", "equal", f"{h['calm']['moves']} / {h['flood']['moves']}")]
+    for label, target, value in rows:
+        print(f"{label:40s}{target:>12s}{value:>24s}")
+
+
 def main(argv=None) -> int:
     import argparse
 
@@ -222,8 +503,10 @@ def main(argv=None) -> int:
         print(f"outputs_bench: {why}", file=sys.stderr)
         return 1
     with tempfile.TemporaryDirectory() as d:
-        res = {"spacenav": spacenav_turns(Path(d))}
+        res = {"spacenav": spacenav_turns(Path(d)), "dsu": dsu_figures(run_dsu_turn(Path(d))),
+               "dsu_hostile": run_dsu_hostile(Path(d))}
     _print_spacenav(res["spacenav"])
+    _print_dsu(res["dsu"], res["dsu_hostile"])
     if args.json:
         Path(args.json).write_text(json.dumps(res, indent=2))
     return 0

@@ -17,6 +17,9 @@
 3. **Work per frame**, in process: decoding and ``SphereMouse.handle`` over 12,000 frames with no pty, CPU µs
    per frame (best of 3): what the daemon computes, without the wake-ups that dominate the CPU share.
 
+``--against default`` runs this tree with the ``--set`` settings beside the same tree without them (what a
+setting costs, say ``--set outputs.dsu.enabled=true``), the same way.
+
 ``--against REV`` runs the daemon of another revision of this repository (say the one an issue was filed
 at) side by side with this one: ``git archive REV host`` into a temporary folder, then ``--pairs`` runs of
 each, interleaved and in alternating order, every run a fresh process executing *this* file's
@@ -352,16 +355,19 @@ def tree_of(rev: str, into: str) -> str:
     return os.path.join(into, "host")
 
 
-def run_side(host_dir: str, args) -> dict:
+def run_side(host_dir: str, args, set_items=None) -> dict:
     """One measurement in a fresh process: this file, with ``host_dir``'s ``sphere`` package imported."""
     env = dict(os.environ, PYTHONPATH=host_dir)
     cmd = [sys.executable, "-P", os.path.abspath(__file__), "--json", "--seconds", str(args.seconds),
            "--rate", str(args.rate)] + (["--orientation"] if args.orientation else [])
-    cmd += [a for item in args.set for a in ("--set", item)]
+    cmd += [a for item in (args.set if set_items is None else set_items) for a in ("--set", item)]
     out = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=args.seconds * 4 + 120)
     if out.returncode != 0:
         raise RuntimeError(f"the run with {host_dir} failed: {out.stderr.strip()[-2000:]}")
     return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+DEFAULT_SIDE = "default"
 
 
 def against(args) -> int:
@@ -369,13 +375,14 @@ def against(args) -> int:
 
     here = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))  # .../host
     with tempfile.TemporaryDirectory(prefix="sphere-bench-") as tmp:
-        other = tree_of(args.against, tmp)
+        # "default": this tree without the --set settings (what a setting, say an output switched on, costs)
+        other = here if args.against == DEFAULT_SIDE else tree_of(args.against, tmp)
         sides = {"this": here, args.against: other}
         runs: dict[str, list[dict]] = {k: [] for k in sides}
         for i in range(args.pairs):
             order = list(sides) if i % 2 == 0 else list(reversed(sides))  # alternate who goes first
             for name in order:
-                r = run_side(sides[name], args)
+                r = run_side(sides[name], args, [] if name == DEFAULT_SIDE else None)
                 runs[name].append(r)
                 print(f"  pair {i + 1}/{args.pairs} {name:>12}: p50 {r['p50_us']:.0f} µs, p99 {r['p99_us']:.0f} µs, "
                       f"after read p50 {r['after_read_p50_us']:.0f} / p99 {r['after_read_p99_us']:.0f} µs, "
@@ -398,7 +405,8 @@ def add_arguments(ap) -> None:
     ap.add_argument("--rate", type=float, default=200.0, help="RAW_SAMPLE frames per second (default 200)")
     ap.add_argument("--orientation", action="store_true", help="also send ORIENTATION at half the rate")
     ap.add_argument("--json", action="store_true", help="print the figures as one JSON object")
-    ap.add_argument("--against", metavar="REV", help="side by side with the daemon of this git revision")
+    ap.add_argument("--against", metavar="REV", help="side by side with the daemon of this git revision, or "
+                    "'default': this tree without the --set settings")
     ap.add_argument("--pairs", type=int, default=8, help="with --against: runs of each side (default 8)")
     ap.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
                     help="a daemon setting other than its default, as sphere-mouse's --set (repeatable), e.g. "

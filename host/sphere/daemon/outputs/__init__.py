@@ -4,7 +4,8 @@ them beside the pointer and the 3-D page. Each is optional and off by default (i
 - :mod:`.opentrack` — OpenTrack's "UDP over network" input: six little-endian doubles per datagram;
 - :mod:`.osc` — Open Sound Control over UDP (python-osc), for creative tools;
 - :mod:`.gamepad` — a virtual gamepad through uinput (python-evdev): tilt → sticks, taps → buttons;
-- :mod:`.spacenav` — a 3-D mouse for libspnav programs (Blender, FreeCAD): spacenavd's protocol on a socket.
+- :mod:`.spacenav` — a 3-D mouse for libspnav programs (Blender, FreeCAD): spacenavd's protocol on a socket;
+- :mod:`.dsu` — a DSU ("cemuhook") motion server for emulators (Dolphin, Cemu, Citra/yuzu): gyro and taps.
 
 A new output is one module (an :class:`~sphere.daemon.outputs.base.Output` subclass with ``NAME``,
 ``from_config(cfg, log)`` and its config section ``[outputs.NAME]``) and one line in :data:`REGISTRY`.
@@ -25,6 +26,7 @@ REGISTRY = {
     "osc": "sphere.daemon.outputs.osc:OscOutput",
     "gamepad": "sphere.daemon.outputs.gamepad:GamepadOutput",
     "spacenav": "sphere.daemon.outputs.spacenav:SpacenavOutput",
+    "dsu": "sphere.daemon.outputs.dsu:DsuOutput",
 }
 
 
