@@ -15,17 +15,16 @@ from sphere.daemon import config  # noqa: E402
 
 @pytest.fixture
 def daemon_source():
-    """[camera] is one of the daemon's sections (sphere.daemon.config.CONTRIBUTORS)."""
+    """[camera] is one of the daemon's sections (sphere.daemon.config.PARTS)."""
     import importlib
 
-    config.load_contributors()
-    assert "camera" in config.SECTIONS
+    assert "camera" in config.sections() and "camera" in config.PARTS
     return importlib.import_module("sphere.camera.daemon_source")
 
 
 def test_camera_section_defaults_to_no_camera(daemon_source):
     cfg = config.Config()
-    assert cfg["camera"].source == "" and daemon_source.CameraPosition.from_config(cfg) is None
+    assert cfg["camera"].source == "" and daemon_source.CameraPosition.from_settings(cfg["camera"]) is None
 
 
 def test_bad_camera_settings_are_one_clear_line(tmp_path, daemon_source):
@@ -34,8 +33,8 @@ def test_bad_camera_settings_are_one_clear_line(tmp_path, daemon_source):
     with pytest.raises(config.ConfigError, match=r"hue_deg.*\[0, 360\)"):
         config.load(p)
     cfg = config.Config({"camera": {"source": str(tmp_path / "missing.avi")}})
-    with pytest.raises(config.ConfigError, match=r"\[camera\] cannot open video file"):
-        daemon_source.CameraPosition.from_config(cfg)
+    with pytest.raises(daemon_source.CameraUnavailable, match=r"\[camera\] cannot open video file"):
+        daemon_source.CameraPosition.from_settings(cfg["camera"])
 
 
 def test_a_video_source_gives_positions(tmp_path, daemon_source):
@@ -50,7 +49,7 @@ def test_a_video_source_gives_positions(tmp_path, daemon_source):
         out.write(sc.render(k / 30, 0.008, lambda t: np.array([0.9, 0.05, 0.0]), k))
     out.release()
     cfg = config.Config({"camera": {"source": path}})
-    pos = daemon_source.CameraPosition.from_config(cfg)
+    pos = daemon_source.CameraPosition.from_settings(cfg["camera"])
     got = None
     end = time.monotonic() + 20
     while pos.live.source.running and time.monotonic() < end:  # the file plays at 30 fps, as a webcam would

@@ -10,7 +10,8 @@ import pytest
 
 from outputs_bench import DsuClient, dsu_figures, free_udp_port, hostile_datagrams, run_dsu_hostile, run_dsu_turn
 from sphere.daemon.config import Config, ConfigError, parse_set
-from sphere.daemon.outputs import OutputUnavailable, attach
+from sphere.daemon.outputs.base import OutputUnavailable
+from sphere.daemon.outputs.fanout import attach
 from sphere.daemon.outputs import dsu
 
 

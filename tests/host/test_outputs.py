@@ -13,7 +13,7 @@ import pytest
 
 from sphere import quaternion as quat
 from sphere.daemon.config import Config, ConfigError, parse_set
-from sphere.daemon.outputs import Outputs, attach, open_outputs
+from sphere.daemon.outputs.fanout import Outputs, attach, open_outputs
 from sphere.daemon.outputs.base import relative_euler_deg
 from sphere.daemon.outputs.gamepad import STICK_MAX, stick_values
 

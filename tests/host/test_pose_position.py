@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from sphere.daemon import config
-from sphere.smoothing.pose import PoseFilter, pose_filter
+from sphere.daemon.app import pose_filter
+from sphere.smoothing.pose import PoseFilter
 
 Q = (1.0, 0.0, 0.0, 0.0)
 
@@ -22,7 +23,6 @@ def _ramp_lag_ms(f: PoseFilter, speed_m_s: float, dt: float = 0.0035) -> float:
 
 
 def test_the_daemon_default_smooths_position_in_metres_not_with_the_orientation_filter():
-    config.load_contributors()
     cfg = config.Config()
     f = pose_filter(cfg)
     assert cfg.stream.smoothing == "tremor" and cfg.stream.position_smoothing == "one-euro"

@@ -5,15 +5,14 @@ import math
 import numpy as np
 import pytest
 
-from sphere.smoothing import (
-    BilateralAngleFilter,
-    ConstantKalman,
-    CriticallyDampedSpring,
-    MotionStateFilter,
-    OneEuroFilter,
-    ParticleFilterAR2,
-    WindowedCurveSmoother,
-)
+from sphere.smoothing.bilateral import BilateralAngleFilter
+from sphere.smoothing.curve import WindowedCurveSmoother
+from sphere.smoothing.kalman_rest import ConstantKalman
+from sphere.smoothing.motion_state import MotionStateFilter
+from sphere.smoothing.one_euro import OneEuroFilter
+from sphere.smoothing.particle import ParticleFilterAR2
+from sphere.smoothing.spring import CriticallyDampedSpring
+from sphere.smoothing.tremor import TremorFilter
 from sphere.smoothing.registry import FILTERS, grid, make_filter
 
 DT = 0.005
@@ -182,8 +181,6 @@ def _tremor_and_ramp(seconds=6.0, tremor_deg=0.1, rate_dps=3.0):
 
 
 def test_tremor_filter_removes_10hz_tremor_and_keeps_slow_aiming():
-    from sphere.smoothing import TremorFilter
-
     t, ramp, x = _tremor_and_ramp()
     out = run(TremorFilter(), x)
     rest = (t > 1.0) & (t < 2.0)
@@ -197,8 +194,6 @@ def test_tremor_filter_removes_10hz_tremor_and_keeps_slow_aiming():
 
 
 def test_tremor_filter_passes_fast_moves_without_lag():
-    from sphere.smoothing import TremorFilter
-
     t = np.arange(400) * DT
     x = np.stack([np.where(t > 0.5, (t - 0.5) * 150.0, 0.0), np.zeros_like(t)], axis=1)
     out = run(TremorFilter(), x)

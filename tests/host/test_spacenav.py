@@ -18,7 +18,8 @@ import pytest
 from outputs_bench import HERE, figures, libspnav_missing, compile_simple, run_turn
 from sphere import quaternion as quat
 from sphere.daemon.config import Config, parse_set
-from sphere.daemon.outputs import OutputUnavailable, attach
+from sphere.daemon.outputs.base import OutputUnavailable
+from sphere.daemon.outputs.fanout import attach
 from sphere.daemon.outputs import spacenav as sn
 
 needs_libspnav = pytest.mark.skipif(libspnav_missing() is not None, reason=str(libspnav_missing()))

@@ -109,7 +109,7 @@ def run(args) -> int:
               file=sys.stderr)
         return 1
     from sphere import broad
-    from sphere.smoothing import position
+    from sphere.smoothing.registry import POSITION, POSITION_DEFAULT
 
     if args.seconds < 9.0:
         print("sphere bench position: --seconds must be at least 9 (the 1 s loss is at 7-8 s)", file=sys.stderr)
@@ -128,9 +128,9 @@ def run(args) -> int:
     print(head)
     doc = {"train": [n for n, _, _ in train], "test": [n for n, _, _ in test], "targets": TARGETS, "filters": {}}
     best = None
-    for name in position.FILTERS:
-        defaults = {k: p.default for k, p in position.params(name).items()}
-        settings = list(grid(position.filter_class(name).GRID)) or [{}]
+    for name in POSITION:
+        defaults = {k: p.default for k, p in POSITION.params(name).items()}
+        settings = POSITION.grid(name)
         tried = [(evaluate(train, name, s)[0], s) for s in settings]
         w, pick = min(tried, key=lambda x: x[0])
         rows = {}
@@ -145,20 +145,12 @@ def run(args) -> int:
     w, name, pick = best
     doc["choice"] = {"filter": name, "params": pick, "train_worst_ratio": w}
     print(f"\nchosen on the train stretches (least worst ratio {w:.2f}): {name} {_params(pick)}".rstrip()
-          + f"; the default is {position.DEFAULT}")
+          + f"; the default is {POSITION_DEFAULT}")
     if args.json:
         with open(args.json, "w") as f:
             json.dump(doc, f, indent=2)
         print(f"wrote {args.json}", file=sys.stderr)
     return 0
-
-
-def grid(space: dict):
-    import itertools
-
-    keys = list(space)
-    for values in itertools.product(*(space[k] for k in keys)):
-        yield dict(zip(keys, values))
 
 
 def _cell(v, k):

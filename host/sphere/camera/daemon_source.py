@@ -1,8 +1,9 @@
 """The camera as sphere-mouse's second source: its ``[camera]`` settings and the object the daemon keeps.
 
-Wiring (for the daemon; one line in ``sphere.daemon.config.CONTRIBUTORS`` declares the section):
+Wiring (for the daemon; its ``PARAMS`` are the ``[camera]`` section, by one line in the daemon config's
+``PARTS``):
 
-    cam = CameraPosition.from_config(cfg, log)          # None when [camera] source is empty
+    cam = CameraPosition.from_settings(cfg["camera"], log)   # None when [camera] source is empty
     ... on every RAW_SAMPLE, after the orientation filter:
     stream.position = cam.update(quat_sensor_to_earth, acc_m_s2) if cam else None
     ... at exit: cam.close()
@@ -15,42 +16,41 @@ from __future__ import annotations
 
 import time
 
-from sphere.daemon.config import ConfigError, option, register_section
+from sphere.settings import Param
+
+
+class CameraUnavailable(Exception):
+    """The camera named in [camera] cannot be used; the message says why and what to do."""
 
 
 def _hue(v):
     return None if 0.0 <= v < 360.0 else "must be an angle in [0, 360) degrees (green 120, orange 25, blue 220)"
 
 
-def _latency(v):
-    return None if 0.0 <= v <= 500.0 else "must be between 0 and 500 ms"
-
-
-class CameraSettings:
-    source: str = option("", "webcam index (0, 1 ...) or a video file; empty: no camera (position stays null)")
-    camera_file: str = option("", "intrinsics from `sphere camera calibrate`; empty: a typical 60° webcam")
-    hue_deg: float = option(120.0, "the ball's colour (hue, degrees)", _hue)
-    latency_ms: float = option(40.0, "from the middle of a frame's exposure to its arrival", _latency)
-
-
-CameraSettings = register_section("camera", CameraSettings)
-
-
 class CameraPosition:
+    NAME = "camera"
+    PARAMS = {
+        "source": Param("", doc="webcam index (0, 1 ...) or a video file; empty: no camera (position stays null)"),
+        "camera_file": Param("", doc="intrinsics from `sphere camera calibrate`; empty: a typical 60° webcam"),
+        "hue_deg": Param(120.0, doc="the ball's colour (hue, degrees)", check=_hue),
+        "latency_ms": Param(40.0, doc="from the middle of a frame's exposure to its arrival", lo=0.0, hi=500.0,
+                            unit="ms"),
+    }
+
     def __init__(self, live, clock=time.monotonic):
         self.live = live
         self.clock = clock
 
     @classmethod
-    def from_config(cls, cfg, log=None) -> "CameraPosition | None":
-        s = cfg["camera"]
+    def from_settings(cls, s, log=None) -> "CameraPosition | None":
+        """From the [camera] settings; None when no camera is named."""
         if not s.source:
             return None
         try:
             from sphere.camera.live import CameraError, CameraSource, LiveTracker
             from sphere.camera.model import Camera, CameraFileError
         except ImportError as e:  # OpenCV missing
-            raise ConfigError(f"[camera] source = {s.source!r} needs OpenCV ({e}); install the camera extra: "
+            raise CameraUnavailable(f"[camera] source = {s.source!r} needs OpenCV ({e}); install the camera extra: "
                               f"pip install -e '.[camera]'") from None
         try:
             cam = Camera.load(s.camera_file) if s.camera_file else None
@@ -58,7 +58,7 @@ class CameraPosition:
             src = CameraSource(s.source, cam, hue_deg=s.hue_deg, latency_s=s.latency_ms / 1000.0,
                                realtime=True).start()
         except (CameraError, CameraFileError) as e:
-            raise ConfigError(f"[camera] {e}") from None
+            raise CameraUnavailable(f"[camera] {e}") from None
         if log:
             log(f"camera: {s.source} ({'calibrated: ' + s.camera_file if s.camera_file else 'uncalibrated'}), "
                 f"ball hue {s.hue_deg:g}°")

@@ -15,7 +15,3 @@ discovery, HID, capture replay, the virtual board, the scripted sphere, and a re
 :mod:`~sphere.daemon.stream3d` (WebSocket + the 3-D page), :mod:`~sphere.daemon.status`,
 :mod:`~sphere.daemon.app` (the loop) and :mod:`~sphere.daemon.cli` (flags).
 """
-
-from sphere.daemon.pointer import PointerMapper, PointerSettings, TiltMapper, TiltSettings
-
-__all__ = ["PointerMapper", "PointerSettings", "TiltMapper", "TiltSettings"]

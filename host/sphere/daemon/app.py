@@ -5,12 +5,21 @@ from __future__ import annotations
 import logging
 
 from sphere.daemon.actions import Action, EventActions
+from sphere.daemon.config import smoothing_params
 from sphere.daemon.motion import G_M_S2, GyroBias, MotionTracker
 from sphere.daemon.pointer import PointerMapper, PointerSettings, TiltMapper, TiltSettings
-from sphere.smoothing.pose import pose_filter
 from sphere.protocol import Event, Hello, Orientation, RawSample, Status
+from sphere.smoothing.pose import PoseFilter
+from sphere.smoothing.registry import POSITION
 
 DEFAULT_SCREEN_WIDTH_PX = 1920
+
+
+def pose_filter(cfg) -> PoseFilter:
+    """The daemon's pose filter from its config: ``stream.smoothing`` and its ``[smoothing.NAME]`` for the
+    orientation, ``stream.position_smoothing`` and its ``[position_smoothing.NAME]`` for the position."""
+    name, pname = cfg.stream.smoothing, cfg.stream.position_smoothing
+    return PoseFilter(name, (pname, smoothing_params(cfg, pname, POSITION)), **smoothing_params(cfg, name))
 BUTTONS = {"left_click": "left", "right_click": "right", "middle_click": "middle"}
 logger = logging.getLogger("sphere.daemon")
 

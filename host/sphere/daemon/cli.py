@@ -223,11 +223,11 @@ def _main(argv=None) -> int:
     except (SourceError, ConfigError) as e:
         logger.error(str(e))
         return 2
-    from sphere.camera.daemon_source import CameraPosition
+    from sphere.camera.daemon_source import CameraPosition, CameraUnavailable
 
     try:
-        camera = CameraPosition.from_config(cfg, log)  # None without [camera] source
-    except ConfigError as e:
+        camera = CameraPosition.from_settings(cfg["camera"], log)  # None without [camera] source
+    except CameraUnavailable as e:
         logger.error(str(e))
         source.close()
         return 2
@@ -251,7 +251,7 @@ def _main(argv=None) -> int:
         except Exception as e:  # a taken port must not stop the pointer
             logger.warning(f"no 3-D stream: {e}")
             stream = None
-    from sphere.daemon.outputs import attach
+    from sphere.daemon.outputs.fanout import attach
 
     stream = attach(stream, cfg, log)  # OpenTrack, OSC, gamepad: those enabled get what the stream gets
     status = None

@@ -1,44 +1,32 @@
-"""sphere-mouse settings: each section a typed dataclass, declared once with its defaults, units and checks.
+"""sphere-mouse settings: the sections of ``~/.config/sphere-mouse/config.toml``, composed from the parameters
+(:class:`sphere.settings.Param`) the parts of the daemon declare.
 
-The same declarations validate ``~/.config/sphere-mouse/config.toml``, the ``--set SECTION.KEY=VALUE``
-overrides and the command-line flags, and write the key reference in host/docs/sphere-mouse.md
-(``python -m sphere.daemon.config --markdown``). A bad key or value stops the daemon at start with a
-message that names the file, the key, what was given and what is allowed.
+Each section is a dict of ``Param`` (default, unit, range or choices, meaning), written once where it is
+used: the daemon's own sections in :data:`CORE` here, and one section per registered component, composed
+from the registries in :data:`REGISTRIES` (``[smoothing.tremor]`` from the smoothing filter ``tremor``'s
+``PARAMS``, ``[outputs.osc]`` from the OSC output's, ``[camera]`` from the camera's ...). The same
+declarations validate the file, the ``--set SECTION.KEY=VALUE`` overrides and the command-line flags, and
+write ``--print-config`` and the key reference in host/docs/sphere-mouse.md (``python -m
+sphere.daemon.config --markdown``). A bad key or value stops the daemon at start with a message that names
+the file, the key, what was given and what is allowed.
 
-A module that needs settings of its own declares its section where it is used, and is listed once in
-:data:`CONTRIBUTORS`::
-
-    from sphere.daemon.config import option, section
-
-    @section("pointer.smoothing")                # TOML [pointer.smoothing] (dotted = nested table)
-    class PointerSmoothing:
-        filter: str = option("none", "smoothing filter", choices=lambda: ("none", *REGISTRY))
-        min_cutoff_hz: float = option(1.0, "…", check=positive)
-
-        def check(self):                         # optional: keys that must agree; an error text or None
-            return None
-
-Types come from the annotations: ``float`` (a finite number; integers accepted), ``int``, ``bool``,
-``str``, ``list`` (of strings unless a check says otherwise). ``choices`` is a tuple or a callable
-returning one (a registry's names). ``register_section(name, cls)`` does the same without the decorator.
-Values: ``cfg.pointer.slow_deg_per_width`` for undotted sections, ``cfg["pointer.smoothing"]`` for any.
+Values: ``cfg.pointer.slow_deg_per_width`` for undotted sections, ``cfg["smoothing.tremor"]`` for any (a
+:class:`sphere.settings.Settings`). Importing this module imports no component: the registries are read
+when a :class:`Config` is first made.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import difflib
-import importlib
-import math
 import os
 import sys
-import typing
-from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable
 
-from sphere.smoothing.position import DEFAULT as _POSITION_SMOOTHING
-from sphere.smoothing.registry import DEFAULT as _SMOOTHING  # the registry imports nothing of the daemon
+from sphere.settings import Param, ParamError, Registry, Settings, load as load_object
+from sphere.smoothing.registry import DEFAULT as _SMOOTHING
+from sphere.smoothing.registry import POSITION as _POSITION_FILTERS
+from sphere.smoothing.registry import POSITION_DEFAULT as _POSITION_SMOOTHING
+from sphere.smoothing.registry import REGISTRY as _SMOOTHING_FILTERS
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -57,18 +45,24 @@ ACTIONS = (
 )
 MODES = ("pointer", "tilt", "3d")
 
-#: Modules that declare config sections of their own (imported before the settings are read). One line
-#: per contributing module; a module that is not installed is skipped.
-CONTRIBUTORS: tuple[str, ...] = (
-    "sphere.daemon.outputs",
-    "sphere.daemon.paths_config",  # [paths] (read by sphere.paths)  # [outputs.opentrack], [outputs.osc], [outputs.gamepad]
-    "sphere.smoothing.config",  # [smoothing.NAME] for every filter of the smoothing registry
-    "sphere.camera.daemon_source",  # [camera]: a webcam or video file giving the ball's position
+#: Parts configured by one section each, ``[NAME]``: NAME → "module:Class" (a class with ``PARAMS``).
+PARTS = Registry("part", {
+    "camera": "sphere.camera.daemon_source:CameraPosition",  # a webcam or video file giving the ball's position
+    "paths": "sphere.daemon.paths_config:PathsSettings",  # [paths] (read by sphere.paths)
+}, section="{name}")
+
+#: Every registry whose components have a section of their own: "module:attribute" of a
+#: :class:`sphere.settings.Registry`, imported when the sections are first composed.
+REGISTRIES: tuple[str, ...] = (
+    "sphere.daemon.outputs:REGISTRY",  # [outputs.NAME]
+    "sphere.smoothing.registry:REGISTRY",  # [smoothing.NAME]
+    "sphere.smoothing.registry:POSITION",  # [position_smoothing.NAME]
+    "sphere.daemon.config:PARTS",  # [camera], [paths]
 )
 
-#: The daemon's own sections, in the order the reference lists them (contributed ones follow).
-CORE_ORDER = ("source", "output", "mode", "pointer", "tilt", "events", "freeze", "gyro", "orientation", "stream",
-              "device", "status")
+#: The sections in the order the reference lists them (by their first part; others follow).
+ORDER = ("source", "output", "mode", "pointer", "tilt", "events", "freeze", "gyro", "orientation", "stream",
+         "device", "status", "outputs", "smoothing", "position_smoothing", "paths", "camera")
 
 #: Keys of earlier releases that live elsewhere now: (section, key) -> what to write instead.
 MOVED_KEYS = {
@@ -78,120 +72,16 @@ MOVED_KEYS = {
                                      "filter `tiered`: [pointer] smoothing = \"tiered\"; the default is now `tremor`)",
 }
 
-#: Largest integer a setting may hold (screen sizes, ports, IDs are far below; 2**70 is a typo).
-MAX_INT = 1 << 31
-
 
 class ConfigError(Exception):
     """A config file, override or flag that cannot be used; the message says which and why."""
 
 
-# ---- declaring sections ----------------------------------------------------------------------------
+# ---- checks a range cannot say -------------------------------------------------------------------
 
 
-def option(default, doc: str, check: Callable[[Any], str | None] | None = None, choices=None):
-    """A key of a section: its default, what it means (for the reference), a check returning the reason a
-    value is bad (or None), and the allowed values (a tuple, or a callable returning one)."""
-    meta = {"doc": doc, "check": check, "choices": choices}
-    if isinstance(default, list):
-        frozen = list(default)
-        return field(default_factory=lambda: list(frozen), metadata=meta)
-    return field(default=default, metadata=meta)
-
-
-SECTIONS: dict[str, type] = {}
-
-
-def _as_dict(self) -> dict:
-    return {f.name: _copy(getattr(self, f.name)) for f in dataclasses.fields(self)}
-
-
-def register_section(name: str, cls: type) -> type:
-    """Make ``cls`` (a class with :func:`option` fields) the section ``[name]``; returns the dataclass."""
-    if not dataclasses.is_dataclass(cls):
-        cls = dataclass(frozen=True)(cls)
-    if not hasattr(cls, "as_dict"):
-        cls.as_dict = _as_dict
-    cls.SECTION = name
-    SECTIONS[name] = cls
-    _KINDS.pop(name, None)
-    return cls
-
-
-def section(name: str):
-    """Class decorator: ``@section("stream")``; see :func:`register_section`."""
-    return lambda cls: register_section(name, cls)
-
-
-_contributors_loaded = False
-
-
-def load_contributors() -> None:
-    """Import the modules of :data:`CONTRIBUTORS` once, so that their sections are declared."""
-    global _contributors_loaded
-    if _contributors_loaded:
-        return
-    _contributors_loaded = True
-    for module in CONTRIBUTORS:
-        try:
-            importlib.import_module(module)
-        except ModuleNotFoundError as e:
-            if e.name is None or not module.startswith(e.name):
-                raise
-
-
-def sections() -> dict[str, type]:
-    """Every declared section, core ones first in :data:`CORE_ORDER`, each followed by its dotted children."""
-    load_contributors()
-
-    def key(name):
-        top = name.split(".", 1)[0]
-        return (CORE_ORDER.index(top) if top in CORE_ORDER else len(CORE_ORDER), top, name)
-
-    return {n: SECTIONS[n] for n in sorted(SECTIONS, key=key)}
-
-
-_KINDS: dict[str, dict[str, type]] = {}
-
-
-def _kinds(name: str) -> dict[str, type]:
-    """key → the annotated type (float, int, bool, str, list) of section ``name``."""
-    got = _KINDS.get(name)
-    if got is None:
-        cls = SECTIONS[name]
-        hints = typing.get_type_hints(cls)
-        got = {}
-        for f in dataclasses.fields(cls):
-            t = hints[f.name]
-            got[f.name] = typing.get_origin(t) or t
-        _KINDS[name] = got
-    return got
-
-
-def _choices(f) -> tuple | None:
-    c = f.metadata.get("choices")
-    return tuple(c()) if callable(c) else c
-
-
-# ---- checks -------------------------------------------------------------------------------------
-
-
-def _positive(v):
+def positive(v):
     return None if v > 0 else "must be greater than 0"
-
-
-def _non_negative(v):
-    return None if v >= 0 else "must be 0 or more"
-
-
-def _range(lo, hi):
-    def check(v):
-        return None if lo <= v <= hi else f"must be between {lo} and {hi}"
-
-    return check
-
-
-positive, non_negative, in_range = _positive, _non_negative, _range
 
 
 def _port(v):
@@ -211,29 +101,26 @@ def _str_list(v):
     return None if all(isinstance(s, str) for s in v) else "must be a list of strings"
 
 
-def _usb_ids(v):
-    import re
+_HEX = frozenset("0123456789abcdefABCDEF")
 
-    bad = [s for s in v if not isinstance(s, str) or not re.fullmatch(r"[0-9a-fA-F]{4}:[0-9a-fA-F]{4}", s)]
+
+def _usb_id(s) -> bool:
+    return isinstance(s, str) and len(s) == 9 and s[4] == ":" and _HEX.issuperset(s[:4] + s[5:])
+
+
+def _usb_ids(v):
+    bad = [s for s in v if not _usb_id(s)]
     return f"has {bad!r}: each entry is a USB VID:PID in hex, e.g. \"1a86:7523\"" if bad else None
 
 
 def _baud(v):
-    from sphere.link.port import check_baud
+    from sphere.link.port import check_baud  # TODO(step 2): the serial source's own PARAMS
 
     return check_baud(v)
 
 
-def _position_smoothing_names():
-    from sphere.smoothing.position import FILTERS
-
-    return tuple(FILTERS)
-
-
 def _smoothing_names():
-    from sphere.smoothing.registry import FILTERS
-
-    return tuple(FILTERS)
+    return tuple(_SMOOTHING_FILTERS)
 
 
 def _source_kinds():
@@ -251,167 +138,6 @@ def _host_filters():
     return ("auto", *LIVE)
 
 
-# ---- the daemon's sections -----------------------------------------------------------------------
-
-
-@section("source")
-class SourceSettings:
-    kind: str = option("auto", "where frames come from: `serial`, `hid`, `replay`, `simulate`, `scripted`; `auto` = "
-                       "serial (with discovery), or `replay`/`simulate` when those flags are given",
-                       choices=_source_kinds)
-    port: str = option("auto", "serial port (`/dev/ttyUSB0`, `/dev/rfcomm0`, `/dev/sphere`); `auto` = discovery: the "
-                       "ports in `candidates` and those whose USB IDs are in `usb_ids`, not held by another program, "
-                       "listened to until one identifies itself as a sphere")
-    candidates: list = option(["/dev/sphere"], "ports `port = \"auto\"` tries first: a literal path (the udev symlink) is "
-                              "asked with GET_HELLO, a glob match is only listened to", _str_list)
-    usb_ids: list = option(["1a86:7523", "0403:6001", "10c4:ea60"], "USB VID:PID of the sphere's USB-serial chip "
-                           "(the Nano's CH340, FT232R, CP2102): such ports are listened to (never written to) until "
-                           "they identify themselves; [] = only `candidates`", _usb_ids)
-    baud: int = option(115200, "baud rate (the Nano's default; an HC-05/HC-06 must be set to the same)", _baud)
-    reset_on_open: bool = option(False, "let opening the port reset a USB Nano through DTR; false holds DTR low "
-                                 "(Linux still raises it for a moment on open, so a Nano with its auto-reset "
-                                 "capacitor may reset anyway)")
-    low_latency: bool = option(True, "ask the serial driver to pass bytes on at once (ASYNC_LOW_LATENCY: an FTDI "
-                               "adapter's latency timer goes from 16 ms to 1 ms); false leaves the driver's default")
-    hello_timeout_s: float = option(0.5, "send GET_HELLO to a named port if no HELLO came within this time (Bluetooth "
-                                    "links do not reset the board)", _range(0.01, 60.0))
-    discovery_timeout_s: float = option(3.0, "give up on a candidate port that did not identify itself within this "
-                                        "time", _range(0.05, 600.0))
-    link_timeout_s: float = option(2.0, "a connected port that delivers no byte for this long is taken as lost (a "
-                                   "Bluetooth link that dropped) and reopened", _range(0.05, 3600.0))
-    reconnect_interval_s: float = option(1.0, "pause between attempts to find the sphere again", _range(0.01, 3600.0))
-    replay: str = option("", "capture file to replay (same as `--replay`)")
-    speed: float = option(1.0, "replay speed: 1 = as recorded, 4 = four times faster, 0 = as fast as possible",
-                          _range(0.0, 1e6))
-    hid_vendor_id: int = option(0, "USB vendor ID of a HID receiver (0 = any device whose product string contains "
-                                "`hid_product`)", _range(0, 0xFFFF))
-    hid_product_id: int = option(0, "USB product ID of a HID receiver (0 = any)", _range(0, 0xFFFF))
-    hid_product: str = option("sphere", "substring of the HID product string looked for when no IDs are set")
-    sim_seconds: float = option(600.0, "how long the virtual board runs with `--simulate` (the daemon ends with it)",
-                                _range(1.0, 86400.0))
-    sim_trace: str = option("", "motion the virtual board plays with `--simulate`: a BROAD trial (.mat, name or "
-                            "number) or `synthetic:NAME` (see `sphere sim --help`); empty = the tour, `synthetic:tour`")
-
-    def check(self):
-        if self.kind == "replay" and not self.replay:
-            return 'kind = "replay" needs a capture file: --replay FILE or [source] replay = "FILE"'
-        return None
-
-
-@section("output")
-class OutputSettings:
-    backend: str = option("auto", "`uinput` (Linux, X11 and Wayland), `x11` (XTest), `pynput` (macOS, Windows), "
-                          "`log` (print only); `auto` tries uinput, x11, pynput, then falls back to log and says why",
-                          choices=("auto", "uinput", "x11", "pynput", "log"))
-    display: str = option("", "X display for the x11 backend (empty = `$DISPLAY`)")
-    screen_width_px: int = option(0, "screen width used to turn degrees into pixels; 0 = ask the backend (x11, "
-                                  "pynput; uinput asks the X display if there is one), else 1920", _range(0, 100000))
-
-
-@section("mode")
-class ModeSettings:
-    start: str = option("pointer", "mode at start", choices=MODES)
-    cycle: list = option(["pointer", "tilt", "3d"], "modes that `next_mode` steps through, in order", _modes_list)
-
-
-@section("pointer")
-class PointerConfig:
-    slow_deg_per_width: float = option(40.0, "degrees of wrist rotation that move the pointer one screen width when "
-                                       "turning slowly (below `accel_low_dps`)", _range(0.5, 3600.0))
-    fast_deg_per_width: float = option(40.0, "the same when turning fast (above `accel_high_dps`); smaller than "
-                                       "`slow_deg_per_width` = acceleration; equal = none", _range(0.5, 3600.0))
-    accel_low_dps: float = option(20.0, "rotation speed (°/s) up to which the slow sensitivity applies",
-                                  _range(0.0, 2000.0))
-    accel_high_dps: float = option(120.0, "rotation speed (°/s) from which the fast sensitivity applies; between the "
-                                   "two it is blended linearly", _range(0.001, 5000.0))
-    tightening_dps: float = option(1.0, "rotations slower than this are scaled down in proportion to their speed "
-                                   "(soft, instead of a dead zone that swallows them); 0 = off", _range(0.0, 100.0))
-    smoothing: str = option(_SMOOTHING, "smoothing filter of the pointer, from the smoothing registry (its parameters "
-                            "in [smoothing.NAME]); `tremor` takes out the hand's 8–12 Hz tremor, `none` = off",
-                            choices=_smoothing_names)
-    axes: str = option("world", "`world`: turning about the vertical moves the pointer sideways however the sphere is "
-                       "rolled (uses gravity); `local`: the sensor's own z (yaw) and y (pitch) axes",
-                       choices=("world", "local"))
-    invert_x: bool = option(False, "swap left and right")
-    invert_y: bool = option(False, "swap up and down")
-
-    def check(self):
-        if self.accel_high_dps <= self.accel_low_dps:
-            return (f"accel_high_dps = {self.accel_high_dps} must be greater than accel_low_dps = "
-                    f"{self.accel_low_dps}")
-        return None
-
-
-@section("tilt")
-class TiltConfig:
-    dead_zone_deg: float = option(3.0, "tilt from the recentred pose that does not move the pointer", _range(0.0, 45.0))
-    full_speed_deg: float = option(25.0, "tilt at which the pointer reaches `max_speed_px_s`", _range(1.0, 90.0))
-    max_speed_px_s: float = option(1200.0, "pointer speed at full tilt", _range(1.0, 100000.0))
-    exponent: float = option(1.5, "response curve between dead zone and full tilt (1 = linear)", _range(0.5, 4.0))
-
-    def check(self):
-        if self.full_speed_deg <= self.dead_zone_deg:
-            return f"full_speed_deg = {self.full_speed_deg} must be greater than dead_zone_deg = {self.dead_zone_deg}"
-        return None
-
-
-@section("events")
-class EventsConfig:
-    single_tap: str = option("left_click", "action of a single tap", choices=ACTIONS)
-    double_tap: str = option("double_click", "action of a double tap (`double_click` counts the single tap's click as "
-                             "the first one)", choices=ACTIONS)
-    free_fall: str = option("next_mode", "action of a free fall (toss and catch)", choices=ACTIONS)
-    single_tap_wait_ms: int = option(0, "hold a single tap's action this long and drop it if a double tap follows (use "
-                                     "with `double_tap = \"right_click\"`); 0 = act at once", _range(0, 1000))
-
-
-@section("freeze")
-class FreezeConfig:
-    tap_before_ms: int = option(80, "pointer motion in this time before a tap is undone, so the click lands where the "
-                                "pointer was aimed before the knock jolted it", _range(0, 1000))
-    tap_after_ms: int = option(150, "the pointer stays still this long after a tap", _range(0, 2000))
-    free_fall_before_ms: int = option(400, "motion undone before a free fall (the toss)", _range(0, 3000))
-    free_fall_after_ms: int = option(700, "the pointer stays still this long after a free fall (the catch)",
-                                     _range(0, 5000))
-
-
-@section("gyro")
-class GyroConfig:
-    auto_bias: bool = option(True, "re-estimate the gyroscope bias on the host whenever the sphere lies still")
-    still_dps: float = option(3.0, "the sphere counts as still while every gyro axis stays within this of its mean",
-                              _range(0.01, 100.0))
-    still_time_s: float = option(1.0, "how long it must be still for a bias update", _range(0.1, 30.0))
-
-
-@section("orientation")
-class OrientationConfig:
-    source: str = option("auto", "`host`: the host's fusion filter on RAW_SAMPLE; `device`: the firmware's ORIENTATION "
-                         "packets; `auto` = host when raw samples arrive and sphere.fusion is installed",
-                         choices=("auto", "host", "device"))
-    use_mag: bool = option(False, "let the host filter use the magnetometer (needs a calibrated one; without it yaw "
-                           "drifts slowly, which pointing does not mind)")
-    filter: str = option("auto", "host filter: `sphere` (sphere.fusion's SphereFilter: rejects taps, vibration and hand "
-                         "acceleration, learns the gyro bias at rest), `madgwick`; `auto` = the best installed",
-                         choices=_host_filters)
-    beta: float = option(0.1, "gain β (rad/s) of the host Madgwick filter", _range(0.0, 2.0))
-
-
-@section("stream")
-class StreamConfig:
-    enabled: bool = option(True, "serve orientation on a WebSocket and the 3-D page over HTTP")
-    host: str = option("127.0.0.1", "address to listen on (keep it local)")
-    port: int = option(8765, "TCP port of the WebSocket and the page (http://127.0.0.1:PORT/)", _port)
-    rate_hz: float = option(60.0, "orientation messages per second", _range(1.0, 200.0))
-    smoothing: str = option(_SMOOTHING, "smoothing filter of the streamed orientation, from the smoothing registry "
-                            "(its parameters in [smoothing.NAME], degrees); `none` = the orientation as measured",
-                            choices=_smoothing_names)
-    position_smoothing: str = option(_POSITION_SMOOTHING, "smoothing filter of the streamed position (with a camera), "
-                                     "its parameters in metres in [position_smoothing.NAME]; `none` = the hybrid "
-                                     "tracker's estimate as it is", choices=_position_smoothing_names)
-    max_clients: int = option(16, "most WebSocket and page connections at once; more are refused (503)",
-                              _range(1, 1000))
-
-
 def _device_settings(items) -> str | None:
     from sphere.link.device_settings import SettingError, parse_assignment  # the settings' own checks
 
@@ -427,17 +153,194 @@ def _device_settings(items) -> str | None:
     return None
 
 
-@section("device")
-class DeviceConfig:
-    settings: list = option([], "device settings sent to the sphere at every connect, as `sphere device set` takes "
-                            "them (`sphere device keys` lists them), e.g. [\"tap.threshold_g=2.5\", \"tap.axes=z\"]; "
-                            "they win over what the sphere saved (`sphere device save`), which it keeps for other "
-                            "programs; empty = the sphere's own", _device_settings)
+def _check_source(s):
+    if s.kind == "replay" and not s.replay:
+        return 'kind = "replay" needs a capture file: --replay FILE or [source] replay = "FILE"'
+    return None
 
 
-@section("status")
-class StatusConfig:
-    interval_s: float = option(1.0, "how often the status line is refreshed", _range(0.05, 3600.0))
+def _check_pointer(s):
+    if s.accel_high_dps <= s.accel_low_dps:
+        return f"accel_high_dps = {s.accel_high_dps} must be greater than accel_low_dps = {s.accel_low_dps}"
+    return None
+
+
+def _check_tilt(s):
+    if s.full_speed_deg <= s.dead_zone_deg:
+        return f"full_speed_deg = {s.full_speed_deg} must be greater than dead_zone_deg = {s.dead_zone_deg}"
+    return None
+
+
+# ---- the daemon's own sections ---------------------------------------------------------------------
+
+#: section → its parameters
+CORE: dict[str, dict[str, Param]] = {
+    "source": {
+        "kind": Param("auto", doc="where frames come from: `serial`, `hid`, `replay`, `simulate`, `scripted`; `auto` = "
+                           "serial (with discovery), or `replay`/`simulate` when those flags are given", choices=_source_kinds),
+        "port": Param("auto", doc="serial port (`/dev/ttyUSB0`, `/dev/rfcomm0`, `/dev/sphere`); `auto` = discovery: the "
+                           "ports in `candidates` and those whose USB IDs are in `usb_ids`, not held by another program, "
+                           "listened to until one identifies itself as a sphere"),
+        "candidates": Param(["/dev/sphere"], doc="ports `port = \"auto\"` tries first: a literal path (the udev symlink) is "
+                                  "asked with GET_HELLO, a glob match is only listened to", check=_str_list),
+        "usb_ids": Param(["1a86:7523", "0403:6001", "10c4:ea60"], doc="USB VID:PID of the sphere's USB-serial chip "
+                               "(the Nano's CH340, FT232R, CP2102): such ports are listened to (never written to) until "
+                               "they identify themselves; [] = only `candidates`", check=_usb_ids),
+        "baud": Param(115200, doc="baud rate (the Nano's default; an HC-05/HC-06 must be set to the same)", check=_baud),
+        "reset_on_open": Param(False, doc="let opening the port reset a USB Nano through DTR; false holds DTR low "
+                                     "(Linux still raises it for a moment on open, so a Nano with its auto-reset "
+                                     "capacitor may reset anyway)"),
+        "low_latency": Param(True, doc="ask the serial driver to pass bytes on at once (ASYNC_LOW_LATENCY: an FTDI "
+                             "adapter's latency timer goes from 16 ms to 1 ms); false leaves the driver's default"),
+        "hello_timeout_s": Param(0.5, doc="send GET_HELLO to a named port if no HELLO came within this time (Bluetooth "
+                                        "links do not reset the board)", lo=0.01, hi=60.0),
+        "discovery_timeout_s": Param(3.0, doc="give up on a candidate port that did not identify itself within this "
+                                            "time", lo=0.05, hi=600.0),
+        "link_timeout_s": Param(2.0, doc="a connected port that delivers no byte for this long is taken as lost (a "
+                                       "Bluetooth link that dropped) and reopened", lo=0.05, hi=3600.0),
+        "reconnect_interval_s": Param(1.0, doc="pause between attempts to find the sphere again", lo=0.01, hi=3600.0),
+        "replay": Param("", doc="capture file to replay (same as `--replay`)"),
+        "speed": Param(1.0, doc="replay speed: 1 = as recorded, 4 = four times faster, 0 = as fast as possible", lo=0.0, hi=1e6),
+        "hid_vendor_id": Param(0, doc="USB vendor ID of a HID receiver (0 = any device whose product string contains "
+                                    "`hid_product`)", lo=0, hi=0xFFFF),
+        "hid_product_id": Param(0, doc="USB product ID of a HID receiver (0 = any)", lo=0, hi=0xFFFF),
+        "hid_product": Param("sphere", doc="substring of the HID product string looked for when no IDs are set"),
+        "sim_seconds": Param(600.0, doc="how long the virtual board runs with `--simulate` (the daemon ends with it)", lo=1.0, hi=86400.0),
+        "sim_trace": Param("", doc="motion the virtual board plays with `--simulate`: a BROAD trial (.mat, name or "
+                                "number) or `synthetic:NAME` (see `sphere sim --help`); empty = the tour, `synthetic:tour`"),
+    },
+    "output": {
+        "backend": Param("auto", doc="`uinput` (Linux, X11 and Wayland), `x11` (XTest), `pynput` (macOS, Windows), "
+                              "`log` (print only); `auto` tries uinput, x11, pynput, then falls back to log and says why", choices=("auto", "uinput", "x11", "pynput", "log")),
+        "display": Param("", doc="X display for the x11 backend (empty = `$DISPLAY`)"),
+        "screen_width_px": Param(0, doc="screen width used to turn degrees into pixels; 0 = ask the backend (x11, "
+                                      "pynput; uinput asks the X display if there is one), else 1920", lo=0, hi=100000),
+    },
+    "mode": {
+        "start": Param("pointer", doc="mode at start", choices=MODES),
+        "cycle": Param(["pointer", "tilt", "3d"], doc="modes that `next_mode` steps through, in order", check=_modes_list),
+    },
+    "pointer": {
+        "slow_deg_per_width": Param(40.0, doc="degrees of wrist rotation that move the pointer one screen width when "
+                                           "turning slowly (below `accel_low_dps`)", lo=0.5, hi=3600.0),
+        "fast_deg_per_width": Param(40.0, doc="the same when turning fast (above `accel_high_dps`); smaller than "
+                                           "`slow_deg_per_width` = acceleration; equal = none", lo=0.5, hi=3600.0),
+        "accel_low_dps": Param(20.0, doc="rotation speed (°/s) up to which the slow sensitivity applies", lo=0.0, hi=2000.0),
+        "accel_high_dps": Param(120.0, doc="rotation speed (°/s) from which the fast sensitivity applies; between the "
+                                       "two it is blended linearly", lo=0.001, hi=5000.0),
+        "tightening_dps": Param(1.0, doc="rotations slower than this are scaled down in proportion to their speed "
+                                       "(soft, instead of a dead zone that swallows them); 0 = off", lo=0.0, hi=100.0),
+        "smoothing": Param(_SMOOTHING, doc="smoothing filter of the pointer, from the smoothing registry (its parameters "
+                                "in [smoothing.NAME]); `tremor` takes out the hand's 8–12 Hz tremor, `none` = off", choices=_smoothing_names),
+        "axes": Param("world", doc="`world`: turning about the vertical moves the pointer sideways however the sphere is "
+                           "rolled (uses gravity); `local`: the sensor's own z (yaw) and y (pitch) axes", choices=("world", "local")),
+        "invert_x": Param(False, doc="swap left and right"),
+        "invert_y": Param(False, doc="swap up and down"),
+    },
+    "tilt": {
+        "dead_zone_deg": Param(3.0, doc="tilt from the recentred pose that does not move the pointer", lo=0.0, hi=45.0),
+        "full_speed_deg": Param(25.0, doc="tilt at which the pointer reaches `max_speed_px_s`", lo=1.0, hi=90.0),
+        "max_speed_px_s": Param(1200.0, doc="pointer speed at full tilt", lo=1.0, hi=100000.0),
+        "exponent": Param(1.5, doc="response curve between dead zone and full tilt (1 = linear)", lo=0.5, hi=4.0),
+    },
+    "events": {
+        "single_tap": Param("left_click", doc="action of a single tap", choices=ACTIONS),
+        "double_tap": Param("double_click", doc="action of a double tap (`double_click` counts the single tap's click as "
+                                 "the first one)", choices=ACTIONS),
+        "free_fall": Param("next_mode", doc="action of a free fall (toss and catch)", choices=ACTIONS),
+        "single_tap_wait_ms": Param(0, doc="hold a single tap's action this long and drop it if a double tap follows (use "
+                                         "with `double_tap = \"right_click\"`); 0 = act at once", lo=0, hi=1000),
+    },
+    "freeze": {
+        "tap_before_ms": Param(80, doc="pointer motion in this time before a tap is undone, so the click lands where the "
+                                    "pointer was aimed before the knock jolted it", lo=0, hi=1000),
+        "tap_after_ms": Param(150, doc="the pointer stays still this long after a tap", lo=0, hi=2000),
+        "free_fall_before_ms": Param(400, doc="motion undone before a free fall (the toss)", lo=0, hi=3000),
+        "free_fall_after_ms": Param(700, doc="the pointer stays still this long after a free fall (the catch)", lo=0, hi=5000),
+    },
+    "gyro": {
+        "auto_bias": Param(True, doc="re-estimate the gyroscope bias on the host whenever the sphere lies still"),
+        "still_dps": Param(3.0, doc="the sphere counts as still while every gyro axis stays within this of its mean", lo=0.01, hi=100.0),
+        "still_time_s": Param(1.0, doc="how long it must be still for a bias update", lo=0.1, hi=30.0),
+    },
+    "orientation": {
+        "source": Param("auto", doc="`host`: the host's fusion filter on RAW_SAMPLE; `device`: the firmware's ORIENTATION "
+                             "packets; `auto` = host when raw samples arrive and sphere.fusion is installed", choices=("auto", "host", "device")),
+        "use_mag": Param(False, doc="let the host filter use the magnetometer (needs a calibrated one; without it yaw "
+                               "drifts slowly, which pointing does not mind)"),
+        "filter": Param("auto", doc="host filter: `sphere` (sphere.fusion's SphereFilter: rejects taps, vibration and hand "
+                             "acceleration, learns the gyro bias at rest), `madgwick`; `auto` = the best installed", choices=_host_filters),
+        "beta": Param(0.1, doc="gain β (rad/s) of the host Madgwick filter", lo=0.0, hi=2.0),
+    },
+    "stream": {
+        "enabled": Param(True, doc="serve orientation on a WebSocket and the 3-D page over HTTP"),
+        "host": Param("127.0.0.1", doc="address to listen on (keep it local)"),
+        "port": Param(8765, doc="TCP port of the WebSocket and the page (http://127.0.0.1:PORT/)", check=_port),
+        "rate_hz": Param(60.0, doc="orientation messages per second", lo=1.0, hi=200.0),
+        "smoothing": Param(_SMOOTHING, doc="smoothing filter of the streamed orientation, from the smoothing registry "
+                                           "(its parameters in [smoothing.NAME], degrees); `none` = the orientation as "
+                                           "measured", choices=_smoothing_names),
+        "position_smoothing": Param(_POSITION_SMOOTHING, doc="smoothing filter of the streamed position (with a "
+                                    "camera), its parameters in metres in [position_smoothing.NAME]; `none` = the "
+                                    "hybrid tracker's estimate as it is", choices=lambda: tuple(_POSITION_FILTERS)),
+        "max_clients": Param(16, doc="most WebSocket and page connections at once; more are refused (503)", lo=1, hi=1000),
+    },
+    "device": {
+        "settings": Param([], doc="device settings sent to the sphere at every connect, as `sphere device set` takes "
+                                  "them (`sphere device keys` lists them), e.g. [\"tap.threshold_g=2.5\", "
+                                  "\"tap.axes=z\"]; they win over what the sphere saved (`sphere device save`), "
+                                  "which it keeps for other programs; empty = the sphere's own", check=_device_settings),
+    },
+    "status": {
+        "interval_s": Param(1.0, doc="how often the status line is refreshed", lo=0.05, hi=3600.0),
+    },}
+
+#: section → the check of keys that must agree (returns the reason, or None)
+CORE_CHECKS = {"source": _check_source, "pointer": _check_pointer, "tilt": _check_tilt}
+
+
+# ---- composing the sections ------------------------------------------------------------------------
+
+
+class Section:
+    """One section: its name, parameters, the check of keys that must agree, and the component it configures
+    (None for the daemon's own)."""
+
+    __slots__ = ("name", "params", "check", "component")
+
+    def __init__(self, name: str, params: dict, check=None, component=None):
+        self.name, self.params, self.check, self.component = name, params, check, component
+
+    def defaults(self) -> Settings:
+        return Settings(self.params, checked=True)
+
+
+def registries() -> list[Registry]:
+    """The registries of :data:`REGISTRIES`, imported."""
+    return [load_object(spec) for spec in REGISTRIES]
+
+
+def sections() -> dict[str, Section]:
+    """Every section: the daemon's own and one per component that has parameters, in :data:`ORDER`."""
+    found = {name: Section(name, params, CORE_CHECKS.get(name)) for name, params in CORE.items()}
+    for registry in registries():
+        for name in registry:
+            try:
+                cls = registry.load(name)
+            except ModuleNotFoundError as e:  # a component whose optional library is missing: no section
+                if e.name is None or e.name.startswith("sphere"):
+                    raise
+                continue
+            params = getattr(cls, "PARAMS", None)
+            if params:
+                found[registry.section(name)] = Section(registry.section(name), params,
+                                                        getattr(cls, "check_settings", None), cls)
+
+    def key(name):
+        top = name.split(".", 1)[0]
+        return (ORDER.index(top) if top in ORDER else len(ORDER), top, "." in name)
+
+    return {n: found[n] for n in sorted(found, key=key)}
 
 
 # ---- values ---------------------------------------------------------------------------------------
@@ -446,17 +349,18 @@ class StatusConfig:
 class Config:
     """All settings; ``Config()`` is the defaults. ``values`` are already validated (``{section: {key: value}}``)."""
 
-    def __init__(self, values: dict | None = None, origin: str = "defaults"):
+    def __init__(self, values: dict | None = None, origin: str = "defaults", _sections: dict | None = None):
         self.origin = origin
+        self._specs = _sections if _sections is not None else sections()
         self._sections = {}
         values = values or {}
-        for name, cls in sections().items():
-            obj = cls(**values.get(name, {}))
+        for name, spec in self._specs.items():
+            obj = Settings(spec.params, values.get(name, {}), checked=True)
             self._sections[name] = obj
             if "." not in name:
                 setattr(self, name, obj)
 
-    def __getitem__(self, name: str):
+    def __getitem__(self, name: str) -> Settings:
         return self._sections[name]
 
     def as_dict(self) -> dict:
@@ -464,15 +368,18 @@ class Config:
 
     def with_overrides(self, overrides: dict, origin: str) -> "Config":
         """A copy with ``{section: {key: value}}`` validated and applied."""
-        checked = validate(overrides, origin, together=False)
+        checked = validate(overrides, origin, together=False, known=self._specs)
         values = self.as_dict()
         for s, keys in checked.items():
             values[s].update(keys)
-        return Config(values, origin=self.origin)
+        return Config(values, origin=self.origin, _sections=self._specs)
 
 
-def _copy(v):
-    return list(v) if isinstance(v, list) else v
+def smoothing_params(cfg: Config, name: str, registry: Registry = _SMOOTHING_FILTERS) -> dict:
+    """The ``[smoothing.NAME]`` values of a loaded config (none for a filter without parameters);
+    ``registry=POSITION`` for ``[position_smoothing.NAME]``."""
+    section = registry.section(name)
+    return cfg[section].as_dict() if section in cfg._sections else {}
 
 
 def default_path() -> Path:
@@ -485,49 +392,22 @@ def _suggest(word: str, options) -> str:
     return f" (did you mean {close[0]!r}?)" if close else ""
 
 
-def _type_name(kind) -> str:
-    return {float: "a number", bool: "true or false", int: "an integer", str: "a string", list: "a list"}.get(
-        kind, str(kind))
-
-
-def check_value(section_name: str, key: str, value, where: str):
+def check_value(spec: Section, key: str, value, where: str):
     """The value converted to the key's type, or ConfigError saying what is wrong."""
-    cls = SECTIONS[section_name]
-    f = cls.__dataclass_fields__[key]
-    kind = _kinds(section_name)[key]
-    label = f"{where}: [{section_name}] {key} = {value!r}"
-    doc = f.metadata.get("doc", "")
-    if kind is float:
-        ok = isinstance(value, (int, float)) and not isinstance(value, bool)
-        if ok:
-            try:
-                value = float(value)
-            except OverflowError:
-                raise ConfigError(f"{label}: is too large") from None
-            if not math.isfinite(value):
-                raise ConfigError(f"{label}: must be a finite number")
-    elif kind is int:
-        ok = isinstance(value, int) and not isinstance(value, bool)
-        if ok and abs(value) > MAX_INT:
-            raise ConfigError(f"{label}: is too large")
-    else:
-        ok = isinstance(value, kind)
-    if not ok:
-        raise ConfigError(f"{label}: must be {_type_name(kind)}. {doc}")
-    choices = _choices(f)
-    if choices is not None and value not in choices:
-        raise ConfigError(f"{label}: must be one of {', '.join(map(repr, choices))}{_suggest(str(value), choices)}")
-    check = f.metadata.get("check")
-    if check is not None:
-        reason = check(value)
-        if reason:
-            raise ConfigError(f"{label}: {reason}")
-    return value
+    p = spec.params[key]
+    try:
+        return p.convert(value)
+    except ParamError as e:
+        hint = ""
+        choices = p.allowed()
+        if choices is not None and isinstance(value, str) and str(e).startswith("must be one of"):
+            hint = _suggest(value, choices)
+        raise ConfigError(f"{where}: [{spec.name}] {key} = {value!r}: {e}{hint}") from None
 
 
-def flatten(values: dict, where: str) -> dict:
-    """``{"pointer": {"smoothing": {...}}}`` (nested TOML tables) → ``{"pointer.smoothing": {...}}``."""
-    known = sections()
+def flatten(values: dict, where: str, known: dict | None = None) -> dict:
+    """``{"smoothing": {"tremor": {...}}}`` (nested TOML tables) → ``{"smoothing.tremor": {...}}``."""
+    known = known if known is not None else sections()
     prefixes = {n.rsplit(".", 1)[0] for n in known if "." in n}
     out: dict[str, dict] = {}
 
@@ -554,44 +434,34 @@ def flatten(values: dict, where: str) -> dict:
     return out
 
 
-def validate(values: dict, where: str, together: bool = True) -> dict:
+def validate(values: dict, where: str, together: bool = True, known: dict | None = None) -> dict:
     """Check a ``{section: {key: value}}`` mapping (nested or dotted section names); returns the converted
     values with dotted section names."""
+    known = known if known is not None else sections()
     out: dict[str, dict] = {}
-    for name, keys in flatten(values, where).items():
-        fields = SECTIONS[name].__dataclass_fields__
+    for name, keys in flatten(values, where, known).items():
+        spec = known[name]
         for key, value in keys.items():
-            if key not in fields and (name, key) in MOVED_KEYS:
+            if key not in spec.params and (name, key) in MOVED_KEYS:
                 raise ConfigError(f"{where}: [{name}] {key} {MOVED_KEYS[name, key]}")
-            if key not in fields:
-                raise ConfigError(f"{where}: unknown key [{name}] {key}{_suggest(key, fields)}; keys of [{name}] are "
-                                  f"{', '.join(fields)}")
-            out.setdefault(name, {})[key] = check_value(name, key, value, where)
+            if key not in spec.params:
+                raise ConfigError(f"{where}: unknown key [{name}] {key}{_suggest(key, spec.params)}; keys of "
+                                  f"[{name}] are {', '.join(spec.params)}")
+            out.setdefault(name, {})[key] = check_value(spec, key, value, where)
     if together:
-        _check_together(out, where)
+        for name, keys in out.items():
+            spec = known[name]
+            if spec.check is not None and keys:
+                reason = spec.check(Settings(spec.params, keys, checked=True))
+                if reason:
+                    raise ConfigError(f"{where}: [{name}] {reason}")
     return out
-
-
-def _check_together(values: dict, where: str) -> None:
-    """Keys that must agree, for the sections present in ``values`` (a dict, or a Config's as_dict())."""
-    for name, keys in values.items():
-        cls = SECTIONS.get(name)
-        if cls is None or not hasattr(cls, "check") or not keys:
-            continue
-        try:
-            obj = cls(**keys)
-        except TypeError:
-            continue
-        reason = obj.check()
-        if reason:
-            raise ConfigError(f"{where}: [{name}] {reason}")
 
 
 def check_config(cfg: Config, where: str) -> None:
     """The cross-key checks on a whole Config (a key from the file with another one's default)."""
-    for name, obj in cfg._sections.items():
-        check = getattr(obj, "check", None)
-        reason = check() if check else None
+    for name, spec in cfg._specs.items():
+        reason = spec.check(cfg[name]) if spec.check is not None else None
         if reason:
             raise ConfigError(f"{where}: [{name}] {reason}")
 
@@ -621,14 +491,15 @@ def load(path: Path | str | None = None, required: bool = False) -> Config:
         raise ConfigError(f"{path}: not a UTF-8 text file (byte {e.start}): save it as UTF-8") from None
     except OSError as e:
         raise ConfigError(f"{path}: cannot read: {e.strerror}") from None
-    checked = validate(data, str(path))
-    cfg = Config(checked, origin=str(path))
+    known = sections()
+    checked = validate(data, str(path), known=known)
+    cfg = Config(checked, origin=str(path), _sections=known)
     check_config(cfg, str(path))  # relations between keys: one key in the file, the other a default
     return cfg
 
 
 def parse_set(items: list[str]) -> dict:
-    """``["pointer.axes=local", "pointer.smoothing.filter=one_euro"]`` → ``{section: {key: value}}``, values
+    """``["pointer.axes=local", "smoothing.tremor.notch_hz=9"]`` → ``{section: {key: value}}``, values
     parsed as TOML values (a bare word is taken as a string)."""
     out: dict[str, dict] = {}
     for item in items:
@@ -644,34 +515,35 @@ def parse_set(items: list[str]) -> dict:
     return out
 
 
+def shown(value) -> str:
+    """A value as TOML writes it."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, str):
+        return f'"{value}"'
+    if isinstance(value, list):
+        return "[" + ", ".join(f'"{v}"' for v in value) + "]"
+    return repr(value)
+
+
 def markdown() -> str:
     """The key reference, as a Markdown table per section."""
     lines = []
-    for name, cls in sections().items():
+    for name, spec in sections().items():
         lines += [f"### [{name}]", "", "| key | default | meaning |", "|---|---|---|"]
-        defaults = cls()
-        for f in dataclasses.fields(cls):
-            default = getattr(defaults, f.name)
-            if isinstance(default, bool):
-                shown = "true" if default else "false"
-            elif isinstance(default, str):
-                shown = f'"{default}"'
-            elif isinstance(default, list):
-                shown = "[" + ", ".join(f'"{v}"' for v in default) + "]"
-            else:
-                shown = repr(default)
-            doc = f.metadata.get("doc", "").replace("|", "\\|")
-            choices = _choices(f)
+        for key, p in spec.params.items():
+            doc = p.describe().replace("|", "\\|")
+            choices = p.allowed()
             if choices and "`" not in doc:
                 doc += " (" + ", ".join(f"`{c}`" for c in choices) + ")"
-            lines.append(f"| `{f.name}` | `{shown}` | {doc} |")
+            lines.append(f"| `{key}` | `{shown(p.default)}` | {doc} |")
         lines.append("")
     return "\n".join(lines)
 
 
 if __name__ == "__main__":  # pragma: no cover
     if "--markdown" in sys.argv:
-        # run as __main__, this file is a second module: the contributed sections register with the real one
+        # run as __main__, this file is a second module: the real one holds the registries' PARTS
         from sphere.daemon import config as _config
 
         print(_config.markdown())

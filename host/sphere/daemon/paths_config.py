@@ -4,13 +4,15 @@ sphere-mouse accepts, checks and documents it (``--print-config``)."""
 
 from __future__ import annotations
 
-from sphere.daemon.config import option, section
+from sphere.settings import Param
 
 
-@section("paths")
 class PathsSettings:
-    broad_dir: str = option("", "folder of the BROAD trials (`data_mat`) for `sphere eval` and `sphere sim`; "
+    NAME = "paths"
+    PARAMS = {
+        "broad_dir": Param("", doc="folder of the BROAD trials (`data_mat`) for `sphere eval` and `sphere sim`; "
                                 "\"\" = $SPHERE_BROAD_DIR, else ../shared/data/broad beside a checkout, else "
-                                "~/.local/share/marg-sphere/broad")
-    firmware: str = option("", "firmware image (sphere.elf, with sphere.hex beside it) for `sphere sim` and "
-                               "`sphere flash`; \"\" = $SPHERE_FIRMWARE, else the checkout's build, else the package's")
+                                "~/.local/share/marg-sphere/broad"),
+        "firmware": Param("", doc="firmware image (sphere.elf, with sphere.hex beside it) for `sphere sim` and "
+                               "`sphere flash`; \"\" = $SPHERE_FIRMWARE, else the checkout's build, else the package's"),
+    }

@@ -28,6 +28,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from sphere.daemon.config import smoothing_params
 from sphere.smoothing.registry import DEFAULT as DEFAULT_SMOOTHING
 from sphere.smoothing.registry import make_filter
 
@@ -50,9 +51,7 @@ class PointerSettings:
         """From the [pointer] section; with the whole config, the filter's [smoothing.NAME] parameters too."""
         settings = cls(**{k: v for k, v in section.as_dict().items() if k in cls.__dataclass_fields__})
         if cfg is not None:
-            from sphere.smoothing.config import filter_params
-
-            settings.smoothing_params = filter_params(cfg, settings.smoothing)
+            settings.smoothing_params = smoothing_params(cfg, settings.smoothing)
         return settings
 
 

@@ -7,7 +7,6 @@ has its meaning and allowed values in the comment above it, so a user copies it 
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import textwrap
 
@@ -32,16 +31,15 @@ def defaults_toml(path_hint: str = "~/.config/sphere-mouse/config.toml") -> str:
     out = [f"# sphere-mouse {__version__}: every setting with its default (sphere-mouse --print-config).",
            f"# Copy to {path_hint}, keep the keys you change, delete the rest.",
            "# Reference with examples: host/docs/sphere-mouse.md", ""]
-    for name, cls in config.sections().items():
+    for name, spec in config.sections().items():
         out.append(f"[{name}]")
-        defaults = cls()
-        for f in dataclasses.fields(cls):
-            doc = f.metadata.get("doc", "")
-            choices = config._choices(f)
+        for key, p in spec.params.items():
+            doc = p.describe()
+            choices = p.allowed()
             if choices:
                 doc += " — one of: " + ", ".join(str(c) for c in choices)
             for line in textwrap.wrap(doc, 100) or [""]:
                 out.append(f"# {line}".rstrip())
-            out.append(f"{f.name} = {_toml_value(getattr(defaults, f.name))}")
+            out.append(f"{key} = {_toml_value(p.default)}")
         out.append("")
     return "\n".join(out)

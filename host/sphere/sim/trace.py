@@ -27,7 +27,7 @@ import numpy as np
 
 from sphere import chips
 from sphere import quaternion as quat
-from sphere.lazy import load
+from sphere.settings import load
 
 ACCEL_RATE_HZ = 200.0
 GYRO_RATE_HZ = 200.0

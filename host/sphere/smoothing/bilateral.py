@@ -8,7 +8,7 @@ from __future__ import annotations
 import math
 from collections import deque
 
-from sphere.smoothing.params import Param, resolve
+from sphere.settings import Param, resolve
 
 
 def _wrap_deg(a: float) -> float:
@@ -16,6 +16,7 @@ def _wrap_deg(a: float) -> float:
 
 
 class BilateralAngleFilter:
+    NAME = "bilateral"
     PARAMS = {
         "sigma_c": Param(3.0, "samples", 1e-3, 1e3, "σ_c of the spatial Gaussian (sample distance without positions)"),
         "sigma_s_deg": Param(0.3, "°", 1e-4, 180.0, "σ_s of the Gaussian of the angle difference"),

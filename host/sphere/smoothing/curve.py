@@ -10,10 +10,11 @@ from collections import deque
 
 import numpy as np
 
-from sphere.smoothing.params import Param, resolve
+from sphere.settings import Param, resolve
 
 
 class WindowedCurveSmoother:
+    NAME = "curve"
     PARAMS = {
         "m": Param(4, "samples", 2, 50, "the output is m samples late; the window holds n = 2 + m points", integer=True),
         "point_weight": Param(0.2, "", 1e-6, 1e6, "weight of the measured points against the smoothed edges"),

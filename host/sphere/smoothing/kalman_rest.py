@@ -4,10 +4,11 @@ the behaviour does not depend on the sample rate)."""
 
 from __future__ import annotations
 
-from sphere.smoothing.params import Param, resolve
+from sphere.settings import Param, resolve
 
 
 class ConstantKalman:
+    NAME = "constant-kalman"
     PARAMS = {
         "q_per_s": Param(0.001, "unit²/s", 0.0, 1e6, "process variance per second: how fast the held value may move"),
         "r": Param(0.001, "unit²", 1e-12, 1e6, "measurement variance (the jitter's)"),

@@ -18,7 +18,7 @@ import math
 
 from sphere.smoothing.curve import WindowedCurveSmoother
 from sphere.smoothing.kalman_rest import ConstantKalman
-from sphere.smoothing.params import Param, resolve
+from sphere.settings import Param, resolve
 from sphere.smoothing.particle import ParticleFilterAR2
 from sphere.smoothing.spring import CriticallyDampedSpring
 
@@ -26,6 +26,7 @@ REST, SLOW, FAST = "rest", "slow", "fast"
 
 
 class MotionStateFilter:
+    NAME = "motion-state"
     FAST_FILTER = "pass"  # what fast motion gets when PARAMS has no `fast` (a subclass fixes it)
     PARAMS = {
         "rest_speed": Param(2.0, "unit/s", 1e-6, 1e6, "below this speed the signal is at rest (constant Kalman)"),

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 
-from sphere.smoothing.params import Param, resolve
+from sphere.settings import Param, resolve
 
 
 def _alpha(cutoff_hz: float, dt_s: float) -> float:
@@ -18,6 +18,7 @@ def _alpha(cutoff_hz: float, dt_s: float) -> float:
 
 
 class OneEuroFilter:
+    NAME = "one-euro"
     PARAMS = {
         "min_cutoff_hz": Param(0.5, "Hz", 0.01, 100.0, "cutoff of the low-pass when the signal is still"),
         "beta": Param(0.3, "1/unit", 0.0, 1000.0, "how fast the cutoff rises with speed (Hz per unit/s; °/s for angles)"),

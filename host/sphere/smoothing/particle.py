@@ -7,10 +7,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from sphere.smoothing.params import Param, resolve
+from sphere.settings import Param, resolve
 
 
 class ParticleFilterAR2:
+    NAME = "particle"
     PARAMS = {
         "particles": Param(100, "", 2, 10000, "number of particles (the paper: 100)", integer=True),
         "a1": Param(2.0, "", -10.0, 10.0, "A1 of the AR(2) motion model (2 with A2 = −1: constant velocity)"),

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 
 class PassThrough:
+    NAME = "none"
     PARAMS: dict = {}
     GRID: dict = {}
 

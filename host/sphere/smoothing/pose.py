@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import math
 
-from sphere.smoothing.registry import make_filter
+from sphere.smoothing.registry import POSITION, make_filter
 
 
 def _qmul(p, q):
@@ -54,12 +54,10 @@ class PoseFilter:
     :mod:`sphere.smoothing.position` (metres)."""
 
     def __init__(self, name: str = "none", position=("none", None), **params):
-        from sphere.smoothing import position as position_filters
-
         self.name = name
         self.position_name = position[0]
         self._orientation = make_filter(name, **params)
-        self._position = position_filters.make_filter(position[0], **(position[1] or {}))
+        self._position = POSITION.build(position[0], position[1] or {})
         self.reset()
 
     def reset(self) -> None:
@@ -94,13 +92,3 @@ class PoseFilter:
         else:
             pos = tuple(float(v) for v in self._position.update(tuple(position), dt_s))
         return out, pos
-
-
-def pose_filter(cfg) -> PoseFilter:
-    """The daemon's pose filter from its config: ``stream.smoothing`` and its ``[smoothing.NAME]`` for the
-    orientation, ``stream.position_smoothing`` and its ``[position_smoothing.NAME]`` for the position."""
-    from sphere.smoothing.config import filter_params
-
-    name = cfg.stream.smoothing
-    pname = cfg.stream.position_smoothing
-    return PoseFilter(name, (pname, filter_params(cfg, pname, "position_smoothing")), **filter_params(cfg, name))

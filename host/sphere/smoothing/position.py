@@ -12,19 +12,20 @@ tracker by about 25 ms. Positions therefore get filters of their own, with param
 rendered BROAD stretches 10:100, 14:120, 16:100, 07:40 (render seed 2), which `sphere hybrid-eval` does not
 score; on hybrid-eval's own (10:40, 14:64, 16:40, seed 1) it gives 2.57 mm lateral / 5.89 mm depth RMSE,
 lag 2.7 ms, against 2.33 / 5.90 mm, −1 ms unfiltered (the worst ratio to the targets 0.54 for both).
-A new position filter = a class here with ``PARAMS``/``GRID``/``reset``/``update`` + one line in FILTERS.
+A new position filter = its module (a class with ``NAME``, ``PARAMS``, ``GRID``, ``reset``, ``update``) + one
+line in ``POSITION`` of :mod:`sphere.smoothing.registry`.
 """
 
 from __future__ import annotations
 
+from sphere.settings import Param
 from sphere.smoothing.one_euro import OneEuroFilter
-from sphere.smoothing.params import Param
-from sphere.smoothing.passthrough import PassThrough
 
 
 class PositionOneEuro(OneEuroFilter):
     """The 1€ filter on a position (m): cutoff = min_cutoff_hz + beta · speed (m/s)."""
 
+    NAME = "one-euro"
     PARAMS = {
         "min_cutoff_hz": Param(0.5, "Hz", 0.01, 100.0, "cutoff of the low-pass when the ball is still"),
         "beta": Param(30.0, "Hz per m/s", 0.0, 10000.0, "how fast the cutoff rises with the ball's speed"),
@@ -32,27 +33,3 @@ class PositionOneEuro(OneEuroFilter):
     }
     GRID = {"min_cutoff_hz": [0.5, 1.0, 2.0, 4.0, 8.0, 16.0], "beta": [0.0, 10.0, 30.0, 100.0, 300.0, 1000.0],
             "d_cutoff_hz": [1.0, 4.0]}
-
-
-#: name → class; the 3-D stream's ``[stream] position_smoothing`` chooses from here
-FILTERS = {
-    "none": PassThrough,
-    "one-euro": PositionOneEuro,
-}
-
-DEFAULT = "one-euro"
-
-
-def params(name: str) -> dict:
-    return dict(filter_class(name).PARAMS)
-
-
-def filter_class(name: str):
-    try:
-        return FILTERS[name]
-    except KeyError:
-        raise ValueError(f"unknown position smoothing {name!r}; choose from {', '.join(FILTERS)}") from None
-
-
-def make_filter(name: str, **values):
-    return filter_class(name)(**values)

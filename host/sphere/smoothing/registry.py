@@ -1,6 +1,7 @@
 """Every smoothing filter by name: the one list the daemon's pointer, the 3-D stream and
-`sphere bench pointer` choose from. A new filter = its module (a class with ``PARAMS``, ``GRID``,
-``reset()`` and ``update(x, dt_s) -> y``) + one line here.
+`sphere bench pointer` choose from. A new filter = its module (a class with ``NAME``, ``PARAMS``, ``GRID``,
+``reset()`` and ``update(x, dt_s) -> y``) + one line here; its ``[smoothing.NAME]`` config section, the
+reference and the bench's grid follow from its ``PARAMS`` and ``GRID``.
 
 Each filter's PARAMS defaults are its family's cross-validated pick from `sphere bench pointer` (tuned on
 synthetic:hold seeds 1–3 and BROAD trial 05; the figures it prints are on other seeds and trials), except
@@ -8,12 +9,10 @@ synthetic:hold seeds 1–3 and BROAD trial 05; the figures it prints are on othe
 
 from __future__ import annotations
 
-import itertools
+from sphere.settings import Registry, UnknownComponent
 
-from sphere.lazy import load
-
-#: name → "module:Class" (imported when first used)
-FILTERS = {
+#: name → "module:Class" (imported when first used); config section [smoothing.NAME]
+REGISTRY = Registry("smoothing", {
     "none": "sphere.smoothing.passthrough:PassThrough",
     "tremor": "sphere.smoothing.tremor:TremorFilter",
     "tiered": "sphere.smoothing.tiered:TieredSmoothing",
@@ -25,26 +24,32 @@ FILTERS = {
     "particle": "sphere.smoothing.particle:ParticleFilterAR2",
     "motion-state": "sphere.smoothing.motion_state:MotionStateFilter",
     "motion-state-particle": "sphere.smoothing.motion_state_particle:MotionStateParticle",
-}
+}, label="smoothing filter")
+
+#: the filter names (the registry's keys)
+FILTERS = REGISTRY.entries
 
 DEFAULT = "tremor"
 
+#: The 3-D stream's position filters, in metres (sphere.smoothing.position says why apart from the angles'):
+#: name → "module:Class"; config section [position_smoothing.NAME], chosen by ``[stream] position_smoothing``.
+POSITION = Registry("position_smoothing", {
+    "none": "sphere.smoothing.passthrough:PassThrough",
+    "one-euro": "sphere.smoothing.position:PositionOneEuro",
+}, label="position smoothing")
 
-class UnknownFilter(ValueError):
-    pass
+POSITION_DEFAULT = "one-euro"
+
+UnknownFilter = UnknownComponent
 
 
 def filter_class(name: str):
-    try:
-        spec = FILTERS[name]
-    except KeyError:
-        raise UnknownFilter(f"unknown smoothing filter {name!r}; choose from {', '.join(FILTERS)}") from None
-    return load(spec)
+    return REGISTRY.load(name)
 
 
 def params(name: str) -> dict:
-    """The filter's parameters: name → sphere.smoothing.params.Param (default, unit, range, meaning)."""
-    return dict(filter_class(name).PARAMS)
+    """The filter's parameters: name → sphere.settings.Param (default, unit, range, meaning)."""
+    return REGISTRY.params(name)
 
 
 def make_filter(name: str, **values):
@@ -54,7 +59,4 @@ def make_filter(name: str, **values):
 
 def grid(name: str):
     """Every parameter combination of a filter's tuning grid (one empty setting when it has none)."""
-    space = filter_class(name).GRID
-    keys = list(space)
-    for values in itertools.product(*(space[k] for k in keys)):
-        yield dict(zip(keys, values))
+    return iter(REGISTRY.grid(name))

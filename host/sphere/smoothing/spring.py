@@ -8,10 +8,11 @@ from __future__ import annotations
 
 import math
 
-from sphere.smoothing.params import Param, resolve
+from sphere.settings import Param, resolve
 
 
 class CriticallyDampedSpring:
+    NAME = "spring"
     PARAMS = {"t_smooth_s": Param(0.05, "s", 0.001, 10.0, "smoothing time; the spring's rate f = 2 / t_smooth")}
     GRID = {"t_smooth_s": [0.01, 0.02, 0.05]}
 

@@ -10,10 +10,11 @@ from __future__ import annotations
 import math
 from collections import deque
 
-from sphere.smoothing.params import Param, resolve
+from sphere.settings import Param, resolve
 
 
 class TieredSmoothing:
+    NAME = "tiered"
     PARAMS = {
         "smoothing_dps": Param(8.0, "°/s", 0.0, 1000.0, "motion slower than this is smoothed (fully below half of it); 0 = off"),
         "smoothing_time_s": Param(0.06, "s", 0.005, 1.0, "averaging window of the smoothing"),

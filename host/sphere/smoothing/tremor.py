@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import math
 
-from sphere.smoothing.params import Param, resolve
+from sphere.settings import Param, resolve
 
 _TWO_PI = 2.0 * math.pi
 
@@ -78,6 +78,7 @@ class _Notch:
 
 
 class TremorFilter:
+    NAME = "tremor"
     PARAMS = {
         "notch_hz": Param(10.0, "Hz", 1.0, 100.0, "centre of the tremor band-stop (physiological tremor: 8–12 Hz)"),
         "notch_q": Param(0.7, "", 0.1, 20.0, "quality factor of each notch (lower = wider band, more delay)"),

@@ -8,36 +8,28 @@ them beside the pointer and the 3-D page. Each is optional and off by default (i
 - :mod:`.dsu` — a DSU ("cemuhook") motion server for emulators (Dolphin, Cemu, Citra/yuzu): gyro and taps.
 
 A new output is one module (an :class:`~sphere.daemon.outputs.base.Output` subclass with ``NAME``,
-``from_config(cfg, log)`` and its config section ``[outputs.NAME]``) and one line in :data:`REGISTRY`.
-Importing this package declares every output's section (the modules import their libraries lazily).
+``PARAMS`` — its ``[outputs.NAME]`` section — and ``from_settings(settings, log)``) and one line in
+:data:`REGISTRY`. This package imports none of them.
 
-The daemon talks to all of them through :class:`Outputs`, which has the orientation stream's interface
-(``publish_orientation``, ``publish_event``, ``publish_mode``, ``recentre``, ``position``) and passes
-each call on to the WebSocket stream (if any) and to every enabled output.
+The daemon talks to all of them through :class:`~sphere.daemon.outputs.fanout.Outputs`, which has the
+orientation stream's interface (``publish_orientation``, ``publish_event``, ``publish_mode``,
+``recentre``, ``position``) and passes each call on to the WebSocket stream (if any) and to every enabled
+output.
 """
 
 from __future__ import annotations
 
-from sphere.lazy import load
+from sphere.settings import Registry
 
 #: ``[outputs.NAME]`` → "module:Class". One line per output.
-REGISTRY = {
+REGISTRY = Registry("outputs", {
     "opentrack": "sphere.daemon.outputs.opentrack:OpenTrackOutput",
     "osc": "sphere.daemon.outputs.osc:OscOutput",
     "gamepad": "sphere.daemon.outputs.gamepad:GamepadOutput",
     "spacenav": "sphere.daemon.outputs.spacenav:SpacenavOutput",
     "dsu": "sphere.daemon.outputs.dsu:DsuOutput",
-}
+}, label="output")
 
 
 def output_class(name: str):
-    return load(REGISTRY[name])
-
-
-for _name in REGISTRY:  # each module declares its [outputs.NAME] section
-    output_class(_name)
-
-from sphere.daemon.outputs.base import Output, OutputUnavailable  # noqa: E402
-from sphere.daemon.outputs.fanout import Outputs, attach, open_outputs  # noqa: E402
-
-__all__ = ["REGISTRY", "Output", "OutputUnavailable", "Outputs", "attach", "open_outputs", "output_class"]
+    return REGISTRY.load(name)

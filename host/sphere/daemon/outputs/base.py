@@ -13,6 +13,11 @@ class OutputUnavailable(Exception):
     """This output cannot start here; the message says why and what to do."""
 
 
+def positive(v):
+    """A Param check: rates and the like."""
+    return None if v > 0 else "must be greater than 0"
+
+
 def relative_euler_deg(q_ref, q) -> tuple[float, float, float]:
     """(yaw, pitch, roll) in degrees of ``q`` relative to ``q_ref`` (both sensor-to-earth), in the sphere's
     own frame at the reference pose (x towards the screen, y left, z up), Tait-Bryan z-y'-x'':
@@ -36,6 +41,8 @@ class Output:
     and optionally :meth:`send_event`, :meth:`send_mode`, :meth:`close`."""
 
     NAME = "output"
+    #: the settings of ``[outputs.NAME]`` (each output has ``enabled``); see sphere.settings
+    PARAMS: dict = {}
 
     def __init__(self, rate_hz: float = 100.0, clock=time.monotonic):
         self.period_s = 1.0 / rate_hz if rate_hz > 0 else 0.0

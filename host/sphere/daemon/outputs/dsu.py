@@ -45,8 +45,8 @@ import threading
 import time
 import zlib
 
-from sphere.daemon.config import in_range, option, positive, section
 from sphere.daemon.outputs.base import Output, OutputUnavailable
+from sphere.settings import Param, positive
 
 MAGIC_SERVER, MAGIC_CLIENT = b"DSUS", b"DSUC"
 VERSION = 1001
@@ -70,18 +70,16 @@ def _host_check(v):
     return None if v and " " not in v else "must be a host name or address, such as \"127.0.0.1\""
 
 
-@section("outputs.dsu")
-class DsuSettings:
-    enabled: bool = option(False, "a DSU (\"cemuhook\") motion server for emulators (Dolphin, Cemu, Citra/yuzu)")
-    host: str = option("127.0.0.1", "address to serve on (127.0.0.1: this machine only)", _host_check)
-    port: int = option(26760, "UDP port (cemuhook's 26760)", in_range(1, 65535))
-    only_3d: bool = option(False, "send motion only in 3-D mode (false: in every mode)")
-    rate_hz: float = option(250.0, "pad data packets a second at most (the sphere samples at 200 Hz)",
-                            in_range(10.0, 1000.0))
-    timeout_s: float = option(5.0, "a client that has not asked for pad data this long stops getting them",
-                              positive)
-    tap_hold_ms: int = option(100, "how long a tap holds its button (A: single tap, B: double tap)",
-                              in_range(10, 2000))
+#: the ``[outputs.dsu]`` section
+DSU_PARAMS = {
+    "enabled": Param(False, doc="a DSU (\"cemuhook\") motion server for emulators (Dolphin, Cemu, Citra/yuzu)"),
+    "host": Param("127.0.0.1", doc="address to serve on (127.0.0.1: this machine only)", check=_host_check),
+    "port": Param(26760, doc="UDP port (cemuhook's 26760)", lo=1, hi=65535),
+    "only_3d": Param(False, doc="send motion only in 3-D mode (false: in every mode)"),
+    "rate_hz": Param(250.0, doc="pad data packets a second at most (the sphere samples at 200 Hz)", lo=10.0, hi=1000.0),
+    "timeout_s": Param(5.0, doc="a client that has not asked for pad data this long stops getting them", check=positive),
+    "tap_hold_ms": Param(100, doc="how long a tap holds its button (A: single tap, B: double tap)", lo=10, hi=2000),
+}
 
 
 class BadDatagram(ValueError):
@@ -267,6 +265,7 @@ class DsuServer:
 
 class DsuOutput(Output):
     NAME = "dsu"
+    PARAMS = DSU_PARAMS
 
     def __init__(self, host: str = "127.0.0.1", port: int = 26760, only_3d: bool = False, rate_hz: float = 250.0,
                  timeout_s: float = 5.0, tap_hold_ms: int = 100, log=None):
@@ -281,7 +280,7 @@ class DsuOutput(Output):
         self._t_us = None
 
     @classmethod
-    def from_config(cls, s, log=None) -> "DsuOutput":
+    def from_settings(cls, s, log=None) -> "DsuOutput":
         return cls(s.host, s.port, s.only_3d, s.rate_hz, s.timeout_s, s.tap_hold_ms, log)
 
     def describe(self) -> str:

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+from sphere.daemon.outputs import REGISTRY
+from sphere.daemon.outputs.base import OutputUnavailable
+
 
 class Outputs:
     """The orientation stream's interface, fanned out to the stream (may be None) and the outputs."""
@@ -105,16 +108,14 @@ class Outputs:
 def open_outputs(cfg, log=None) -> list:
     """The outputs enabled in ``cfg`` (``[outputs.NAME] enabled = true``), started. One that cannot start
     is reported and left out: it must not stop the pointer."""
-    from sphere.daemon.outputs import REGISTRY, OutputUnavailable, output_class
-
     log = log or (lambda m: None)
     out = []
     for name in REGISTRY:
-        settings = cfg[f"outputs.{name}"]
+        settings = cfg[REGISTRY.section(name)]
         if not settings.enabled:
             continue
         try:
-            o = output_class(name).from_config(settings, log)
+            o = REGISTRY.build(name, settings, log=log)
         except OutputUnavailable as e:
             log(f"output {name} cannot start: {e}")
             continue

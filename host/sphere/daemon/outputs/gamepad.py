@@ -11,19 +11,11 @@ Needs write access to /dev/uinput (host/packaging/70-sphere-mouse.rules, as for 
 
 from __future__ import annotations
 
-from sphere.daemon.config import in_range, option, section
 from sphere.daemon.outputs.base import Output, OutputUnavailable
+from sphere.settings import Param
 
 STICK_MAX = 32767
 BUTTONS = {"single_tap": "BTN_SOUTH", "double_tap": "BTN_EAST", "free_fall": "BTN_NORTH"}
-
-
-@section("outputs.gamepad")
-class GamepadSettings:
-    enabled: bool = option(False, "a virtual gamepad (uinput): tilt → sticks, taps → buttons")
-    name: str = option("MARG sphere gamepad", "the device's name as games list it")
-    full_tilt_deg: float = option(30.0, "tilt from the reference pose that is a full stick", in_range(1.0, 90.0))
-    rate_hz: float = option(200.0, "stick updates a second at most", in_range(1.0, 1000.0))
 
 
 def stick_values(angles_deg, full_tilt_deg: float) -> dict[str, int]:
@@ -38,6 +30,12 @@ def stick_values(angles_deg, full_tilt_deg: float) -> dict[str, int]:
 
 class GamepadOutput(Output):
     NAME = "gamepad"
+    PARAMS = {
+        "enabled": Param(False, doc="a virtual gamepad (uinput): tilt → sticks, taps → buttons"),
+        "name": Param("MARG sphere gamepad", doc="the device's name as games list it"),
+        "full_tilt_deg": Param(30.0, doc="tilt from the reference pose that is a full stick", lo=1.0, hi=90.0),
+        "rate_hz": Param(200.0, doc="stick updates a second at most", lo=1.0, hi=1000.0),
+    }
 
     def __init__(self, name: str = "MARG sphere gamepad", full_tilt_deg: float = 30.0, rate_hz: float = 200.0, **kw):
         super().__init__(rate_hz, **kw)
@@ -60,7 +58,7 @@ class GamepadOutput(Output):
         self.last = {}
 
     @classmethod
-    def from_config(cls, s, log=None) -> "GamepadOutput":
+    def from_settings(cls, s, log=None) -> "GamepadOutput":
         return cls(s.name, s.full_tilt_deg, s.rate_hz)
 
     def describe(self) -> str:

@@ -13,18 +13,10 @@ from __future__ import annotations
 import socket
 import struct
 
-from sphere.daemon.config import in_range, option, positive, section
-from sphere.daemon.outputs.base import Output, OutputUnavailable
+from sphere.daemon.outputs.base import Output, OutputUnavailable, positive
+from sphere.settings import Param
 
 DATAGRAM = struct.Struct("<6d")
-
-
-@section("outputs.opentrack")
-class OpenTrackSettings:
-    enabled: bool = option(False, "send the pose to OpenTrack's \"UDP over network\" input")
-    host: str = option("127.0.0.1", "where OpenTrack runs")
-    port: int = option(4242, "OpenTrack's UDP port (its default 4242)", in_range(1, 65535))
-    rate_hz: float = option(100.0, "datagrams a second at most", positive)
 
 
 def datagram(angles_deg, moved_m) -> bytes:
@@ -39,6 +31,12 @@ def datagram(angles_deg, moved_m) -> bytes:
 
 class OpenTrackOutput(Output):
     NAME = "opentrack"
+    PARAMS = {
+        "enabled": Param(False, doc="send the pose to OpenTrack's \"UDP over network\" input"),
+        "host": Param("127.0.0.1", doc="where OpenTrack runs"),
+        "port": Param(4242, doc="OpenTrack's UDP port (its default 4242)", lo=1, hi=65535),
+        "rate_hz": Param(100.0, doc="datagrams a second at most", check=positive),
+    }
 
     def __init__(self, host: str = "127.0.0.1", port: int = 4242, rate_hz: float = 100.0, **kw):
         super().__init__(rate_hz, **kw)
@@ -50,7 +48,7 @@ class OpenTrackOutput(Output):
             raise OutputUnavailable(f"cannot send UDP to {host}:{port}: {e}; check [outputs.opentrack] host") from None
 
     @classmethod
-    def from_config(cls, s, log=None) -> "OpenTrackOutput":
+    def from_settings(cls, s, log=None) -> "OpenTrackOutput":
         return cls(s.host, s.port, s.rate_hz)
 
     def describe(self) -> str:

@@ -14,8 +14,8 @@ Messages (``prefix`` "/sphere" by default):
 
 from __future__ import annotations
 
-from sphere.daemon.config import in_range, option, positive, section
-from sphere.daemon.outputs.base import Output, OutputUnavailable
+from sphere.daemon.outputs.base import Output, OutputUnavailable, positive
+from sphere.settings import Param
 
 
 def _prefix(v):
@@ -23,17 +23,15 @@ def _prefix(v):
         "must be an OSC address such as \"/sphere\" (starts with /, no trailing /, no spaces)"
 
 
-@section("outputs.osc")
-class OscSettings:
-    enabled: bool = option(False, "send OSC messages over UDP")
-    host: str = option("127.0.0.1", "where the OSC receiver runs")
-    port: int = option(9000, "the receiver's UDP port", in_range(1, 65535))
-    prefix: str = option("/sphere", "the messages' address prefix", _prefix)
-    rate_hz: float = option(60.0, "pose messages a second at most", positive)
-
-
 class OscOutput(Output):
     NAME = "osc"
+    PARAMS = {
+        "enabled": Param(False, doc="send OSC messages over UDP"),
+        "host": Param("127.0.0.1", doc="where the OSC receiver runs"),
+        "port": Param(9000, doc="the receiver's UDP port", lo=1, hi=65535),
+        "prefix": Param("/sphere", doc="the messages' address prefix", check=_prefix),
+        "rate_hz": Param(60.0, doc="pose messages a second at most", check=positive),
+    }
 
     def __init__(self, host: str = "127.0.0.1", port: int = 9000, prefix: str = "/sphere", rate_hz: float = 60.0,
                  **kw):
@@ -51,7 +49,7 @@ class OscOutput(Output):
         self.prefix = prefix
 
     @classmethod
-    def from_config(cls, s, log=None) -> "OscOutput":
+    def from_settings(cls, s, log=None) -> "OscOutput":
         return cls(s.host, s.port, s.prefix, s.rate_hz)
 
     def describe(self) -> str:

@@ -67,8 +67,8 @@ import struct
 import threading
 import time
 
-from sphere.daemon.config import in_range, option, positive, section
 from sphere.daemon.outputs.base import Output, OutputUnavailable
+from sphere.settings import Param, positive
 
 # -- the protocol (libspnav src/proto.h) --
 UEV_MOTION, UEV_PRESS, UEV_RELEASE = 0, 1, 2
@@ -103,28 +103,26 @@ def _socket_check(v):
         "must be an absolute path shorter than 108 bytes (AF_UNIX), or \"\" for $SPNAV_SOCKET / $XDG_RUNTIME_DIR"
 
 
-@section("outputs.spacenav")
-class SpacenavSettings:
-    enabled: bool = option(False, "a 3-D mouse for libspnav programs (Blender, FreeCAD): spacenavd's protocol")
-    socket: str = option("", "the AF_UNIX socket to serve; \"\" = $SPNAV_SOCKET, else $XDG_RUNTIME_DIR/spnav.sock",
-                         _socket_check)
-    protocol: int = option(1, "highest spacenavd protocol version offered (0 = answer as a spacenavd before 1.0)",
-                           in_range(0, 1))
-    mapping: str = option("puck", "puck: tilt from the start pose is a rate (a SpaceMouse cap); direct: the "
-                          "sphere's own rotation, the model turns with the hand", choices=("puck", "direct"))
-    zoom: str = option("roll", "roll: the roll about the axis facing the screen zooms (clockwise = in) instead of "
-                       "turning; none: roll turns, no zoom", choices=("roll", "none"))
-    only_3d: bool = option(True, "send motion and buttons only in 3-D mode (false: in every mode)")
-    rate_hz: float = option(100.0, "motion events a second while the sphere moves", in_range(20.0, 250.0))
-    name: str = option("MARG sphere", "the device name clients read (spnav_dev_name)")
-    dead_zone_deg: float = option(3.0, "puck: tilt from the start pose that sends nothing", in_range(0.0, 45.0))
-    full_tilt_deg: float = option(30.0, "puck: tilt that sends full_scale", in_range(1.0, 90.0))
-    curve: float = option(1.5, "puck: rate = full_scale · (tilt beyond the dead zone / the rest)^curve",
-                          in_range(0.5, 4.0))
-    full_scale: int = option(350, "puck: the value sent at full tilt", in_range(1, 100000))
-    direct_scale: float = option(1.0, "direct: units per milliradian turned (1 = a model under "
-                                 "spnav_posrot_moveobj turns as the sphere)", positive)
-    still_dps: float = option(3.0, "direct: rates below this (°/s) count as still", in_range(0.0, 90.0))
+#: the ``[outputs.spacenav]`` section
+SPACENAV_PARAMS = {
+    "enabled": Param(False, doc="a 3-D mouse for libspnav programs (Blender, FreeCAD): spacenavd's protocol"),
+    "socket": Param("", doc="the AF_UNIX socket to serve; \"\" = $SPNAV_SOCKET, else $XDG_RUNTIME_DIR/spnav.sock", check=_socket_check),
+    "protocol": Param(1, doc="highest spacenavd protocol version offered (0 = answer as a spacenavd before 1.0)", lo=0, hi=1),
+    "mapping": Param("puck", doc="puck: tilt from the start pose is a rate (a SpaceMouse cap); direct: the "
+            "sphere's own rotation, the model turns with the hand", choices=("puck", "direct")),
+    "zoom": Param("roll", doc="roll: the roll about the axis facing the screen zooms (clockwise = in) instead of "
+            "turning; none: roll turns, no zoom", choices=("roll", "none")),
+    "only_3d": Param(True, doc="send motion and buttons only in 3-D mode (false: in every mode)"),
+    "rate_hz": Param(100.0, doc="motion events a second while the sphere moves", lo=20.0, hi=250.0),
+    "name": Param("MARG sphere", doc="the device name clients read (spnav_dev_name)"),
+    "dead_zone_deg": Param(3.0, doc="puck: tilt from the start pose that sends nothing", lo=0.0, hi=45.0),
+    "full_tilt_deg": Param(30.0, doc="puck: tilt that sends full_scale", lo=1.0, hi=90.0),
+    "curve": Param(1.5, doc="puck: rate = full_scale · (tilt beyond the dead zone / the rest)^curve", lo=0.5, hi=4.0),
+    "full_scale": Param(350, doc="puck: the value sent at full tilt", lo=1, hi=100000),
+    "direct_scale": Param(1.0, doc="direct: units per milliradian turned (1 = a model under "
+            "spnav_posrot_moveobj turns as the sphere)", check=positive),
+    "still_dps": Param(3.0, doc="direct: rates below this (°/s) count as still", lo=0.0, hi=90.0),
+}
 
 
 def default_socket_path(env=None) -> str:
@@ -680,6 +678,7 @@ def system_socket_note(path: str) -> str | None:
 
 class SpacenavOutput(Output):
     NAME = "spacenav"
+    PARAMS = SPACENAV_PARAMS
 
     def __init__(self, path: str | None = None, name: str = "MARG sphere", protocol: int = 1, only_3d: bool = True,
                  log=None, **motion):
@@ -695,7 +694,7 @@ class SpacenavOutput(Output):
         self.events = 0
 
     @classmethod
-    def from_config(cls, s, log=None) -> "SpacenavOutput":
+    def from_settings(cls, s, log=None) -> "SpacenavOutput":
         return cls(s.socket or None, s.name, s.protocol, s.only_3d, log,
                    mapping=s.mapping, zoom=s.zoom, rate_hz=s.rate_hz, dead_zone_deg=s.dead_zone_deg,
                    full_tilt_deg=s.full_tilt_deg, curve=s.curve, full_scale=s.full_scale,

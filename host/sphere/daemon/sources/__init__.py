@@ -21,7 +21,7 @@ from sphere.daemon.sources.scripted import ScriptedSource
 from sphere.daemon.sources.serial import SerialSource, candidate_ports, expand_candidates, usb_ports
 from sphere.daemon.sources.simulated import (DEFAULT_SIM_TRACE, PTY_RE, SimulatorSource, simulator_available,
                                              simulator_command, start_simulator)
-from sphere.lazy import load
+from sphere.settings import load
 
 #: ``[source] kind`` → "module:Class". One line per source.
 REGISTRY = {
