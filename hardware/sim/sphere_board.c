@@ -29,6 +29,7 @@
 #ifdef __linux__
 #include <sys/prctl.h>
 #include <termios.h>
+#include <fcntl.h>
 #endif
 
 #include "sim_avr.h"
@@ -182,12 +183,21 @@ typedef struct {
 	uint32_t packet, pending;
 	uint8_t pend[64];
 	avr_cycle_count_t latency_cycles, last_packet;
-	avr_irq_t *pty_in;
 	/* FTDI: the latency timer the driver sets (--latency-timer, 16 ms by default) and the one it sets when the
 	 * host asks for low latency (1 ms), read from the pty's termios (pty_fd: the master; "The host's requests") */
 	int ftdi, pty_fd, host_low_latency;
 	uint32_t latency_ms;
+	/* what reaches the pty in one write (a USB packet, or one byte without an adapter), paced to the wall clock */
+	uint8_t out[512];
+	uint32_t n_out, out_delims;
+	uint64_t pty_dropped;
+	int realtime;
+	double frame_start_s;
+	FILE *host_log; /* --host-log: frames leaving the UART and reaching the pty, for `sphere bench latency` */
 } uart_out_t;
+
+static double board_wall0; /* CLOCK_MONOTONIC s at simulated time 0 (--realtime pacing) */
+static double wall_now(void);
 
 static uart_out_t uart_out;
 
@@ -224,8 +234,36 @@ static void host_receives(uart_out_t *u, uint8_t byte)
 		fwrite(&off, 8, 1, u->times);
 		fwrite(&t, 8, 1, u->times);
 	}
-	if (u->pty_in)
-		avr_raise_irq(u->pty_in, byte);
+	if (u->pty_fd > 0 && u->n_out < sizeof u->out) {
+		u->out[u->n_out++] = byte;
+		u->out_delims += byte == 0;
+	}
+}
+
+/* What the host received since the last call reaches the pty now: with --realtime not before its simulated time
+ * on the wall clock (the main loop alone lets the simulation run up to 2 ms ahead), and written by this thread
+ * (simavr's pty thread would add up to its 0.5 ms select period). --host-log: "P simulated_s monotonic_ns frames". */
+static void host_deliver(uart_out_t *u)
+{
+	if (!u->n_out)
+		return;
+	double sim_s = (double)u->avr->cycle / u->avr->frequency;
+	if (u->realtime) {
+		double ahead = board_wall0 + sim_s - wall_now();
+		if (ahead > 50e-6) {
+			struct timespec ts = {(time_t)ahead, (long)((ahead - floor(ahead)) * 1e9)};
+			nanosleep(&ts, NULL);
+		}
+	}
+	ssize_t w = write(u->pty_fd, u->out, u->n_out); /* non-blocking: nobody reading drops, as a full adapter does */
+	if (w < (ssize_t)u->n_out)
+		u->pty_dropped += u->n_out - (w > 0 ? (uint32_t)w : 0);
+	if (u->host_log && u->out_delims) {
+		struct timespec now;
+		clock_gettime(CLOCK_MONOTONIC, &now);
+		fprintf(u->host_log, "P %.9f %lld %u\n", sim_s, (long long)now.tv_sec * 1000000000LL + now.tv_nsec, u->out_delims);
+	}
+	u->n_out = u->out_delims = 0;
 }
 
 /* The adapter sends what it holds as one USB packet. */
@@ -233,6 +271,7 @@ static void adapter_flush(uart_out_t *u)
 {
 	for (uint32_t i = 0; i < u->pending; i++)
 		host_receives(u, u->pend[i]);
+	host_deliver(u);
 	u->pending = 0;
 	u->last_packet = u->avr->cycle;
 }
@@ -276,12 +315,19 @@ static void uart_hook(struct avr_irq_t *irq, uint32_t value, void *param)
 	uart_out_t *u = param;
 	uint8_t byte = (uint8_t)value;
 	u->bytes++;
+	double now_s = (double)u->avr->cycle / u->avr->frequency;
 	if (byte == 0) {
-		if (u->last_nonzero)
+		if (u->last_nonzero) {
 			u->frames++;
+			if (u->host_log) /* "U first_byte_s delimiter_s": the firmware wrote them into UDR then */
+				fprintf(u->host_log, "U %.9f %.9f\n", u->frame_start_s, now_s);
+		}
 		u->last_nonzero = 0;
-	} else
+	} else {
+		if (!u->last_nonzero)
+			u->frame_start_s = now_s;
 		u->last_nonzero = 1;
+	}
 	if (!u->host_reading) { /* the adapter keeps what fits in its buffer and drops the rest */
 		if (u->buffered >= u->adapter_buffer) {
 			u->host_dropped++;
@@ -291,6 +337,7 @@ static void uart_hook(struct avr_irq_t *irq, uint32_t value, void *param)
 	}
 	if (!u->packet) {
 		host_receives(u, byte);
+		host_deliver(u);
 		return;
 	}
 	u->pend[u->pending++] = byte;
@@ -556,6 +603,9 @@ static void usage(FILE *f)
 		"                       runs; interrupts, peripherals and the watchdog go on (a reset ends it)\n"
 		"  --drdy-pin PIN       wire the HMC5883L's DRDY to PIN (e.g. D3; not wired on the sphere)\n"
 		"  --capture-times FILE at each frame delimiter in the capture: u64 bytes captured so far, f64 simulated s\n"
+		"  --host-log FILE      text: T0 (CLOCK_MONOTONIC ns at simulated 0), U (each frame's first byte and\n"
+		"                       delimiter leaving the UART, simulated s), P (each pty write with delimiters:\n"
+		"                       simulated s, CLOCK_MONOTONIC ns after the write, delimiters in it)\n"
 		"  --simavr-i2c-timing  simavr's 1 us per I2C step (default: 9 SCL periods a byte at the TWBR rate)\n"
 		"  --i2c-real-timing    (the default; kept for old scripts)\n"
 		"  --simavr-twi-status  keep simavr 1.6's status 0x28/0x30 after SLA+W (default: the real 0x18/0x20)\n"
@@ -596,7 +646,7 @@ int main(int argc, char **argv)
 	imp.seed = 1;
 	int clocks_random = 0, sda_held = 0, n_brownouts = 0, n_stalls = 0, n_resets_mid = 0, n_resets_at = 0, n_power_offs = 0;
 	double glitch_rate = 0, power_offs[MAX_FAULTS], brownouts[MAX_FAULTS], resets_mid[MAX_FAULTS], host_stalls[MAX_FAULTS][2], resets_at[MAX_FAULTS];
-	const char *adapter = NULL, *times_path = NULL, *bootloader_path = NULL;
+	const char *adapter = NULL, *times_path = NULL, *bootloader_path = NULL, *host_log_path = NULL;
 	double hangs[MAX_FAULTS][2];
 	int n_hangs = 0;
 	uint32_t latency_timer_ms = 16; /* the FT232R latency timer as ftdi_sio leaves it (since Linux 4.x) */
@@ -618,7 +668,7 @@ int main(int argc, char **argv)
 		{"glitch", required_argument, 0, 'g'}, {"reset-mid-read", required_argument, 0, 'm'},
 		{"brownout", required_argument, 0, 'b'}, {"sda-held", no_argument, 0, 'H'},
 		{"host-stall", required_argument, 0, 'o'}, {"adapter", required_argument, 0, 'a'},
-		{"latency-timer", required_argument, 0, 'Y'},
+		{"latency-timer", required_argument, 0, 'Y'}, {"host-log", required_argument, 0, 'W'},
 		{"simavr-i2c-timing", no_argument, 0, 'U'}, {"capture-times", required_argument, 0, 'X'},
 		{"reset-at", required_argument, 0, 'A'}, {"drdy-pin", required_argument, 0, 'D'},
 		{"power-off", required_argument, 0, 'O'}, {"bootloader", required_argument, 0, 'Q'},
@@ -638,6 +688,7 @@ int main(int argc, char **argv)
 		case 'I': real_i2c = 1; break;
 		case 'U': real_i2c = 0; break;
 		case 'X': times_path = optarg; break;
+		case 'W': host_log_path = optarg; break;
 		case 'D':
 			if (parse_pin(optarg, &dpin_port, &dpin_bit)) { fprintf(stderr, "bad pin %s (e.g. D3)\n", optarg); return 2; }
 			break;
@@ -809,6 +860,10 @@ int main(int argc, char **argv)
 		log_fault(0, "sda_held_at_power_up", CHIP_HMC5883L);
 	}
 	uart_out.avr = avr;
+	if (host_log_path && !(uart_out.host_log = fopen(host_log_path, "w"))) {
+		fprintf(stderr, "sphere-board: cannot write %s: %s\n", host_log_path, strerror(errno));
+		return 1;
+	}
 	if (times_path && !(uart_out.times = fopen(times_path, "wb"))) {
 		fprintf(stderr, "sphere-board: cannot write %s: %s\n", times_path, strerror(errno));
 		return 1;
@@ -849,11 +904,12 @@ int main(int argc, char **argv)
 	if (use_pty) {
 		uart_pty_init(avr, &pty);
 		pty_connect_without_link(&pty);
-		if (adapter) { /* the adapter's packets reach the pty, not the UART's bytes one by one */
-			avr_unconnect_irq(avr_io_getirq(avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_OUTPUT), pty.irq + IRQ_UART_PTY_BYTE_IN);
-			uart_out.pty_in = pty.irq + IRQ_UART_PTY_BYTE_IN;
-		}
+		/* the host's side (the adapter's packets, or each byte) is written by host_deliver(), not simavr's thread,
+		 * which keeps reading what the host sends */
+		avr_unconnect_irq(avr_io_getirq(avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_OUTPUT), pty.irq + IRQ_UART_PTY_BYTE_IN);
 		uart_out.pty_fd = pty.port[0].s;
+		fcntl(uart_out.pty_fd, F_SETFL, fcntl(uart_out.pty_fd, F_GETFL) | O_NONBLOCK);
+		uart_out.realtime = realtime;
 		printf("sphere-board: UART on %s\n", pty.port[0].slavename);
 		fflush(stdout);
 	}
@@ -899,6 +955,11 @@ int main(int argc, char **argv)
 	avr_cycle_count_t next_check = 0;
 	const avr_cycle_count_t check_every = avr->frequency / 1000; /* 1 ms */
 	double wall0 = wall_now(), cpu0 = cpu_now();
+	board_wall0 = wall0;
+	if (uart_out.host_log) {
+		fprintf(uart_out.host_log, "T0 %lld\n", (long long)llround(wall0 * 1e9));
+		setvbuf(uart_out.host_log, NULL, _IOFBF, 1 << 16);
+	}
 	int stall = 0, state = cpu_Running;
 	double next_glitch = glitch_rate > 0 ? 0.5 : INFINITY;
 	int brown_i = 0, reset_i = 0, reset_at_i = 0, power_off_i = 0;
@@ -1049,6 +1110,10 @@ int main(int argc, char **argv)
 	/* a full or read-only disk: say so and fail, never leave a short file behind silently */
 	if (uart_out.capture && (ferror(uart_out.capture) | fclose(uart_out.capture))) {
 		fprintf(stderr, "sphere-board: cannot write %s: %s\n", capture_path, strerror(errno ? errno : EIO));
+		return 1;
+	}
+	if (uart_out.host_log && (ferror(uart_out.host_log) | fclose(uart_out.host_log))) {
+		fprintf(stderr, "sphere-board: cannot write %s: %s\n", host_log_path, strerror(errno ? errno : EIO));
 		return 1;
 	}
 	if (uart_out.times && (ferror(uart_out.times) | fclose(uart_out.times))) {

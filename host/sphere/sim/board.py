@@ -150,7 +150,7 @@ def board_command(elf, trace, seconds: float, capture=None, pty=False, realtime=
                   verbose=0, build=True, i2c_real_timing=True, board=None, noise=False, seed=None,
                   clock_ppm=(), clocks_random=False, glitch=None, reset_mid_read=(), brownout=(), sda_held=False,
                   host_stall=(), adapter=None, capture_times=None, reset_at=(), drdy_pin=None,
-                  power_off=(), latency_timer_ms=None, bootloader=None, hang=()) -> list[str]:
+                  power_off=(), latency_timer_ms=None, bootloader=None, hang=(), host_log=None) -> list[str]:
     """sphere-board's command line. I2C runs at its real 400 kHz timing unless ``i2c_real_timing=False``."""
     cmd = [str(board_path(build)), str(elf), "--trace", str(trace), "--seconds", f"{seconds:g}"]
     if capture:
@@ -203,6 +203,8 @@ def board_command(elf, trace, seconds: float, capture=None, pty=False, realtime=
         cmd += ["--adapter", adapter]
     if latency_timer_ms:
         cmd += ["--latency-timer", str(int(latency_timer_ms))]
+    if host_log:
+        cmd += ["--host-log", str(host_log)]
     if capture_times:
         cmd += ["--capture-times", str(capture_times)]
     if drdy_pin:

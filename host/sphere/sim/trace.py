@@ -399,6 +399,7 @@ SYNTHETIC = {
     "taps": lambda seconds, arg: taps(seconds),
     "calibration": lambda seconds, arg: calibration(seconds),
     "hold": "sphere.sim.hold:synthetic",
+    "onsets": "sphere.sim.onsets:synthetic",
     "tour": "sphere.sim.tour:synthetic",
     "turn": "sphere.sim.turn:synthetic",
 }

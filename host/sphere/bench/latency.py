@@ -1,0 +1,370 @@
+"""Motion onset → X pointer move, end to end: the real firmware on the virtual board in real time, each USB-serial
+adapter model, ``sphere-mouse --backend x11`` on a private Xvfb, the pointer read back thousands of times a second.
+
+Rows (each a fresh board and daemon; every row in the same run, side by side):
+
+- ``none``: bytes reach the host as they leave the UART (a native-USB board's best case);
+- ``ch340``: the CH340 model (32-byte packets, sent at every 1 ms USB frame);
+- ``ftdi``: the FT232R model with the host's low-latency request honoured (what sphere-mouse asks by default:
+  latency timer 1 ms; hardware/sim/README.md, "The host's requests");
+- ``ftdi-16ms``: the same with ``[source] low_latency = false`` (the driver's default 16 ms latency timer: what
+  every earlier sphere-mouse got), the row the others are compared with.
+
+Motion: ``synthetic:onsets`` (:mod:`sphere.sim.onsets`): sharp 120 °/s turns starting at known simulated times,
+at every phase of the 5 ms sample clock. For each onset the pointer's first move after it is found in the
+pointer record, and its latency is split where the path can be split (all from the board's ``--host-log``):
+
+- ``age``: onset → the firmware starts sending the frame that moved the pointer (sampling, the ITG-3200's
+  42 Hz DLPF, waiting for the sample period, the MARG update, queueing behind other frames);
+- ``wire``: that frame's first byte → its delimiter at the UART (its length at the baud rate);
+- ``adapter``: the delimiter leaves the UART → the adapter hands the packet to the host (the pty write);
+- ``host``: the pty write → the X pointer moved (the daemon's read, decoding, filters, XTest, the X server,
+  and the pointer sampler's own period).
+
+The frame that moved the pointer: of the pty writes before the move, the last one that carried the turn (a
+RAW_SAMPLE sent after the onset with a non-zero gyro reading: the board runs without noise), and in it the first
+such RAW_SAMPLE (an FTDI packet holds several frames; the daemon moves at the first that adds up to a pixel).
+A move with no such frame before it is counted as unattributed. ``total`` = age + wire + adapter + host. The board paces itself to
+the wall clock and writes no packet before its simulated time; ``lag`` (the write's wall time minus its
+simulated time) is how late it was, left out of ``total`` and printed so that a run on a loaded machine shows.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from sphere import argtypes
+
+HELP = ("motion onset -> X pointer move through the virtual board: each USB adapter model and baud, "
+        "sphere-mouse --backend x11 on Xvfb, latency per stage (percentiles)")
+
+#: row name -> (the board's --adapter, the host asks for low latency)
+ADAPTERS = {"none": (None, True), "ch340": ("ch340", True), "ftdi": ("ftdi", True), "ftdi-16ms": ("ftdi", False)}
+BASELINE = "ftdi-16ms"
+STAGES = ("age", "wire", "adapter", "host")
+#: a move this long after its onset is not this onset's (the next comes PERIOD_S later)
+MOVE_WINDOW_S = 0.25
+
+
+def add_arguments(p) -> None:
+    p.add_argument("--seconds", type=argtypes.seconds_up_to(3600.0), default=20.0,
+                   help="simulated (= wall) seconds per row, the first 3 still (default 20: 42 onsets a row)")
+    p.add_argument("--adapters", type=_adapter_list, default=list(ADAPTERS),
+                   help=f"comma-separated rows among {', '.join(ADAPTERS)} (default all)")
+    p.add_argument("--bauds", type=_baud_list, default=[115200],
+                   help="comma-separated baud rates the sphere runs at (default 115200)")
+    p.add_argument("--seed", type=argtypes.count, default=27, help="seed of the onsets' phases (default 27)")
+    p.add_argument("--json", metavar="OUT", type=argtypes.out_file, help="also write every figure as JSON")
+
+
+def _adapter_list(text: str) -> list[str]:
+    import argparse
+
+    names = [n.strip() for n in text.split(",") if n.strip()]
+    bad = [n for n in names if n not in ADAPTERS]
+    if bad or not names:
+        raise argparse.ArgumentTypeError(f"unknown adapter row {', '.join(bad) or repr(text)}: "
+                                         f"choose among {', '.join(ADAPTERS)}")
+    return names
+
+
+def _baud_list(text: str) -> list[int]:
+    import argparse
+
+    bauds = [argtypes.baud(b.strip()) for b in text.split(",") if b.strip()]
+    if not bauds:
+        raise argparse.ArgumentTypeError(f"no baud rate in {text!r}: e.g. 115200 or 115200,1000000")
+    for b in bauds:
+        if b != 115200:
+            raise argparse.ArgumentTypeError(f"baud {b}: the sphere runs at 115200 only (the firmware has no baud "
+                                             "switch yet)")
+    return bauds
+
+
+# ---------------------------------------------------------------------------------------------------- the record
+
+
+@dataclass
+class HostLog:
+    """The board's --host-log: T0, frames at the UART (U), pty writes (P), one entry per delimiter."""
+
+    t0_ns: int
+    uart: list  # (first byte s, delimiter s) per frame
+    pty: list  # (simulated s, monotonic ns) per delimiter
+
+    @classmethod
+    def read(cls, path: Path) -> "HostLog":
+        t0, uart, pty = 0, [], []
+        for line in path.read_text().splitlines():
+            f = line.split()
+            if f[0] == "T0":
+                t0 = int(f[1])
+            elif f[0] == "U":
+                uart.append((float(f[1]), float(f[2])))
+            elif f[0] == "P":
+                pty.extend([(float(f[1]), int(f[2]))] * int(f[3]))
+        return cls(t0, uart, pty)
+
+
+@dataclass
+class Frame:
+    uart_start_s: float
+    uart_end_s: float
+    pty_s: float
+    pty_ns: int
+    moving: bool  # a RAW_SAMPLE with a non-zero gyro reading
+
+
+def frames_of(capture: bytes, log: HostLog) -> list[Frame]:
+    """Every frame the host received, in order, with its times at the UART and at the pty."""
+    from sphere.protocol import FrameDecoder, RawSample
+
+    chunks = capture.split(b"\x00")[:-1]  # one per delimiter (the text after the last one is unfinished)
+    decoder = FrameDecoder("device")
+    out, u = [], 0
+    for j, chunk in enumerate(chunks):
+        if not chunk:
+            continue
+        if j >= len(log.pty) or u >= len(log.uart):
+            break
+        got = decoder.feed(chunk + b"\x00")
+        p = got[0] if got else None
+        moving = p is not None and p.TYPE == RawSample.TYPE and any(p.gyro)
+        start, end = log.uart[u]
+        out.append(Frame(start, end, *log.pty[j], moving))
+        u += 1
+    return out
+
+
+def pointer_moves(samples: np.ndarray, after_ns: int, until_ns: int):
+    """(time ns, x, y) of the first sample after ``after_ns`` (and before ``until_ns``) whose position differs from
+    the position at ``after_ns``; None when the pointer did not move."""
+    t = samples[:, 0]
+    i = int(np.searchsorted(t, after_ns, side="right"))
+    if i == 0 or i >= len(t):
+        return None
+    x0, y0 = samples[i - 1, 1], samples[i - 1, 2]
+    moved = np.nonzero((samples[i:, 1] != x0) | (samples[i:, 2] != y0))[0]
+    if not len(moved):
+        return None
+    k = i + int(moved[0])
+    return None if t[k] > until_ns else (int(t[k]), int(samples[k, 1]), int(samples[k, 2]))
+
+
+def attribute(onsets_s, connected_ns: int, frames: list[Frame], samples: np.ndarray, t0_ns: int) -> dict:
+    """Per onset: the pointer's first move and the stages of the frame that moved it (module docstring)."""
+    stages = {k: [] for k in (*STAGES, "total", "lag")}
+    missed = unattributed = skipped = 0
+    pty_ns = np.array([f.pty_ns for f in frames], dtype=np.int64)
+    for t_on in onsets_s:
+        on_ns = t0_ns + int(round(t_on * 1e9))
+        if on_ns < connected_ns:
+            skipped += 1
+            continue
+        # the pointer's position when the board reached the onset: its last write before the onset
+        before = [f for f in frames if f.uart_end_s <= t_on]
+        start_ns = max(on_ns, before[-1].pty_ns if before else on_ns)
+        move = pointer_moves(samples, start_ns, on_ns + int(MOVE_WINDOW_S * 1e9) + (start_ns - on_ns))
+        if move is None:
+            missed += 1
+            continue
+        w = int(np.searchsorted(pty_ns, move[0], side="right"))  # frames written before the move: [:w]
+        carrying = [i for i in range(w) if frames[i].moving and frames[i].uart_start_s >= t_on]
+        if not carrying:
+            unattributed += 1
+            continue
+        write_ns = frames[carrying[-1]].pty_ns  # the last write before the move that carried the turn
+        trigger = frames[next(i for i in carrying if frames[i].pty_ns == write_ns)]
+        parts = {"age": trigger.uart_start_s - t_on, "wire": trigger.uart_end_s - trigger.uart_start_s,
+                 "adapter": trigger.pty_s - trigger.uart_end_s, "host": (move[0] - trigger.pty_ns) / 1e9}
+        for k, v in parts.items():
+            stages[k].append(v * 1e3)
+        stages["total"].append(sum(parts.values()) * 1e3)
+        stages["lag"].append((trigger.pty_ns - t0_ns) / 1e6 - trigger.pty_s * 1e3)
+    return {"ms": stages, "missed": missed, "unattributed": unattributed, "skipped": skipped}
+
+
+def percentiles(values) -> dict:
+    if not values:
+        return {"n": 0}
+    a = np.asarray(values, dtype=float)
+    return {"n": len(a), "p50": float(np.percentile(a, 50)), "p95": float(np.percentile(a, 95)),
+            "p99": float(np.percentile(a, 99)), "max": float(a.max())}
+
+
+# ---------------------------------------------------------------------------------------------------- one row
+
+
+class PointerRecorder(threading.Thread):
+    """Reads the X pointer every 0.2 ms or so (the sleep plus one round trip) and keeps each change."""
+
+    def __init__(self, display: str):
+        super().__init__(daemon=True)
+        from sphere.bench._xvfb import PointerReader
+
+        self.reader = PointerReader(display)
+        self.stop = threading.Event()
+        self.changes: list[tuple[int, int, int]] = []
+        self.reads = 0
+        self.gaps_ns: list[int] = []
+
+    def run(self):
+        pos = self.reader.position()
+        last = time.monotonic_ns()
+        self.changes.append((last, *pos))
+        while not self.stop.is_set():
+            p = self.reader.position()
+            now = time.monotonic_ns()
+            self.reads += 1
+            self.gaps_ns.append(now - last)
+            last = now
+            if p != pos:
+                pos = p
+                self.changes.append((now, *p))
+            time.sleep(0.0002)  # about 3,000 reads a second on an idle machine: the sampler's period stays well under 1 ms
+        self.changes.append((time.monotonic_ns(), *pos))
+        self.reader.close()
+
+
+def run_row(name: str, baud: int, trace: Path, onsets_s, seconds: float, display: str, tmp: Path, elf) -> dict:
+    from sphere.sim.board import board_command
+
+    adapter, low_latency = ADAPTERS[name]
+    log_path, cap_path = tmp / f"{name}-{baud}.log", tmp / f"{name}-{baud}.cap"
+    cmd = board_command(elf, trace, seconds, capture=cap_path, pty=True, adapter=adapter, host_log=log_path)
+    board = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    mouse = None
+    recorder = PointerRecorder(display)
+    recorder.start()
+    try:
+        pty = None
+        for line in board.stdout:
+            if "UART on " in line:
+                pty = line.split("UART on ", 1)[1].strip()
+                break
+        if pty is None:
+            raise RuntimeError(f"the virtual board did not start: {board.stderr.read().strip()[-300:]}")
+        mouse_cmd = [sys.executable, "-m", "sphere.mouse", "--port", pty, "--baud", str(baud), "--backend", "x11",
+                     "--display", display, "--no-stream", "--quiet", "--config", os.devnull,
+                     "--set", f"source.low_latency={'true' if low_latency else 'false'}"]
+        mouse = subprocess.Popen(mouse_cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+        connected = {}
+
+        def watch():
+            for line in mouse.stderr:
+                if "sphere found on" in line and "ns" not in connected:
+                    connected["ns"] = time.monotonic_ns()
+                connected.setdefault("lines", []).append(line.rstrip())
+
+        watcher = threading.Thread(target=watch, daemon=True)
+        watcher.start()
+        board.wait(seconds * 4 + 60)
+    finally:
+        recorder.stop.set()
+        recorder.join(5)
+        for proc in (mouse, board):
+            if proc is not None and proc.poll() is None:
+                proc.terminate()
+                try:
+                    proc.wait(10)
+                except subprocess.TimeoutExpired:
+                    proc.kill()
+    if "ns" not in connected:
+        raise RuntimeError("sphere-mouse did not find the virtual board: " + " | ".join(connected.get("lines", [])[-3:]))
+    log = HostLog.read(log_path)
+    frames = frames_of(cap_path.read_bytes(), log)
+    samples = np.array(recorder.changes, dtype=np.int64)
+    # from 0.5 s after the daemon found the port: its start-up (HELLO, gyro bias) is not the steady state
+    got = attribute(onsets_s, connected["ns"] + 500_000_000, frames, samples, log.t0_ns)
+    gaps = np.asarray(recorder.gaps_ns, dtype=float) / 1e6
+    return {"row": name, "baud": baud, "onsets": len(onsets_s), "moves": len(got["ms"]["total"]),
+            "missed": got["missed"], "unattributed": got["unattributed"], "skipped_before_connect": got["skipped"],
+            "stages_ms": {k: percentiles(v) for k, v in got["ms"].items()},
+            "pointer_reads_per_s": recorder.reads / max(1e-9, gaps.sum() / 1e3),
+            "pointer_read_gap_ms": {"p50": float(np.percentile(gaps, 50)), "p99": float(np.percentile(gaps, 99))}
+            if len(gaps) else {}}
+
+
+# ---------------------------------------------------------------------------------------------------- the bench
+
+
+def run(args) -> int:
+    from sphere.bench._xvfb import Xvfb, XvfbUnavailable
+    from sphere.sim import onsets as O
+    from sphere.sim import trace as T
+    from sphere.sim.board import firmware_elf
+
+    onsets_s = O.onset_times(args.seconds, args.seed)
+    if not len(onsets_s):
+        print(f"sphere bench latency: --seconds {args.seconds:g} leaves no onset (the first comes at "
+              f"{O.LEAD_S:g} s): give at least {O.LEAD_S + O.PERIOD_S:g}", file=sys.stderr)
+        return 2
+    try:
+        elf = firmware_elf()
+        xvfb = Xvfb()
+    except (XvfbUnavailable, RuntimeError, OSError) as e:
+        print(f"sphere bench latency: {e}", file=sys.stderr)
+        return 1
+    rows = []
+    load_before = os.getloadavg()[0]
+    try:
+        with tempfile.TemporaryDirectory(prefix="sphere-latency-") as tmp:
+            tmp = Path(tmp)
+            trace = T.to_chips(O.onsets(args.seconds, args.seed), gyro_rate_hz=1000.0).write(tmp / "onsets.bin")
+            for baud in args.bauds:
+                for name in args.adapters:
+                    print(f"  {name} at {baud} baud: {args.seconds:g} s ...", file=sys.stderr, flush=True)
+                    rows.append(run_row(name, baud, trace, onsets_s, args.seconds, xvfb.display, tmp, elf))
+    except RuntimeError as e:
+        print(f"sphere bench latency: {e}", file=sys.stderr)
+        return 1
+    finally:
+        xvfb.close()
+    result = {"seconds_per_row": args.seconds, "seed": args.seed, "load_average": [load_before, os.getloadavg()[0]],
+              "rows": rows}
+    report(result)
+    if args.json:
+        with open(args.json, "w") as f:
+            json.dump(result, f, indent=2)
+    return 0
+
+
+def report(result: dict) -> None:
+    rows = result["rows"]
+    base = {r["baud"]: r for r in rows if r["row"] == BASELINE}
+    print(f"motion onset -> X pointer move, ms ({result['seconds_per_row']:g} s a row, seed {result['seed']}; "
+          f"load average {result['load_average'][0]:.1f} -> {result['load_average'][1]:.1f})")
+    head = (f"{'adapter':<10} {'baud':>7} {'moves':>7} {'total p50':>9} {'p95':>6} {'p99':>6} {'max':>6} "
+            f"{'vs 16ms':>7} | {'age p50':>7} {'p95':>5} | {'wire':>5} | {'adapter p50':>11} {'p95':>5} | "
+            f"{'host p50':>8} {'p95':>5} {'p99':>5} | {'lag p95':>7} {'reads/s':>7}")
+    print(head)
+    for r in rows:
+        s = r["stages_ms"]
+
+        def f(stage, p, width=6):
+            v = s[stage].get(p)
+            return f"{v:{width}.2f}" if v is not None else " " * (width - 1) + "-"
+
+        b = base.get(r["baud"])
+        ratio = (f"{s['total']['p95'] / b['stages_ms']['total']['p95']:7.2f}"
+                 if b and b is not r and s["total"].get("p95") and b["stages_ms"]["total"].get("p95") else "      -")
+        print(f"{r['row']:<10} {r['baud']:>7} {r['moves']:>3}/{r['onsets'] - r['skipped_before_connect']:<3} "
+              f"{f('total', 'p50', 9)} {f('total', 'p95')} {f('total', 'p99')} {f('total', 'max')} {ratio} | "
+              f"{f('age', 'p50', 7)} {f('age', 'p95', 5)} | {f('wire', 'p50', 5)} | {f('adapter', 'p50', 11)} "
+              f"{f('adapter', 'p95', 5)} | {f('host', 'p50', 8)} {f('host', 'p95', 5)} {f('host', 'p99', 5)} | "
+              f"{f('lag', 'p95', 7)} {r['pointer_reads_per_s']:7.0f}")
+    notes = [f"{r['row']}: {r['missed']} onsets without a move, {r['unattributed']} unattributed"
+             for r in rows if r["missed"] or r["unattributed"]]
+    if notes:
+        print("; ".join(notes))

@@ -1,0 +1,39 @@
+"""`sphere bench latency` through the command line: the real firmware on the virtual board in real time, the
+daemon on Xvfb, the pointer read back; the stages add up and the adapter models show where they should."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+import sys
+
+import pytest
+
+pytestmark = pytest.mark.skipif(shutil.which("Xvfb") is None, reason="needs Xvfb (apt-get install xvfb)")
+
+
+def test_bench_latency_rows_and_stages(tmp_path):
+    from simscenarios import need_board
+
+    need_board()
+    out = tmp_path / "latency.json"
+    r = subprocess.run([sys.executable, "-m", "sphere.cli", "bench", "latency", "--seconds", "9", "--adapters",
+                        "none,ftdi-16ms", "--json", str(out)], capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert "motion onset -> X pointer move" in r.stdout and "ftdi-16ms" in r.stdout
+    rows = {row["row"]: row for row in json.loads(out.read_text())["rows"]}
+    assert set(rows) == {"none", "ftdi-16ms"}
+    for row in rows.values():
+        s = row["stages_ms"]
+        assert row["moves"] >= 3, row  # onsets after the daemon found the port, each moved the pointer
+        assert row["pointer_reads_per_s"] >= 1000
+        # a RAW_SAMPLE frame at 115200 baud (10 bits a byte): its 30-odd bytes take 2.5-2.9 ms
+        assert 2.4 <= s["wire"]["p50"] <= 3.0
+        assert s["age"]["p50"] > 0 and s["host"]["p50"] > 0
+        assert s["total"]["max"] < 250
+    # without an adapter the pty gets each byte as it leaves the UART; the FT232R at 16 ms holds a frame for
+    # up to its latency timer plus a 1 ms USB frame
+    assert rows["none"]["stages_ms"]["adapter"]["max"] < 0.01
+    ftdi = rows["ftdi-16ms"]["stages_ms"]["adapter"]
+    assert 1.0 < ftdi["p50"] and ftdi["max"] <= 17.1
