@@ -95,6 +95,8 @@ def main() -> None:
     out.append(ok("reply_settings", p.Reply(13, p.GetSettings.TYPE, p.Result.OK, data=saved + bytes([p.SETTINGS_SAVED])), 10,
                   "REPLY to GET_SETTINGS: 14-byte settings block (raw 100 Hz, orientation 50 Hz, no status; tap 2.5 g "
                   "on z only, no double tap; free fall 0.5 g for 200 ms; β 0.060) then settings_state saved"))
+    out.append(ok("reply_echo", p.Reply(14, p.Echo.TYPE, p.Result.OK, data=(4000123456).to_bytes(4, "little")), 11,
+                  "REPLY to ECHO: device_t_us 4000123456 (version 3)"))
     # host → device
     out.append(ok("cmd_get_hello", p.GetHello(), 0, "GET_HELLO"))
     out.append(ok("cmd_set_stream", p.SetStream(0x07, 200, 100), 1, "SET_STREAM: raw 200 Hz, orientation 100 Hz, status"))
@@ -116,6 +118,10 @@ def main() -> None:
     out.append(ok("cmd_get_settings", p.GetSettings(), 18, "GET_SETTINGS"))
     out.append(ok("cmd_save_settings", p.SaveSettings(), 19, "SAVE_SETTINGS"))
     out.append(ok("cmd_clear_settings", p.ClearSettings(), 20, "CLEAR_SETTINGS"))
+    out.append(ok("cmd_set_baud", p.SetBaud(1000000), 21, "SET_BAUD 1000000 (version 3)"))
+    out.append(ok("cmd_set_baud_bad_rate", p.SetBaud(230400), 22,
+                  "SET_BAUD 230400: not exact on 16 MHz, a valid frame the device answers with bad_value"))
+    out.append(ok("cmd_echo", p.Echo(), 23, "ECHO (version 3)"))
 
     # broken frames
     good = p.RawSample(123456789, 0x0F, (-3, 12, 256), (5, -7, 1), (210, -45, -380))

@@ -1,6 +1,7 @@
 // MARG sphere firmware for the Arduino Nano (ATmega328P, 16 MHz).
 // Sensors: ADXL345 (0x53), ITG-3200 (0x68/0x69), HMC5883L (0x1E) or QMC5883L (0x0D) on I²C at 400 kHz; ADXL345 INT1 on D2.
-// Output: framed packets per protocol/spec.md on the UART at 115200 baud. D13 is high exactly while
+// Output: framed packets per protocol/spec.md on the UART at 115200 baud (SET_BAUD moves a USB link to 250k-1M
+// baud while the host confirms it, spec §5.4). D13 is high exactly while
 // the MARG update runs. All behaviour lives in src/core/ (SphereDevice); this file only wires the
 // Nano's peripherals to it and paces it with the 200 Hz timer.
 #include <Arduino.h>

@@ -7,6 +7,7 @@ from __future__ import annotations
 import pytest
 
 from simscenarios import firmware_scenario, tap_times_sim_s
+from sphere.protocol import PROTOCOL_VERSION
 
 pytestmark = pytest.mark.slow
 
@@ -21,7 +22,7 @@ def test_hello_packet():
     _ok(s)
     h = s.summary.hello
     assert h is not None, "no HELLO in the capture"
-    assert h.protocol_version == 2
+    assert h.protocol_version == PROTOCOL_VERSION
     assert h.sensors_found == 0b111
     assert h.adxl345_devid == 0xE5
     assert h.itg3200_whoami & 0x7E == 0x68

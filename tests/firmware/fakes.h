@@ -138,6 +138,12 @@ struct FakeHal : sphere::DeviceHal {
     }
     void identify(uint8_t s) override { identify_s = s; }
     void reboot() override { ++reboots; }
+    uint32_t baud = 115200;
+    int baud_switches = 0;
+    void setBaud(uint32_t b) override {
+        baud = b;
+        ++baud_switches;
+    }
     uint16_t i2cRecoveries() override { return 0; }
     uint16_t batteryMv() override { return 0; }
 

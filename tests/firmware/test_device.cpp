@@ -270,7 +270,7 @@ TEST_CASE("every host command vector gets exactly one REPLY with the listed resu
         REQUIRE(count(f, PKT_REPLY) == 1);
         const auto* rep = first(f, PKT_REPLY);
         CHECK((*rep)[2] == parseInts(v.get("seq")).at(0));
-        uint8_t expect = v.name == "cmd_set_stream_bad_rate" ? RESULT_BAD_VALUE
+        uint8_t expect = v.name == "cmd_set_stream_bad_rate" || v.name == "cmd_set_baud_bad_rate" ? RESULT_BAD_VALUE
                          : v.get("outcome") == "bad_length" ? RESULT_BAD_LENGTH
                          : v.get("outcome") == "unknown_type" ? RESULT_UNKNOWN_COMMAND
                                                               : RESULT_OK;
@@ -287,9 +287,63 @@ TEST_CASE("every host command vector gets exactly one REPLY with the listed resu
         if (v.name == "cmd_get_settings") CHECK(rep->size() == 4 + 3 + SETTINGS_BLOCK_LEN + 1);
         if (v.name == "cmd_save_settings") CHECK(r.hal.eeprom[SETTINGS_EEPROM_ADDR] == SETTINGS_EEPROM_VERSION);
         if (v.name == "cmd_clear_settings") CHECK(r.dev.settingsState() == SETTINGS_NONE_SAVED);
+        if (v.name == "cmd_set_baud") CHECK((r.hal.baud == 1000000 && r.dev.linkQuiet()));
+        if (v.name == "cmd_set_baud_bad_rate") CHECK((r.hal.baud_switches == 0 && !r.dev.linkQuiet()));
+        if (v.name == "cmd_echo") CHECK(rep->size() == 4 + 3 + 4);
         ++n;
     }
-    CHECK(n == 21);
+    CHECK(n == 24);
+}
+
+TEST_CASE("SET_BAUD: REPLY at the old rate, silence until the host's frame at the new one, fall-backs") {
+    Rig r;
+    r.dev.begin();
+    r.run(10);
+    r.hal.frames();
+    // confirmed: the REPLY, then nothing (no sequence number used) until the ECHO, whose REPLY carries the time
+    r.send(frameOf(CMD_SET_BAUD, 1, {0x40, 0x42, 0x0F, 0x00}));  // 1,000,000
+    auto f = r.hal.frames();
+    REQUIRE(f.size() == 1);
+    CHECK((f[0][0] == PKT_REPLY && f[0][4] == RESULT_OK));
+    uint8_t seq_reply = f[0][1];
+    CHECK((r.hal.baud == 1000000 && r.hal.baud_switches == 1 && r.dev.linkQuiet()));
+    r.run(50);
+    CHECK(r.hal.frames().empty());
+    r.hal.now = 4000000000u;
+    r.send(frameOf(CMD_ECHO, 2, {}));
+    f = r.hal.frames();
+    REQUIRE(f.size() == 1);
+    CHECK((uint8_t)(f[0][1] - seq_reply) == 1);  // no gap: the silent periods took no numbers
+    CHECK(getU32(&f[0][5]) >= 4000000000u);
+    CHECK(!r.dev.linkQuiet());
+    // renewed every 0.5 s (100 periods): the rate holds; the stream goes on
+    for (int i = 0; i < 6; ++i) {
+        r.run(100);
+        r.send(frameOf(CMD_ECHO, (uint8_t)(3 + i), {}));
+    }
+    CHECK((r.hal.baud == 1000000 && r.hal.baud_switches == 1));
+    CHECK(count(r.hal.frames(), PKT_RAW_SAMPLE) == 600);
+    // the host goes away: 1.5 s without an intact frame, back to 115200, a 0x00, the stream resumes
+    r.run(299);
+    CHECK(r.hal.baud == 1000000);
+    r.run(1);
+    CHECK((r.hal.baud == 115200 && r.hal.baud_switches == 2));
+    r.hal.frames();
+    // a host that never confirms: 1 s of silence, then 115200 again
+    r.send(frameOf(CMD_SET_BAUD, 20, {0x90, 0xD0, 0x03, 0x00}));  // 250,000
+    CHECK(r.hal.baud == 250000);
+    r.hal.frames();
+    r.run(199);
+    CHECK(r.hal.frames().empty());
+    r.run(1);
+    CHECK((r.hal.baud == 115200 && !r.dev.linkQuiet()));
+    r.run(2);
+    f = r.hal.frames();
+    CHECK(count(f, PKT_RAW_SAMPLE) >= 2);
+    // the rate in use: OK and nothing changes
+    int switches = r.hal.baud_switches;
+    r.send(frameOf(CMD_SET_BAUD, 21, {0x00, 0xC2, 0x01, 0x00}));  // 115200
+    CHECK((r.hal.baud_switches == switches && !r.dev.linkQuiet()));
 }
 
 TEST_CASE("SET_STREAM changes the streams; an invalid one changes nothing") {

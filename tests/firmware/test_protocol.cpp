@@ -63,6 +63,8 @@ const std::map<std::string, std::pair<uint8_t, std::vector<FieldSpec>>>& layouts
         {"GET_SETTINGS", {CMD_GET_SETTINGS, {}}},
         {"SAVE_SETTINGS", {CMD_SAVE_SETTINGS, {}}},
         {"CLEAR_SETTINGS", {CMD_CLEAR_SETTINGS, {}}},
+        {"SET_BAUD", {CMD_SET_BAUD, {{"baud", 'I', 1}}}},
+        {"ECHO", {CMD_ECHO, {}}},
     };
     return L;
 }
@@ -196,7 +198,7 @@ Decoded runDecoder(FrameDecoder& d, const std::vector<uint8_t>& wire) {
 
 // The REPLY result the device gives each host-direction vector (spec §5, §5.1).
 uint8_t expectedReplyResult(const Vector& v) {
-    if (v.name == "cmd_set_stream_bad_rate") return RESULT_BAD_VALUE;
+    if (v.name == "cmd_set_stream_bad_rate" || v.name == "cmd_set_baud_bad_rate") return RESULT_BAD_VALUE;
     std::string o = v.get("outcome");
     if (o == "bad_length") return RESULT_BAD_LENGTH;
     if (o == "unknown_type") return RESULT_UNKNOWN_COMMAND;
@@ -319,6 +321,8 @@ TEST_CASE("every golden vector decodes, re-encodes and is judged as listed") {
                     CHECK(cmd.identify.seconds == field1(v, "seconds"));
                 } else if (tname == "REBOOT") {
                     CHECK(cmd.reboot.magic == field1(v, "magic"));
+                } else if (tname == "SET_BAUD") {
+                    CHECK(cmd.set_baud.baud == (uint32_t)field1(v, "baud"));
                 } else if (tname == "SET_CALIBRATION") {
                     uint8_t blk[CALIBRATION_BLOCK_LEN];
                     writeCalibrationBlock(cmd.calibration, blk);
@@ -399,7 +403,10 @@ TEST_CASE("command ranges: an invalid command gets a reason") {
     CHECK(parse(payload(CMD_REBOOT, {0xB0, 0x07})) == RESULT_BAD_VALUE);
     CHECK(parse(payload(CMD_GET_STATUS, {1})) == RESULT_BAD_LENGTH);
     CHECK(parse(payload(0x02, {})) == RESULT_UNKNOWN_COMMAND);  // a device type sent as a command
-    CHECK(parse(payload(0x4F, {})) == RESULT_UNKNOWN_COMMAND);
+    CHECK(parse(payload(0x51, {})) == RESULT_UNKNOWN_COMMAND);  // reserved (spec §5), not a command yet
+    CHECK(parse(payload(CMD_SET_BAUD, {0x00, 0x84, 0x03, 0x00})) == RESULT_BAD_VALUE);  // 230400: not exact
+    CHECK(parse(payload(CMD_SET_BAUD, {0x20, 0xA1, 0x07, 0x00})) == RESULT_OK);
+    CHECK(c.set_baud.baud == 500000);
     CHECK(parse(payload(CMD_SET_BOARD, {2})) == RESULT_OK);
     CHECK(c.set_board.board_profile == 2);
     CHECK(parse(payload(CMD_SET_BOARD, {3})) == RESULT_BAD_VALUE);

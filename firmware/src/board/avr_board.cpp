@@ -77,6 +77,11 @@ bool AvrBoard::send(const uint8_t* frame, uint8_t len) {
     return true;
 }
 
+void AvrBoard::setBaud(uint32_t baud) {
+    Serial.flush();     // the REPLY (and anything before it) leaves at the old rate
+    Serial.begin(baud);  // 250k, 500k, 1M: UBRR 7, 3, 1 with U2X, exact on 16 MHz (ATmega328P datasheet, Table 20-7)
+}
+
 uint8_t AvrBoard::txRoom() {
     int n = Serial.availableForWrite();
     return (uint8_t)(n > 255 ? 255 : n);

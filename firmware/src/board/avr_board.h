@@ -28,6 +28,7 @@ public:
     bool adxlInterrupt(uint32_t& t_us) override;
     void identify(uint8_t seconds) override;
     void reboot() override { reboot_pending_ = true; }
+    void setBaud(uint32_t baud) override;
     uint16_t i2cRecoveries() override { return twi_.recoveries(); }
     uint16_t batteryMv() override { return 0; }
 

@@ -64,6 +64,12 @@ ResultCode CommandParser::parse(const uint8_t* payload, uint8_t len, Command& cm
             if (b[0] >= BOARD_PROFILE_COUNT) return RESULT_BAD_VALUE;
             cmd.set_board.board_profile = b[0];
             break;
+        case CMD_SET_BAUD: {  // the rates exact on 16 MHz, and the default (spec §5.4)
+            uint32_t baud = getU32(b);
+            if (baud != DEFAULT_BAUD && baud != 250000 && baud != 500000 && baud != 1000000) return RESULT_BAD_VALUE;
+            cmd.set_baud.baud = baud;
+            break;
+        }
         case CMD_IDENTIFY:
             if (b[0] < 1 || b[0] > 60) return RESULT_BAD_VALUE;
             cmd.identify.seconds = b[0];

@@ -36,6 +36,7 @@ struct Command {
         struct { uint8_t seconds; } identify;
         struct { uint16_t magic; } reboot;
         struct { uint8_t board_profile; } set_board;
+        struct { uint32_t baud; } set_baud;
     };
     Calibration calibration;  // SET_CALIBRATION
 };

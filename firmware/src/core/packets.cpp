@@ -30,6 +30,8 @@ int bodyLength(uint8_t type) {
         case CMD_GET_SETTINGS: return 0;
         case CMD_SAVE_SETTINGS: return 0;
         case CMD_CLEAR_SETTINGS: return 0;
+        case CMD_SET_BAUD: return 4;
+        case CMD_ECHO: return 0;
         default: return -1;
     }
 }

@@ -1,4 +1,4 @@
-// Packet types and bodies of protocol/spec.md §4–§5 (version 2). Field names are the spec's.
+// Packet types and bodies of protocol/spec.md §4–§5 (version 3). Field names are the spec's.
 #pragma once
 #include <stdint.h>
 
@@ -31,13 +31,19 @@ enum PacketType : uint8_t {
     CMD_REBOOT = 0x4C,
     CMD_GET_STATUS = 0x4D,
     CMD_SET_BOARD = 0x4E,
+    CMD_SET_BAUD = 0x4F,  // version 3: spec §5.4
+    CMD_ECHO = 0x50,      // version 3: spec §5.5
     CMD_GET_SETTINGS = 0x54,
     CMD_SAVE_SETTINGS = 0x55,
     CMD_CLEAR_SETTINGS = 0x56,
 };
 
 const uint8_t HELLO_LEN = 22, RAW_SAMPLE_LEN = 23, ORIENTATION_LEN = 13, EVENT_LEN = 8, STATUS_LEN = 29;
-const uint8_t REPLY_LEN = 3, REPLY_CALIBRATION_LEN = 3 + CALIBRATION_BLOCK_LEN + 1;
+const uint8_t REPLY_LEN = 3, REPLY_CALIBRATION_LEN = 3 + CALIBRATION_BLOCK_LEN + 1, REPLY_ECHO_LEN = 3 + 4;
+// SET_BAUD (spec §5.4): the rate after power-up and after a fall-back, and how long a faster rate waits
+// for the host's first intact frame (200 periods: 1 s) and then between intact frames (300: 1.5 s)
+const uint32_t DEFAULT_BAUD = 115200;
+const uint16_t BAUD_CONFIRM_TICKS = 200, BAUD_LEASE_TICKS = 300;
 
 // Body length of a packet type, -1 when this firmware does not know the type. REPLY: the length
 // without data (3); with GET_CALIBRATION's data it is 46.

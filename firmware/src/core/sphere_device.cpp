@@ -1,5 +1,7 @@
 #include "sphere_device.h"
 
+#include "bytes.h"
+
 #include <string.h>
 
 #include "bytes.h"
@@ -378,6 +380,7 @@ __attribute__((noinline)) void SphereDevice::tick() {
                       ? (uint16_t)(since > MargFilter::MAX_DT_US ? MargFilter::MAX_DT_US : since)
                       : 0;
     last_t_us_ = t0;
+    watchLink();
     readSensors(t0);
     handleEvents();
     if (raw_flags_ & RAW_ACCEL_OK) tap_active_ = guard_.update(raw_[0]);
@@ -421,6 +424,7 @@ __attribute__((noinline)) void SphereDevice::stream(uint32_t t_us) {
 }
 
 void SphereDevice::sendPacket(uint8_t type, const uint8_t* body, uint8_t len) {
+    if (link_quiet_) return;  // a rate the host may not listen at yet: not sent, no sequence number (spec §5.4)
     uint8_t frame[MAX_FRAME];
     uint8_t n = (uint8_t)FrameEncoder::encodeWithSeq(type, encoder_.nextSeq(), body, len, frame);
     // a dropped frame still uses its sequence number, so the host sees the loss as a gap
@@ -468,8 +472,34 @@ void SphereDevice::sendStatus() {
 __attribute__((noinline)) bool SphereDevice::receive(uint8_t byte) {
     // a delimiter ends a command: take it only when its reply fits (it waits in the receive buffer)
     if (byte == 0 && decoder_.pending() && hal_.txRoom() < REPLY_ROOM) return false;
-    if (decoder_.push(byte) == FRAME_OK) execute(decoder_.payload(), decoder_.payloadLength());
+    if (decoder_.push(byte) == FRAME_OK) {
+        rx_t_us_ = hal_.micros();
+        rx_idle_ticks_ = 0;
+        link_quiet_ = false;  // the host's first intact frame at a new rate confirms it (spec §5.4)
+        execute(decoder_.payload(), decoder_.payloadLength());
+    }
     return true;
+}
+
+// SET_BAUD (spec §5.4): the REPLY leaves at the old rate, then nothing is sent until the host's first intact
+// frame at the new one; watchLink() falls back to the default rate when that, or a later frame, does not come.
+void SphereDevice::switchBaud(uint32_t baud) {
+    hal_.setBaud(baud);
+    baud_ = baud == DEFAULT_BAUD ? 0 : baud;
+    link_quiet_ = true;
+    rx_idle_ticks_ = 0;
+}
+
+void SphereDevice::watchLink() {
+    if (!baud_ && !link_quiet_) return;
+    if (++rx_idle_ticks_ < (link_quiet_ ? BAUD_CONFIRM_TICKS : BAUD_LEASE_TICKS)) return;
+    // nobody confirmed or renewed the rate: back to the one every host starts at, a 0x00 to end what it cut
+    hal_.setBaud(DEFAULT_BAUD);
+    baud_ = 0;
+    link_quiet_ = false;
+    rx_idle_ticks_ = 0;
+    uint8_t zero = 0;
+    hal_.send(&zero, 1);
 }
 
 __attribute__((noinline)) void SphereDevice::execute(const uint8_t* payload, uint8_t len) {
@@ -479,7 +509,11 @@ __attribute__((noinline)) void SphereDevice::execute(const uint8_t* payload, uin
     keepTrackedBias();  // a command that changed the bias is kept at once: a REBOOT may follow in this period
     uint8_t body[REPLY_CALIBRATION_LEN];
     uint8_t n;
-    if (result == RESULT_OK && c.type == CMD_GET_CALIBRATION) {
+    if (result == RESULT_OK && c.type == CMD_ECHO) {
+        uint8_t data[4];
+        putU32(data, rx_t_us_);
+        n = writeReply(c.seq, c.type, result, data, sizeof data, body);
+    } else if (result == RESULT_OK && c.type == CMD_GET_CALIBRATION) {
         uint8_t data[CALIBRATION_BLOCK_LEN + 1];
         writeCalibrationBlock(cal_, data);
         data[CALIBRATION_BLOCK_LEN] = cal_state_;
@@ -497,6 +531,7 @@ __attribute__((noinline)) void SphereDevice::execute(const uint8_t* payload, uin
     if (c.type == CMD_GET_HELLO) sendHello();
     else if (c.type == CMD_GET_STATUS) sendStatus();
     else if (c.type == CMD_REBOOT) hal_.reboot();
+    else if (c.type == CMD_SET_BAUD && c.set_baud.baud != baud()) switchBaud(c.set_baud.baud);
 }
 
 // Stops the power-up gyro bias estimate or a CALIBRATION_STEP gyro_bias, whichever runs.

@@ -43,6 +43,8 @@ public:
     virtual void identify(uint8_t seconds) = 0;
     // Called after the REBOOT reply was queued: flush it, then let the watchdog reset the chip.
     virtual void reboot() = 0;
+    // The UART to `baud` once what is queued has left at the old rate (SET_BAUD, spec §5.4).
+    virtual void setBaud(uint32_t baud) = 0;
     virtual uint16_t i2cRecoveries() = 0;
     virtual uint16_t batteryMv() = 0;
 
@@ -105,6 +107,9 @@ public:
     // The quaternion an ORIENTATION packet carries now (the filter's state GYRO_DELAY_US ahead), Q14.
     void orientationQ14(int16_t out[4]) const { filter_.predictQ14(gyro_, GYRO_DELAY_US, out); }
     bool tapActive() const { return tap_active_; }
+    // The UART's rate (spec §5.4) and whether the device waits for the host's first frame at it.
+    uint32_t baud() const { return baud_ ? baud_ : DEFAULT_BAUD; }
+    bool linkQuiet() const { return link_quiet_; }
 
 private:
     bool probe(uint8_t index);
@@ -120,6 +125,8 @@ private:
     void execute(const uint8_t* payload, uint8_t len);
     uint8_t executeCommand(const Command& c);
     void sendPacket(uint8_t type, const uint8_t* body, uint8_t len);
+    void switchBaud(uint32_t baud);
+    void watchLink();
     void sendHello();
     void sendStatus();
     void loadCalibration(bool at_start);
@@ -171,6 +178,10 @@ private:
     uint8_t bias_tries_;
     uint16_t max_work_us_;
     bool falling_;
+    uint32_t baud_;            // SET_BAUD's rate; 0: DEFAULT_BAUD
+    uint32_t rx_t_us_;         // when the last intact frame from the host was complete (ECHO's reply)
+    uint16_t rx_idle_ticks_;   // periods since then (the fall-back of spec §5.4)
+    bool link_quiet_;          // switched: nothing is sent until the host's first intact frame
     uint32_t last_fall_us_;
 };
 

@@ -14,8 +14,12 @@ from sphere import chips
 
 PROTOCOL_VERSION = 3
 # Versions this host decodes: version 2 only appended fields to HELLO and STATUS (a version-1 body is
-# their prefix; the new fields then read as their defaults) and added flags and SET_BOARD.
+# their prefix; the new fields then read as their defaults) and added flags and SET_BOARD; version 3 only
+# added commands (SET_BAUD, ECHO, the settings commands) and REPLY data for two of them.
 SUPPORTED_VERSIONS = (1, 2, 3)
+#: SET_BAUD's rates (spec §5.4): the default, and the rates exact on the Nano's 16 MHz
+DEFAULT_BAUD = 115200
+FAST_BAUDS = (250000, 500000, 1000000)
 
 Q14 = 16384.0
 
@@ -305,7 +309,7 @@ class Reply(Packet):
         Field("cmd_type", "B", show=lambda v: _COMMAND_NAMES.get(v, v)),
         Field("result", "B", show=lambda v: Result(v).name.lower() if v in Result._value2member_map_ else v),
     )
-    DATA_SIZES = (0, 43, 15)
+    DATA_SIZES = (0, 4, 15, 43)  # nothing; ECHO's device_t_us; GET_SETTINGS' block (version 3); GET_CALIBRATION's
 
     def __init__(self, *args, data: bytes = b"", **kwargs):
         super().__init__(*args, **kwargs)
@@ -462,6 +466,17 @@ class SetBoard(Packet):
     FIELDS = (Field("board_profile", "B", show=lambda v: BOARD_PROFILES.get(v, v)),)
 
 
+class SetBaud(Packet):
+    """Version 3: the link to another rate, confirmed by the host's next frame (spec §5.4)."""
+
+    TYPE, NAME, DIRECTION = 0x4F, "SET_BAUD", "host"
+    FIELDS = (Field("baud", "I"),)
+
+
+class Echo(Packet):
+    """Version 3: REPLY data is the device's micros() when the frame was complete (spec §5.5)."""
+
+    TYPE, NAME, DIRECTION = 0x50, "ECHO", "host"
 class GetSettings(Packet):
     TYPE, NAME, DIRECTION = 0x54, "GET_SETTINGS", "host"
 
@@ -518,6 +533,8 @@ ALL_TYPES: tuple[type[Packet], ...] = (
     Reboot,
     GetStatus,
     SetBoard,
+    SetBaud,
+    Echo,
     GetSettings,
     SaveSettings,
     ClearSettings,
