@@ -262,7 +262,7 @@ def test_ftdi_model_flushes_at_1_ms_once_the_host_asks_for_low_latency(tmp_path)
     events = [f for f in json.loads(stats.read_text())["faults"] if f["kind"].startswith("host_")]
     assert [e["kind"] for e in events] == ["host_low_latency"], events
     asked = events[0]["t"]
-    assert 0.3 < asked < 2.7  # simulated time: a loaded machine runs the board slower than the wall clock
+    assert 0.1 < asked < 2.7  # simulated time: a loaded machine runs the board slower than the wall clock
     assert cap.read_bytes() == wire_cap.read_bytes()
     rec = np.dtype([("off", "<u8"), ("t", "<f8")])
     wire, host = np.fromfile(wire_times, rec)["t"], np.fromfile(times, rec)["t"]

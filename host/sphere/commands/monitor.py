@@ -7,6 +7,9 @@ import time
 
 from sphere import argtypes
 
+#: how often the monitor asks the device's clock with ECHO (spec §5.4; version-3 firmware)
+ECHO_EVERY_S = 0.5
+
 HELP = "live view of a sphere on a port: packets and rates, sensor flags, latest values, events, link quality"
 DESCRIPTION = (
     "Reads the sphere's port and shows what arrives: packets per type and their rate, the RAW_SAMPLE "
@@ -79,7 +82,8 @@ class _Plot:
 def run(args) -> int:
     from sphere.link.device import DeviceLink, LinkLost
     from sphere.link.monitor import LinkMonitor
-    from sphere.protocol import GetHello
+    from sphere.link.clock import DeviceClock
+    from sphere.protocol import Echo, GetHello, Hello, RawSample, Reply
     from sphere.link.port import PortError, open_port
 
     try:
@@ -98,20 +102,37 @@ def run(args) -> int:
             print("sphere monitor: --plot needs matplotlib (pip install 'marg-sphere[plot]')", file=sys.stderr)
             ser.close()
             return 1
+    clock = DeviceClock(args.baud)
+    next_echo = 0.0
     start = time.monotonic()
     next_draw = start + args.refresh
     asked = False
     code = 0
     try:
         while args.seconds is None or time.monotonic() - start < args.seconds:
-            for dp in link.read():
-                line = mon.packet(dp, time.monotonic())
+            batch = link.read()
+            arrival = time.monotonic()  # the clock the ECHO round trips are timed with
+            for dp in batch:
+                line = mon.packet(dp, arrival)
+                p = dp.packet
+                if p.TYPE == RawSample.TYPE:
+                    clock.note_sample(dp.t_us)
+                    if clock.ready:
+                        line = mon.sample_age(arrival - clock.host_s(dp.t_us), arrival) or line
+                elif p.TYPE == Reply.TYPE and p.cmd_type == Echo.TYPE:
+                    clock.reply(p, arrival)
+                    mon.clock_uncertainty_s = clock.uncertainty_s
+                elif p.TYPE == Hello.TYPE and p.seq == 0:
+                    clock.restart()  # the device restarted: its clock too (spec §3)
                 if line and not tty:
                     print(line, flush=True)
             if args.events is not None and mon.counts["EVENT"] >= args.events and (
                     mon.hello is not None or time.monotonic() - start > 2.0):
                 break
             now = time.monotonic()
+            if mon.hello is not None and mon.hello.protocol_version >= 3 and now >= next_echo:
+                next_echo = now + ECHO_EVERY_S  # the device's clock on ours (spec §5.4): each sample's age
+                clock.sent(link.send(Echo()), time.monotonic())
             if mon.hello is None and not asked:
                 link.send(GetHello())  # the version and sensors (a USB Nano also sends HELLO when the open resets it)
                 asked = True

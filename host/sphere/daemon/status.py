@@ -35,6 +35,10 @@ class StatusLine:
         losses = getattr(src, "losses", 0)
         if losses:
             parts.append(f"reconnects {losses}")
+        age = getattr(src, "sample_age_ms", None)
+        age = age() if age is not None else None
+        if age is not None:
+            parts.append(f"age {age[0]:.1f}/{age[1]:.1f} ms" + (" growing" if src.ages.growing else ""))
         missing = getattr(daemon, "sensors_missing", ())
         if missing:
             parts.append(", ".join(missing) + " not answering")

@@ -13,6 +13,8 @@ from __future__ import annotations
 import collections
 import math
 
+from sphere.link.clock import SampleAges
+from sphere.protocol.packets import Echo
 from sphere.protocol.packets import EVENT_NAMES, ORIENTATION_FLAGS, RAW_FLAGS, SENSOR_BITS, bit_names
 
 RATE_WINDOW_S = 2.0
@@ -40,6 +42,26 @@ class LinkMonitor:
         #: recent samples for a plot: (device s, accel g ×3, gyro °/s ×3, mag µT ×3)
         self.raw_history: collections.deque = collections.deque(maxlen=4000)
         self.quat_history: collections.deque = collections.deque(maxlen=2000)
+        #: each RAW_SAMPLE's age on arrival (sphere.link.clock), once the device clock is known
+        self.ages = SampleAges()
+        self.run_ages: list[float] = []
+        self.clock_uncertainty_s: float | None = None
+
+    def sample_age(self, age_s: float, wall_s: float) -> str | None:
+        """Note a RAW_SAMPLE's age on arrival; a line when it starts or stops growing."""
+        if len(self.run_ages) < 1_000_000:
+            self.run_ages.append(age_s)
+        return self.ages.add(age_s, wall_s)
+
+    def age_line(self) -> str | None:
+        now = self.ages.percentiles_ms()
+        if now is None:
+            return None
+        a = sorted(self.run_ages)
+        run = (f"; over the run median {a[len(a) // 2] * 1e3:.2f} ms, p95 {a[int(0.95 * (len(a) - 1))] * 1e3:.2f} ms "
+               f"({len(a)} samples)")
+        clock = f", device clock ±{self.clock_uncertainty_s * 1e3:.2f} ms" if self.clock_uncertainty_s is not None else ""
+        return f"sample age: median {now[0]:.2f} ms, p95 {now[1]:.2f} ms (last {self.ages.keep_s:g} s{clock}){run}"
 
     def packet(self, dp, wall_s: float) -> str | None:
         p = dp.packet
@@ -68,6 +90,8 @@ class LinkMonitor:
             return (f"HELLO seq {p.seq}: firmware {j['firmware_version']}, protocol {p.protocol_version}, sensors "
                     f"{', '.join(j['sensors_found']) or 'none'}, stream {', '.join(j['stream_mode']) or 'off'}")
         elif name == "REPLY":
+            if p.cmd_type == Echo.TYPE and p.ok:  # the monitor's own clock queries (twice a second)
+                return None
             j = p.to_json()
             return f"REPLY to {j['cmd_type']} (seq {p.cmd_seq}): {j['result']}"
         return None
@@ -118,6 +142,9 @@ class LinkMonitor:
         q = self.quality()
         if q:
             out.append(f"link: {q}")
+        age = self.age_line()
+        if age:
+            out.append(age)
         out.append("events: " + ("  |  ".join(e.strip() for e in self.events) if self.events else "none yet"))
         return out
 
@@ -126,5 +153,7 @@ class LinkMonitor:
         raw = self.latest.get("RAW_SAMPLE")
         flags = f"; flags {' '.join(bit_names(raw.flags, RAW_FLAGS))}" if raw is not None else ""
         q = self.quality()
-        return f"{rates or 'no packets'}{flags}" + (f"; {q}" if q else "")
+        ages = self.ages.percentiles_ms()
+        age = f"; sample age median {ages[0]:.2f} ms, p95 {ages[1]:.2f} ms" if ages else ""
+        return f"{rates or 'no packets'}{flags}" + (f"; {q}" if q else "") + age
 

@@ -21,7 +21,8 @@ import select
 import time
 
 from sphere.daemon.sources.base import LinkLost, Source, SourceError, version_problem
-from sphere.protocol import GetHello, Hello, PacketStream
+from sphere.link.clock import DeviceClock, SampleAges
+from sphere.protocol import Echo, GetHello, Hello, PacketStream, RawSample, Reply
 from sphere.link.port import PortBusy, PortError, open_port, port_problem
 
 DEFAULT_CANDIDATES = ("/dev/sphere",)
@@ -29,6 +30,9 @@ DEFAULT_CANDIDATES = ("/dev/sphere",)
 DEFAULT_USB_IDS = ("1a86:7523", "0403:6001", "10c4:ea60")
 #: An unnamed port counts as a sphere after this many CRC-good sphere frames in a row.
 IDENTIFY_FRAMES = 3
+#: How often a version-3 sphere is sent ECHO: its clock on ours (each sample's age, spec §5.4), and the lease
+#: that holds a faster baud rate (§5.3)
+ECHO_EVERY_S = 0.5
 
 
 def _is_glob(pattern: str) -> bool:
@@ -114,6 +118,10 @@ class SerialSource(Source):
         self._comports = comports
         self.allow_pids: tuple[int, ...] = ()  # processes that may hold the port (the virtual board we started)
         self._warned: set[str] = set()
+        #: the sphere's clock on ours and each RAW_SAMPLE's age on arrival (version-3 firmware: ECHO)
+        self.clock = DeviceClock(baud)
+        self.ages = SampleAges()
+        self._next_echo = 0.0
 
     @classmethod
     def from_config(cls, cfg, log):
@@ -250,6 +258,9 @@ class SerialSource(Source):
             self.state = f"{path}"
             self.log(f"sphere found on {path}" + (" (reconnected)" if self.connects >= 1 else ""))
             self.link.stream = self.stream
+            self.clock.restart(self.baud)
+            self.ages.clear()
+            self._next_echo = 0.0
             adopted = self.stream.adopt(packets)
             if self.device_settings:  # a few ms at connect; the samples read meanwhile are counted, not used
                 self._apply_device_settings(self.stream.hello)
@@ -272,6 +283,35 @@ class SerialSource(Source):
 
     def _read(self) -> bytes:
         return self._read_port(self.serial)
+
+    def _batch(self):
+        batch = super()._batch()
+        if self.link is None:
+            return batch
+        arrival = self.arrival_ns / 1e9 if batch else 0.0  # perf_counter: the clock the round trips are timed with
+        for dp in batch:
+            p = dp.packet
+            if p.TYPE == RawSample.TYPE:
+                self.clock.note_sample(dp.t_us)
+                if self.clock.ready:
+                    said = self.ages.add(arrival - self.clock.host_s(dp.t_us), arrival)
+                    if said:
+                        self.log(said, logging.WARNING if self.ages.growing else logging.INFO)
+            elif p.TYPE == Reply.TYPE and p.cmd_type == Echo.TYPE:
+                self.clock.reply(p, arrival)
+            elif p.TYPE == Hello.TYPE and p.seq == 0:
+                self.clock.restart()  # the sphere restarted, its clock too
+        hello = self.stream.hello
+        if hello is not None and hello.protocol_version >= 3:
+            now = time.perf_counter()
+            if now >= self._next_echo:
+                self._next_echo = now + ECHO_EVERY_S
+                self.clock.sent(self.link.send(Echo()), time.perf_counter())
+        return batch
+
+    def sample_age_ms(self) -> tuple[float, float] | None:
+        """(median, p95) of the last 2 s of RAW_SAMPLE ages on arrival, ms; None before the clock is known."""
+        return self.ages.percentiles_ms()
 
     def _lose(self, why: str) -> None:
         super()._lose(f"on {self.port_name}: {why}")
