@@ -31,7 +31,6 @@ def test_bench_latency_rows_and_stages(tmp_path):
         # a RAW_SAMPLE frame at 115200 baud (10 bits a byte): its 30-odd bytes take 2.5-2.9 ms
         assert 2.4 <= s["wire"]["p50"] <= 3.0
         assert s["age"]["p50"] > 0 and s["host"]["p50"] > 0
-        assert s["total"]["max"] < 250
     # without an adapter the pty gets each byte as it leaves the UART; the FT232R at 16 ms holds a frame for
     # up to its latency timer plus a 1 ms USB frame
     assert rows["none"]["stages_ms"]["adapter"]["max"] < 0.01
