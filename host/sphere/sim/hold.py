@@ -56,6 +56,9 @@ class HoldParams:
     mag_noise_uT: float = 0.2  # HMC5883L datasheet: 2 mG
     bias_max_dps: float = 0.5
     bias_drift_dps_per_min: float = 0.02
+    bias_dps: float | None = None  # each axis starts at ±bias_dps (the seed's signs) instead of a draw within ±bias_max_dps
+    bias_ramp_dps: float = 0.0  # warm-up: each axis's bias grows by this much (away from zero) ...
+    bias_ramp_s: float = 300.0  # ... linearly over these seconds from switch-on, then stays
     ramp_s: float = 0.02  # a sharp start or stop
     turn_s: float = 1.0
 
@@ -81,7 +84,7 @@ class HoldTrace:
     true_gyro_dps: np.ndarray | None = None  # (N, 3) body rates without noise or bias
     quat_enu: np.ndarray | None = None  # (N, 4) the true orientation, sensor-to-ENU
     intent_quat_enu: np.ndarray | None = None  # (N, 4) the same without tremor and wander (the aim)
-    bias_dps: np.ndarray | None = None
+    bias_dps: np.ndarray | None = None  # (N, 3) the gyro's bias at every sample (°/s)
 
 
 def _script(seconds: float, rng, p: HoldParams):
@@ -179,12 +182,85 @@ def hold_script(seconds: float = 60.0, seed: int = 0, params: HoldParams | None 
     ideal = T._from_orientation(q, np.radians(true_gyro), rate_hz, "hold")
     bias = rng.uniform(-p.bias_max_dps, p.bias_max_dps, 3)
     drift = p.bias_drift_dps_per_min / 60.0 * np.arange(n)[:, None] / rate_hz * rng.choice([-1.0, 1.0], 3)
+    if p.bias_dps is not None or p.bias_ramp_dps:
+        # a fixed start and a warm-up ramp (the ITG-3200's zero-rate output moves with its die temperature,
+        # datasheet §3.1 "ZRO variation over temperature"): drawn after the rest, so the seed's motion stays
+        sign = np.sign(bias) if p.bias_dps is None else rng.choice([-1.0, 1.0], 3)
+        bias = bias if p.bias_dps is None else p.bias_dps * sign
+        ramp = np.minimum(np.arange(n) / rate_hz / p.bias_ramp_s, 1.0)
+        drift = drift + p.bias_ramp_dps * ramp[:, None] * sign
     gyro = true_gyro + bias + drift + rng.normal(0.0, p.gyro_noise_dps, (n, 3))
     g = chips.STANDARD_GRAVITY_M_S2
     acc = ideal.acc_m_s2 + rng.normal(0.0, 1.0, (n, 3)) * np.asarray(p.accel_noise_g) * g
     mag = ideal.mag_uT + rng.normal(0.0, p.mag_noise_uT, (n, 3))
     motion = T.Motion(rate_hz, acc, np.radians(gyro), mag, f"hold_{seed}")
-    return HoldTrace(motion, phases, true_gyro, q, q_aim, bias)
+    return HoldTrace(motion, phases, true_gyro, q, q_aim, bias + drift)
+
+
+def _band(rate_dps: float) -> str:
+    return next(b for b, (lo, hi) in BANDS.items() if abs(rate_dps) <= hi or b == "fast")
+
+
+def startup_turn_script(rate_dps: float = 20.0, turn_s: float = 3.0, still_s: float = 11.0) -> list:
+    """A steady turn about the vertical from switch-on (the first sample), then laid still: the case in which
+    nothing but a later stop tells the turn from a gyro bias when the magnetometer does not answer. Run it with
+    :data:`CLEAN` (a turntable's motion: no tremor, no wander)."""
+    return [("turn", turn_s, _band(rate_dps), rate_dps, "yaw"), ("rest", still_s, "", 0.0, "")]
+
+
+def long_hold_script(seconds: float = 600.0, seed: int = 0, aim_every_s: float = 20.0) -> list:
+    """Switched on in the hand and never laid down: held still, with an aim (a fine or slow turn of 0.5–1.5 s,
+    yaw or pitch, each undoing about half the last aim's offset so the aim stays near the screen's middle)
+    every ``aim_every_s`` (± 15 %)."""
+    rng = np.random.default_rng(10_000 + seed)
+    out, t, k = [], 0.0, 0
+    aim = {"yaw": 0.0, "pitch": 0.0}
+    while t < seconds:
+        held = float(rng.uniform(0.85, 1.15) * aim_every_s)
+        out.append(("held", min(held, seconds - t), "", 0.0, ""))
+        t += held
+        if t >= seconds:
+            break
+        band = "fine" if k % 2 == 0 else "slow"
+        axis = "yaw" if rng.random() < 0.6 else "pitch"
+        lo, hi = BANDS[band]
+        rate = float(rng.uniform(lo, min(hi, 15.0)))
+        dur = float(rng.uniform(0.5, 1.5))
+        if aim[axis] > 0 or (aim[axis] == 0 and rng.random() < 0.5):
+            rate = -rate
+        aim[axis] += rate * dur
+        out.append(("turn", min(dur, seconds - t), band, rate, axis))
+        t += dur
+        k += 1
+    return out
+
+
+def stops_script(seed: int = 0, held_s: tuple = (1.5, 2.5)) -> list:
+    """Picked up from the table, then turns in every band with hard stops (three each, fast ones of 0.15–0.4 s;
+    yaw and pitch; each turn's direction brings the aim back towards its start), held between them, put down."""
+    rng = np.random.default_rng(20_000 + seed)
+    turns = [(band, k) for band in BANDS for k in range(3)]
+    out = [("rest", 3.0, "", 0.0, "")]
+    aim = {"yaw": 0.0, "pitch": 0.0}
+    for i in rng.permutation(len(turns)):
+        band, k = turns[i]
+        lo, hi = BANDS[band]
+        rate = float(rng.uniform(lo, hi))
+        axis = "yaw" if k != 1 else "pitch"
+        dur = float(rng.uniform(0.15, 0.4)) if band == "fast" else float(rng.uniform(0.5, 1.0))
+        if axis == "pitch":
+            dur = min(dur, 30.0 / rate)
+        if aim[axis] > 0 or (aim[axis] == 0 and rng.random() < 0.5):
+            rate = -rate
+        aim[axis] += rate * dur
+        out.append(("held", float(rng.uniform(*held_s)), "", 0.0, ""))
+        out.append(("turn", dur, band, rate, axis))
+    out += [("held", 2.0, "", 0.0, ""), ("rest", 3.0, "", 0.0, "")]
+    return out
+
+
+def script_seconds(script) -> float:
+    return float(sum(step[1] for step in script))
 
 
 def synthetic(seconds: float, arg: str = "") -> T.Motion:
@@ -198,3 +274,11 @@ def synthetic(seconds: float, arg: str = "") -> T.Motion:
 
 def with_params(**changes) -> HoldParams:
     return replace(HoldParams(), **changes)
+
+
+#: a turntable's motion: the sphere turned without a hand (no tremor, no wander)
+CLEAN = HoldParams(tremor_rms_deg=0.0, wander_rms_deg=0.0)
+#: a warm-up: each axis's bias starts at ±0.6 °/s and grows by a further 0.5 °/s over 5 minutes (and no other drift)
+WARM_UP = HoldParams(bias_dps=0.6, bias_ramp_dps=0.5, bias_ramp_s=300.0, bias_drift_dps_per_min=0.0)
+#: hard stops: starts and stops within 10 ms
+HARD_STOPS = HoldParams(ramp_s=0.01)
