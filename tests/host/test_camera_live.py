@@ -48,7 +48,7 @@ def test_live_tracker_with_the_trials_imu(video):
     src._thread.join(timeout=60)  # a file: the thread reads ahead; each fix is used once it has "arrived"
     out = np.full((len(rt.t), 3), np.nan)
     for i, t in enumerate(rt.t):
-        p = live.sensor(t + 0.004, rt.q_host_enu[i], rt.trial.acc_m_s2[i])
+        p = live.sensor(t, rt.q_host_enu[i], rt.trial.acc_m_s2[i])  # taken at t, arrives 4 ms later
         if p is not None:
             out[i] = p
     assert src.error is None and src.found >= 0.9 * src.frames

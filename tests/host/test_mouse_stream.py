@@ -61,7 +61,7 @@ def test_messages(stream):
     assert {"type": "event", "event": "single_tap", "t_us": 1300} in msgs
     ori = [m for m in msgs if m["type"] == "orientation"][0]
     assert ori == {"type": "orientation", "t_us": 1234, "quat": [0.5, 0.5, -0.5, 0.5], "frame": "NWU",
-                   "mode": "3d", "position": None}
+                   "mode": "3d", "position": None, "camera": None}
 
 
 def test_rate_limit_and_only_changes(stream):

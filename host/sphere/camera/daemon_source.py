@@ -3,13 +3,18 @@
 Wiring (for the daemon; its ``PARAMS`` are the ``[camera]`` section, by one line in the daemon config's
 ``PARTS``):
 
-    cam = CameraPosition.from_settings(cfg["camera"], log)   # None when [camera] source is empty
+    cam = CameraPosition.from_settings(cfg["camera"], log, source)  # None without [camera] source or a session
     ... on every RAW_SAMPLE, after the orientation filter:
-    stream.position = cam.update(quat_sensor_to_earth, acc_m_s2) if cam else None
+    stream.position = cam.update(quat_sensor_to_earth, acc_m_s2, t_us) if cam else None
     ... at exit: cam.close()
 
 The position is the ball's centre in metres in the camera's frame (x right, y down, z out of the lens),
 or None while it is unknown (no fix yet, or more than 2 s without one).
+
+Time: frames are stamped on the host clock when they arrive; a sensor sample by its device time, mapped to
+the host clock by the smallest delay seen so far (``SampleClock``: the host's read jitter drops out) less
+the link's latency. A replayed session (``sphere-mouse --replay SESSION``) gives both the recorded host
+times, so the replay meets frames and samples exactly as they met when recorded.
 """
 
 from __future__ import annotations
@@ -27,6 +32,30 @@ def _hue(v):
     return None if 0.0 <= v < 360.0 else "must be an angle in [0, 360) degrees (green 120, orange 25, blue 220)"
 
 
+class SampleClock:
+    """Device time (µs) → host time (s) of a sample's taking: device time + the smallest host-minus-device
+    offset seen (the read least delayed by the host), less the link's latency. The offset may grow by
+    ``drift`` (200 ppm: two crystals' tolerance) per second, so a device clock slower than the host's is
+    followed; a restart of the device's time base (a jump back) starts it again."""
+
+    def __init__(self, link_latency_s: float = 0.004, drift: float = 2e-4):
+        self.link_latency_s, self.drift = link_latency_s, drift
+        self.offset = None
+        self._last_dev = None
+
+    def __call__(self, t_dev_us, host_s: float) -> float:
+        if t_dev_us is None:
+            return host_s - self.link_latency_s
+        dev = t_dev_us * 1e-6
+        off = host_s - self.link_latency_s - dev
+        if self.offset is None or self._last_dev is None or dev < self._last_dev:
+            self.offset = off
+        else:
+            self.offset = min(self.offset + self.drift * (dev - self._last_dev), off)
+        self._last_dev = dev
+        return dev + self.offset
+
+
 class CameraPosition:
     NAME = "camera"
     PARAMS = {
@@ -37,13 +66,21 @@ class CameraPosition:
                             unit="ms"),
     }
 
-    def __init__(self, live, clock=time.monotonic):
+    def __init__(self, live, clock=time.perf_counter):
         self.live = live
-        self.clock = clock
+        self.clock = clock  # the daemon's sources stamp arrivals with time.perf_counter
+        self.sample_clock = SampleClock(live.lead_s)
 
     @classmethod
-    def from_settings(cls, s, log=None) -> "CameraPosition | None":
-        """From the [camera] settings; None when no camera is named."""
+    def from_settings(cls, s, log=None, source=None) -> "CameraPosition | None":
+        """From the [camera] settings; None when no camera is named. A replayed session (``source.session``)
+        brings its own video, played on the replay's clock."""
+        session = getattr(source, "session", None)
+        if session is not None:
+            if s.source:
+                raise CameraUnavailable(f"[camera] source = {s.source!r}: a session brings its own video; replay "
+                                        f"it without --camera (or replay its serial.bin alone with --camera)")
+            return cls._session(s, log, source)
         if not s.source:
             return None
         try:
@@ -64,10 +101,34 @@ class CameraPosition:
                 f"ball hue {s.hue_deg:g}°")
         return cls(LiveTracker(src))
 
-    def update(self, q_sensor_to_earth, acc_m_s2):
-        """One sensor sample, now: the ball's position (list of 3, m) or None."""
-        p = self.live.sensor(self.clock(), q_sensor_to_earth, acc_m_s2)
+    @classmethod
+    def _session(cls, s, log, source) -> "CameraPosition":
+        from sphere.camera.live import CameraError, LiveTracker, SessionCamera
+        from sphere.camera.model import Camera, CameraFileError
+
+        session = source.session
+        try:
+            cam = Camera.load(s.camera_file) if s.camera_file else None
+            src = SessionCamera(session.video_path, session.frame_times, cam, hue_deg=s.hue_deg,
+                                latency_s=s.latency_ms / 1000.0)
+        except (CameraError, CameraFileError) as e:
+            raise CameraUnavailable(f"[camera] {e}") from None
+        if log:
+            log(f"camera: the session's video ({len(session.frame_times)} frames), ball hue {s.hue_deg:g}°")
+        return cls(LiveTracker(src), clock=lambda: source.host_time_s)
+
+    def update(self, q_sensor_to_earth, acc_m_s2, t_us=None):
+        """One sensor sample (device time ``t_us``) that arrived now: the ball's position (list of 3, m) at
+        the moment of its arrival, or None."""
+        t = self.sample_clock(t_us, self.clock())
+        p = self.live.sensor(t, q_sensor_to_earth, acc_m_s2)
         return None if p is None else [float(v) for v in p]
+
+    def diagnostics(self) -> dict:
+        """What the camera and the tracker did so far (the 3-D stream's ``camera`` field)."""
+        trk = self.live.tracker
+        src = self.live.source
+        return {"frames": src.frames, "found": src.found, **trk.stats, "alignment": trk.alignment.ready}
 
     def close(self) -> None:
         self.live.source.stop()

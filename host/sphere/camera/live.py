@@ -37,6 +37,18 @@ class Fix:
     radius_px: float
 
 
+@dataclass
+class Frame:
+    """One frame as the camera delivered it: the fix found in it (None without the ball) and, when an AR view
+    is watching, the image itself (BGR)."""
+
+    index: int
+    t_arrival: float
+    t_exposure: float
+    fix: Fix | None
+    image: np.ndarray | None = None
+
+
 def hint_from(tracker, camera, t_exposure: float, radius_m: float, last=None):
     """Where to look in a frame: the tracker's position at its exposure time, projected; else the last fix."""
     p = tracker.position_at(t_exposure) if tracker.x is not None else None
@@ -47,11 +59,40 @@ def hint_from(tracker, camera, t_exposure: float, radius_m: float, last=None):
     return last
 
 
+class FrameDetector:
+    """The ball in each frame of a stream, as a live system looks for it: where the tracker expects it at the
+    frame's exposure time (``hint_fn``), else around the last fix, else the whole frame."""
+
+    def __init__(self, camera: Camera, hue_deg: float, radius_m: float, latency_s: float):
+        self.detector = BallDetector(camera, hue_deg=hue_deg, radius_m=radius_m)
+        self.latency_s = latency_s
+        self.hint_fn = None  # t_exposure ↦ (centre_px, radius_px) or None
+        self.last = None
+        self.frames = 0
+        self.found = 0
+        self.keep_images = False
+
+    def __call__(self, index: int, image, t_arrival: float) -> Frame:
+        t_exp = t_arrival - self.latency_s
+        hint = self.hint_fn(t_exp) if self.hint_fn is not None else None
+        d = self.detector.detect(image, hint or self.last)
+        self.frames += 1
+        fix = None
+        if d is None:
+            self.last = None
+        else:
+            self.found += 1
+            self.last = (d.center_px, d.radius_px)
+            fix = Fix(index, t_arrival, t_exp, d.center_cam, d.cov, d.center_px, d.radius_px)
+        return Frame(index, t_arrival, t_exp, fix, image if self.keep_images else None)
+
+
 class CameraSource:
     def __init__(self, spec, camera: Camera | None = None, hue_deg: float = 120.0, radius_m: float = 0.04,
-                 latency_s: float = 0.040, realtime: bool | None = None, clock=time.monotonic,
-                 arrival_times=None):
+                 latency_s: float = 0.040, realtime: bool | None = None, clock=time.perf_counter,
+                 arrival_times=None, detect: bool = True):
         self.spec = spec
+        self.detect = detect  # False: only read and stamp the frames (for ``on_frame``)
         self.camera = camera
         self.hue_deg, self.radius_m = hue_deg, radius_m
         self.latency_s = latency_s
@@ -59,14 +100,23 @@ class CameraSource:
         # the .csv that `sphere camera render` writes beside its video), unless realtime is asked for
         self.realtime = str(spec).isdigit() if realtime is None else realtime
         self.arrival_times = None if arrival_times is None else np.asarray(arrival_times, float)
-        self.clock = clock
-        self.fixes: queue.Queue = queue.Queue()
-        self.frames = 0
-        self.found = 0
+        self.clock = clock  # the daemon's: sphere.daemon.sources.base's arrival times are time.perf_counter
+        self.fixes: queue.Queue = queue.Queue()  # Frame objects, found or not
         self.error: str | None = None
+        self.keep_images = False  # set when an AR view wants the frames themselves
+        self.on_frame = None  # image, t_arrival ↦ None: every frame as it arrives (`sphere capture --camera`)
         self._stop = threading.Event()
         self._thread = None
+        self._detector = None
         self.hint_fn = None  # t_exposure ↦ (centre_px, radius_px) or None: where the tracker expects the ball
+
+    @property
+    def frames(self) -> int:
+        return self._detector.frames if self._detector is not None else 0
+
+    @property
+    def found(self) -> int:
+        return self._detector.found if self._detector is not None else 0
 
     def _open(self):
         import cv2
@@ -78,7 +128,8 @@ class CameraSource:
             raise CameraError(f"cannot open {what}; check the index (ls /dev/video*) or the file's path")
         return cap
 
-    def start(self) -> "CameraSource":
+    def open(self) -> "CameraSource":
+        """Opens the camera (CameraError when it cannot be used) without reading from it yet."""
         cap = self._open()
         w, h = int(cap.get(3)), int(cap.get(4))
         if self.camera is None:
@@ -88,7 +139,23 @@ class CameraSource:
             raise CameraError(f"the camera file is for {self.camera.width}x{self.camera.height}, the camera gives "
                               f"{w}x{h}; calibrate this mode with `sphere camera calibrate`")
         self._fps = cap.get(5) or 30.0
-        self._thread = threading.Thread(target=self._run, args=(cap,), daemon=True, name="sphere-camera")
+        self._cap = cap
+        return self
+
+    def release(self) -> None:
+        """Closes a camera opened and not started."""
+        if getattr(self, "_cap", None) is not None and self._thread is None:
+            self._cap.release()
+
+    @property
+    def fps(self) -> float:
+        return self._fps
+
+    def start(self) -> "CameraSource":
+        if getattr(self, "_cap", None) is None:
+            self.open()
+        self._detector = FrameDetector(self.camera, self.hue_deg, self.radius_m, self.latency_s)
+        self._thread = threading.Thread(target=self._run, args=(self._cap,), daemon=True, name="sphere-camera")
         self._thread.start()
         return self
 
@@ -102,9 +169,9 @@ class CameraSource:
         return self._thread is not None and self._thread.is_alive()
 
     def _run(self, cap) -> None:
-        det = BallDetector(self.camera, hue_deg=self.hue_deg, radius_m=self.radius_m)
+        det = self._detector
         t0 = self.clock()
-        last = None
+        n = 0
         try:
             while not self._stop.is_set():
                 ok, frame = cap.read()
@@ -113,32 +180,32 @@ class CameraSource:
                 if self.realtime:
                     t_arr = self.clock()
                     if not str(self.spec).isdigit():  # a file: pace it at its frame rate
-                        due = t0 + (self.frames + 1) / self._fps
+                        due = t0 + (n + 1) / self._fps
                         if due > t_arr:
                             time.sleep(due - t_arr)
                         t_arr = self.clock()
                 elif self.arrival_times is not None:
-                    if self.frames >= len(self.arrival_times):
+                    if n >= len(self.arrival_times):
                         break
-                    t_arr = float(self.arrival_times[self.frames])
+                    t_arr = float(self.arrival_times[n])
                 else:
-                    t_arr = (self.frames + 1) / self._fps + self.latency_s
-                self.frames += 1
-                t_exp = t_arr - self.latency_s
-                hint = self.hint_fn(t_exp) if self.hint_fn is not None else None
-                d = det.detect(frame, hint or last)
-                if d is None:
-                    last = None
+                    t_arr = (n + 1) / self._fps + self.latency_s
+                if self.on_frame is not None:
+                    self.on_frame(frame, t_arr)
+                if not self.detect:
+                    n += 1
                     continue
-                self.found += 1
-                last = (d.center_px, d.radius_px)
-                self.fixes.put(Fix(self.frames - 1, t_arr, t_exp, d.center_cam, d.cov, d.center_px, d.radius_px))
+                det.hint_fn = self.hint_fn
+                det.keep_images = self.keep_images
+                self.fixes.put(det(n, frame, t_arr))
+                n += 1
         except Exception as e:  # the thread must say why it stopped, not die silently
             self.error = f"{type(e).__name__}: {e}"
         finally:
             cap.release()
 
-    def poll(self) -> list[Fix]:
+    def poll_frames(self, t: float | None = None) -> list[Frame]:
+        """Every frame processed since the last call (a live camera's thread decides what has arrived)."""
         out = []
         while True:
             try:
@@ -146,26 +213,98 @@ class CameraSource:
             except queue.Empty:
                 return out
 
+    def poll(self) -> list[Fix]:
+        """The fixes found since the last call."""
+        return [f.fix for f in self.poll_frames() if f.fix is not None]
+
+
+class SessionCamera:
+    """The video of a recorded session (:mod:`sphere.link.session`) as the camera: each frame is read and searched
+    when the replay's clock reaches its recorded arrival time, in the caller's thread, so the replay is the
+    same at any speed (as fast as possible included) and the tracker's hints are those it would have had."""
+
+    def __init__(self, video_path, frame_times, camera: Camera | None = None, hue_deg: float = 120.0,
+                 radius_m: float = 0.04, latency_s: float = 0.040):
+        import cv2
+
+        self.path = str(video_path)
+        self.times = list(frame_times)
+        self.hue_deg, self.radius_m, self.latency_s = hue_deg, radius_m, latency_s
+        self.error = None
+        self.keep_images = False
+        self.hint_fn = None
+        self._cap = cv2.VideoCapture(self.path)
+        if not self._cap.isOpened():
+            raise CameraError(f"cannot open the session's video {self.path}")
+        w, h = int(self._cap.get(3)), int(self._cap.get(4))
+        if camera is None:
+            camera = Camera.webcam(w, h)
+        elif (camera.width, camera.height) != (w, h):
+            raise CameraError(f"the camera file is for {camera.width}x{camera.height}, the session's video is {w}x{h}")
+        self.camera = camera
+        self._detector = FrameDetector(camera, hue_deg, radius_m, latency_s)
+        self._next = 0
+
+    frames = CameraSource.frames
+    found = CameraSource.found
+
+    def start(self) -> "SessionCamera":
+        return self
+
+    @property
+    def running(self) -> bool:
+        return self._next < len(self.times)
+
+    def stop(self) -> None:
+        self._cap.release()
+
+    def poll_frames(self, t: float | None = None) -> list[Frame]:
+        out = []
+        while self._next < len(self.times) and (t is None or self.times[self._next] <= t):
+            ok, image = self._cap.read()
+            if not ok:  # the video is shorter than its time file: the rest is not there
+                self.error = f"{self.path} ends after {self._next} of {len(self.times)} frames"
+                self._next = len(self.times)
+                break
+            self._detector.hint_fn = self.hint_fn
+            self._detector.keep_images = self.keep_images
+            out.append(self._detector(self._next, image, self.times[self._next]))
+            self._next += 1
+        return out
+
+    def poll(self) -> list[Fix]:
+        return [f.fix for f in self.poll_frames() if f.fix is not None]
+
 
 class LiveTracker:
     """Sensor samples in, the ball's position out, camera fixes folded in as they come."""
 
-    def __init__(self, source: CameraSource, lead_s: float = 0.004):
+    def __init__(self, source, lead_s: float = 0.004):
         self.source = source
         self.tracker = CameraImuTracker()
         self.lead_s = lead_s
-        self._pending: list[Fix] = []
+        self._pending: list[Frame] = []
+        self.frames_out: list = []  # (Frame, fix status) of the frames used, for an AR view (kept when asked)
+        self.keep_frames = False
         source.hint_fn = self._hint
 
     def _hint(self, t_exposure):
         return hint_from(self.tracker, self.source.camera, t_exposure, self.source.radius_m)
 
     def sensor(self, t: float, q_sensor_to_earth, acc_sensor):
-        """One sensor sample (host clock): the position (camera frame, m) or None while unknown."""
-        self._pending += self.source.poll()
-        due = [f for f in self._pending if f.t_arrival <= t]  # (a file read ahead of time waits its turn)
+        """One sensor sample taken at ``t`` (host clock), arriving ``lead_s`` later (the link's latency): the
+        frames that arrived by then are used, and the position (camera frame, m) at the arrival, when the
+        output is used, is returned; None while it is unknown."""
+        now = t + self.lead_s
+        self._pending += self.source.poll_frames(now)
+        due = [f for f in self._pending if f.t_arrival <= now]  # (a file read ahead of time waits its turn)
         if due:
-            self._pending = [f for f in self._pending if f.t_arrival > t]
+            self._pending = [f for f in self._pending if f.t_arrival > now]
             for f in sorted(due, key=lambda f: f.t_exposure):
-                self.tracker.camera(f.t_exposure, f.center_cam, f.cov)
+                status = None
+                if f.fix is not None:
+                    status = self.tracker.camera(f.t_exposure, f.fix.center_cam, f.fix.cov)
+                if self.keep_frames:
+                    self.frames_out.append((f, status))
+                    del self.frames_out[:-8]
         return self.tracker.imu(t, q_sensor_to_earth, acc_sensor, lead_s=self.lead_s)

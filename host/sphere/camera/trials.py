@@ -38,6 +38,7 @@ class RenderedTrial:
     pos_valid: np.ndarray  # (N,) optical reference present
     scene: render.Scene
     q_host_enu: np.ndarray = field(default=None)  # (N, 4) the host filter's orientation (sensor → ENU)
+    start_s: float = 0.0  # where the slice starts in the trial
 
     @property
     def duration_s(self) -> float:
@@ -139,4 +140,42 @@ def rendered_trial(name: str, start_s: float, seconds: float, distance_m: float 
             marker = replace(marker, face=max(faces, key=faces.get))
     scene = render.Scene(camera or Camera.webcam(), R_wc, cam_pos, hue_deg=hue_deg, seed=seed,
                          occlusions=list(occlusions), marker=marker, body_rotation=body, jpeg_quality=jpeg_quality)
-    return RenderedTrial(full.name, sl, t, pf, valid, scene, q)
+    return RenderedTrial(full.name, sl, t, pf, valid, scene, q, start_s)
+
+
+#: a serial frame reaches the host this long after the sample is taken (hybrid-eval's IMU latency)
+SESSION_IMU_LATENCY_S = 0.004
+
+
+def write_session(rt: RenderedTrial, folder, lead_s: float | None = None, directory=None) -> dict:
+    """A recorded session (:mod:`sphere.link.session`) of a rendered trial, as `sphere capture --camera` would record
+    it: the trial's IMU as the sphere sends it (RAW_SAMPLE frames in the chips' units and rates, from
+    ``lead_s`` before the stretch — by default from the trial's start, as the host filter of `sphere
+    hybrid-eval` runs, a sphere switched on before the camera), each frame's bytes arriving 4 ms after the
+    sample; the rendered frames at their arrival times.
+
+    Returns the time bases: ``{"slice_t0_host_s": ...}``, the session time of the stretch's t = 0 (stretch
+    time = session time − it; the sample's device time t_us = (slice time + lead_s + 1) · 10⁶)."""
+    from sphere.link import session
+    from sphere.protocol.framing import encode_frame
+    from sphere.sim import trace as T
+    from sphere.bench.pointer import raw_packets
+
+    full = broad.load_trial(broad.find_trial(rt.name, directory))
+    lead = rt.start_s if lead_s is None else min(lead_s, rt.start_s)
+    motion = T.from_broad(full, rt.start_s - lead, rt.duration_s + lead)
+    cam = rt.scene.camera
+    with session.SessionWriter(folder, cam.width, cam.height, rt.scene.fps,
+                               extra={"rendered": {"trial": rt.name, "start_s": rt.start_s, "lead_s": lead}}) as w:
+        frames = rt.frames()
+        pending = next(frames, None)
+        for seq, (t_us, packet) in enumerate(raw_packets(motion)):
+            t_host = t_us * 1e-6 - 1.0 + SESSION_IMU_LATENCY_S  # raw_packets' device time starts at 1 s
+            while pending is not None and pending.t_arrival + lead <= t_host:
+                w.write_frame(pending.image, pending.t_arrival + lead)
+                pending = next(frames, None)
+            w.write_serial(encode_frame(packet, seq & 0xFF), t_host)
+        while pending is not None:
+            w.write_frame(pending.image, pending.t_arrival + lead)
+            pending = next(frames, None)
+    return {"slice_t0_host_s": lead, "lead_s": lead}

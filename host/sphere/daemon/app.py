@@ -240,12 +240,13 @@ class SphereMouse:
             return
         position = None
         if self.motion.quat is not None and self.motion.accel_g is not None:
-            position = self.camera.update(self.motion.quat, [v * G_M_S2 for v in self.motion.accel_g])
+            position = self.camera.update(self.motion.quat, [v * G_M_S2 for v in self.motion.accel_g], t_us)
         if position is None:
             q = self.pose.at(self.motion.quat, t_us)
         else:
             q, position = self.pose.at(self.motion.quat, t_us, position)
         self.stream.position = None if position is None else [float(v) for v in position]
+        self.stream.camera = self.camera.diagnostics()
         self.stream.publish_orientation(q, t_us)
 
     def _sensors_changed(self, bits: int) -> None:

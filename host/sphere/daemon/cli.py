@@ -226,7 +226,7 @@ def _main(argv=None) -> int:
     from sphere.camera.daemon_source import CameraPosition, CameraUnavailable
 
     try:
-        camera = CameraPosition.from_settings(cfg["camera"], log)  # None without [camera] source
+        camera = CameraPosition.from_settings(cfg["camera"], log, source)  # None without [camera] source or a session
     except CameraUnavailable as e:
         logger.error(str(e))
         source.close()

@@ -3,7 +3,12 @@ the built-in page that shows a 3-D object turning with the sphere.
 
     http://127.0.0.1:8765/      the page (sphere.daemon.page)
     ws://127.0.0.1:8765/ws      one JSON object per message:
-        {"type": "orientation", "t_us": ..., "quat": [w, x, y, z], "frame": "NWU", "mode": "3d", "position": null}
+        {"type": "orientation", "t_us": ..., "quat": [w, x, y, z], "frame": "NWU", "mode": "3d", "position": null,
+         "camera": null}     with a camera: "position" [x, y, z] m in the camera's frame (null while unknown),
+                             "camera" {"frames", "found", "accepted", "gated", "reacquired", "late", "alignment"}:
+                             frames seen, with the ball, fixes used, rejected by the gate (an implausible jump
+                             against the IMU's prediction), re-acquisitions, too late; the camera-to-earth
+                             rotation known
         {"type": "event", "event": "single_tap", "t_us": ...}
         {"type": "mode", "mode": "tilt"}
         {"type": "recentre", "quat": [w, x, y, z]}
@@ -72,6 +77,7 @@ class OrientationStream:
         self.log = log or (lambda m: None)
         self.mode = None
         self.position = None
+        self.camera = None  # the camera's diagnostics (sphere.camera.daemon_source.CameraPosition.diagnostics)
         self.clients = set()
         self.sent = 0
         self._quat = None
@@ -234,7 +240,7 @@ class OrientationStream:
                     self._dirty = False
                     messages.append({"type": "orientation", "t_us": self._t_us,
                                      "quat": [round(float(v), 6) for v in self._quat], "frame": "NWU",
-                                     "mode": self.mode, "position": self.position})
+                                     "mode": self.mode, "position": self.position, "camera": self.camera})
                 if messages and self.clients:
                     for m in messages:
                         broadcast(self.clients, json.dumps(m))

@@ -52,6 +52,15 @@ class Outputs:
         if self.stream is not None:
             self.stream.position = value
 
+    @property
+    def camera(self):
+        return getattr(self.stream, "camera", None)
+
+    @camera.setter
+    def camera(self, value):  # the camera's diagnostics, for the WebSocket's messages
+        if self.stream is not None:
+            self.stream.camera = value
+
     def _each(self, call) -> None:
         for out in list(self.outputs):
             try:

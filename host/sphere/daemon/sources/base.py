@@ -76,6 +76,12 @@ class Source:
 
     # -- what the daemon reads --
     @property
+    def host_time_s(self) -> float:
+        """When the current batch arrived, on the host clock (s, ``time.perf_counter``; a recorded session's
+        replay: the recorded time, on the session's clock)."""
+        return self.arrival_ns * 1e-9
+
+    @property
     def stats(self):
         return self.stream.stats
 

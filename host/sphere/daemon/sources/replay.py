@@ -1,25 +1,37 @@
-"""A capture file (``sphere capture``), paced by its device times divided by ``speed``."""
+"""A capture file (``sphere capture``), paced by its device times divided by ``speed``; or a recorded session
+(``sphere capture --camera``, :mod:`sphere.link.session`), paced by its host times, its video played in step."""
 
 from __future__ import annotations
 
 import os
 import time
 
-from sphere.link.capture import CaptureError, CaptureFile
 from sphere.daemon.sources.base import Source, SourceEnded, SourceError, version_problem
+from sphere.link import session as session_mod
+from sphere.link.capture import CaptureError, CaptureFile
 from sphere.protocol import Hello
 
 
 class ReplaySource(Source):
     """A capture file, paced by its device times divided by ``speed`` (0 = as fast as possible).
-    The iteration ends with the file."""
+    The iteration ends with the file.
+
+    A session folder is paced by the host times its bytes arrived at; ``host_time_s`` is then the recorded
+    time of the current packet (the session's clock), which the camera replay (``session``) follows, so
+    frames and samples meet exactly as they did, at any speed."""
 
     NAME = "replay"
 
     def __init__(self, path, speed: float = 1.0, clock=time.perf_counter, sleep=time.sleep):
         super().__init__(reconnect_interval_s=0.0)
+        self.session = None
+        self._t_host = 0.0
         try:
-            self.capture = CaptureFile(path)
+            if session_mod.is_session(path):
+                self.session = session_mod.load(path)
+                self.capture = CaptureFile(self.session.serial_path)
+            else:
+                self.capture = CaptureFile(path)
         except CaptureError as e:
             raise SourceError(str(e)) from None
         if not self.capture.path.is_file():  # a FIFO would block the daemon before it could see a SIGTERM
@@ -45,9 +57,21 @@ class ReplaySource(Source):
     def _over(self) -> bool:
         return self._done
 
+    @property
+    def host_time_s(self) -> float:
+        return self._t_host if self.session is not None else self.arrival_ns * 1e-9
+
+    def _session_packets(self):
+        for data, t in self.session.serial_chunks():
+            for dp in self.stream.feed(data):
+                yield dp, t
+
     def _connect(self):
         try:
-            self._packets = self.capture.packets()
+            if self.session is not None:
+                self._packets = self._session_packets()
+            else:
+                self._packets = ((dp, None) for dp in self.capture.packets())
         except CaptureError as e:
             raise SourceError(str(e)) from None
         self._t0_dev = None
@@ -56,7 +80,7 @@ class ReplaySource(Source):
 
     def _batch(self):
         try:
-            dp = next(self._packets)
+            dp, t_host = next(self._packets)
         except StopIteration:
             self._done = True
             self.state = f"replay {os.path.basename(self.path)}: ended"
@@ -74,10 +98,14 @@ class ReplaySource(Source):
             problem = version_problem(p)
             if problem:
                 raise SourceError(f"{self.path}: {problem}")
-        if self.speed > 0 and dp.t_us is not None:
-            if self._t0_dev is None or dp.t_us < self._t0_dev:
-                self._t0_dev, self._t0_wall = dp.t_us, self.clock()
-            wait = self._t0_wall + (dp.t_us - self._t0_dev) * 1e-6 / self.speed - self.clock()
+        # a session is paced by when its bytes arrived, a capture by its device times
+        t_rec = t_host if t_host is not None else (None if dp.t_us is None else dp.t_us * 1e-6)
+        if t_host is not None:
+            self._t_host = t_host
+        if self.speed > 0 and t_rec is not None:
+            if self._t0_dev is None or t_rec < self._t0_dev:
+                self._t0_dev, self._t0_wall = t_rec, self.clock()
+            wait = self._t0_wall + (t_rec - self._t0_dev) / self.speed - self.clock()
             if wait > 0:
                 self._sleep(wait)
         self.arrival_ns = time.perf_counter_ns()
