@@ -472,6 +472,98 @@ def run_dsu_hostile(folder: Path, n: int = 10000) -> dict:
     return results
 
 
+DSU_READER = """
+import socket, sys, time
+s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+s.settimeout(0.2)
+port, seconds = int(sys.argv[1]), float(sys.argv[2])
+req = bytearray(28)  # DSUC, 1001, length 12, CRC, id, type 0x100002, flags 0 (all pads)
+req[0:4] = b"DSUC"; req[4:6] = (1001).to_bytes(2, "little"); req[6:8] = (12).to_bytes(2, "little")
+req[16:20] = (0x100002).to_bytes(4, "little")
+import binascii; req[8:12] = (binascii.crc32(bytes(req)) & 0xFFFFFFFF).to_bytes(4, "little")
+end = time.monotonic() + seconds; asked = 0; n = 0
+while time.monotonic() < end:
+    if time.monotonic() - asked > 0.5:
+        s.sendto(bytes(req), ("127.0.0.1", port)); asked = time.monotonic()
+    try:
+        s.recv(2048); n += 1
+    except socket.timeout:
+        pass
+print(n)
+"""
+
+
+def output_cost(name: str | None, samples: int = 4000) -> float:
+    """Process CPU seconds (every thread: the output's server thread too) to pass ``samples`` samples of a
+    sphere turning at 90 °/s (the daemon's 200 Hz RAW_SAMPLE rate in device time) through the outputs'
+    fan-out with ``name``'s output on and a client of it reading in its own process; None: no output."""
+    from sphere import quaternion as quat
+    from sphere.daemon.outputs.fanout import Outputs
+
+    client = None
+    folder = tempfile.mkdtemp()
+    outs = []
+    if name == "spacenav":
+        from sphere.daemon.outputs.spacenav import SpacenavOutput
+
+        path = os.path.join(folder, "cost.sock")
+        outs = [SpacenavOutput(path, mapping="direct")]
+        client = subprocess.Popen([sys.executable, str(HERE / "spnav_client.py"), "120"], stdout=subprocess.DEVNULL,
+                                  env=dict(os.environ, SPNAV_SOCKET=path))
+        wait = lambda: outs[0].server.clients  # noqa: E731
+    elif name == "dsu":
+        from sphere.daemon.outputs.dsu import DsuOutput
+
+        port = free_udp_port()
+        outs = [DsuOutput(port=port)]
+        client = subprocess.Popen([sys.executable, "-c", DSU_READER, str(port), "120"], stdout=subprocess.DEVNULL)
+        wait = lambda: outs[0].server.subscribers  # noqa: E731
+    try:
+        if client is not None:
+            deadline = time.monotonic() + 20
+            while not wait() and time.monotonic() < deadline:
+                time.sleep(0.02)
+            time.sleep(0.5)
+        fan = Outputs(None, outs)
+        fan.mode = "3d"
+        dt_us = 5000
+        step = quat.from_axis_angle((0.0, 0.0, 1.0), math.radians(90.0) * dt_us / 1e6)
+        q = (1.0, 0.0, 0.0, 0.0)
+        poses = []
+        for _ in range(samples):
+            q = tuple(float(v) for v in quat.multiply(q, step))
+            poses.append(q)
+        gyro, accel = (0.0, 0.0, 90.0), (0.0, 0.0, 1.0)
+        t0 = time.process_time()
+        for i, q in enumerate(poses):
+            t_us = 1_000_000 + i * dt_us
+            fan.publish_orientation(q, t_us)
+            fan.publish_motion(gyro, accel, t_us)
+            if i % 200 == 199:
+                time.sleep(0.01)  # let the clients read (as at the real rate) without counting it
+        cpu = time.process_time() - t0
+        fan.stop()
+    finally:
+        if client is not None:
+            client.kill()
+            client.wait()
+        shutil.rmtree(folder, ignore_errors=True)
+    return cpu
+
+
+def output_costs(samples: int = 4000, repeats: int = 3) -> dict:
+    """Extra CPU of each output over the fan-out alone, as % of one core at 200 samples/s (median of
+    ``repeats`` interleaved runs)."""
+    from statistics import median
+
+    runs = {k: [] for k in (None, "spacenav", "dsu")}
+    for _ in range(repeats):
+        for k in runs:
+            runs[k].append(output_cost(k, samples))
+    base = median(runs[None])
+    return {k: (median(v) - base) / samples * 200 * 100 for k, v in runs.items() if k}
+
+
 def _print_dsu(f: dict, h: dict) -> None:
     print()
     print("dsu output, sphere-mouse --replay sim_turn_90.bin (pointer mode), a client written from the description")
@@ -504,9 +596,13 @@ def main(argv=None) -> int:
         return 1
     with tempfile.TemporaryDirectory() as d:
         res = {"spacenav": spacenav_turns(Path(d)), "dsu": dsu_figures(run_dsu_turn(Path(d))),
-               "dsu_hostile": run_dsu_hostile(Path(d))}
+               "dsu_hostile": run_dsu_hostile(Path(d)), "cost_pct": output_costs()}
     _print_spacenav(res["spacenav"])
     _print_dsu(res["dsu"], res["dsu_hostile"])
+    print()
+    print("extra CPU of the daemon's loop and the output's thread, a client connected and reading, 200 samples/s")
+    for k, v in res["cost_pct"].items():
+        print(f"{k:40s}{'<= 0.5 %':>12s}{v:>20.3f} % of a core")
     if args.json:
         Path(args.json).write_text(json.dumps(res, indent=2))
     return 0

@@ -8,7 +8,8 @@ import time
 
 import pytest
 
-from outputs_bench import DsuClient, dsu_figures, free_udp_port, hostile_datagrams, run_dsu_hostile, run_dsu_turn
+from outputs_bench import (DsuClient, dsu_figures, free_udp_port, hostile_datagrams, libspnav_missing, output_costs,
+                           run_dsu_hostile, run_dsu_turn)
 from sphere.daemon.config import Config, ConfigError, parse_set
 from sphere.daemon.outputs.base import OutputUnavailable
 from sphere.daemon.outputs.fanout import attach
@@ -103,3 +104,11 @@ def test_crc_is_zlibs_over_the_message_with_its_field_zeroed():
     zeroed = m[:8] + bytes(4) + m[12:]
     assert struct.unpack_from("<I", m, 8)[0] == binascii.crc32(zeroed) and dsu.crc(m) == binascii.crc32(zeroed)
     assert m[:4] == b"DSUS" and struct.unpack_from("<HH", m, 4) == (1001, 6) and len(m) == 22
+
+
+@pytest.mark.skipif(libspnav_missing() is not None, reason=str(libspnav_missing()))
+def test_each_output_costs_under_half_a_percent_of_a_core():
+    """The daemon's extra CPU per output (its loop's calls and its server thread), a client connected and
+    reading, at the sphere's 200 samples/s: target ≤ 0.5 % of a core each."""
+    costs = output_costs(samples=3000, repeats=3)
+    assert costs["spacenav"] <= 0.5 and costs["dsu"] <= 0.5, costs
