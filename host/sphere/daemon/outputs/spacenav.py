@@ -69,6 +69,7 @@ import time
 
 from sphere.daemon.outputs.base import Output, OutputUnavailable
 from sphere.settings import Param, positive
+from sphere.smoothing.pose import _conj, _qmul, log_deg  # the per-sample tuple forms (no numpy)
 
 # -- the protocol (libspnav src/proto.h) --
 UEV_MOTION, UEV_PRESS, UEV_RELEASE = 0, 1, 2
@@ -267,13 +268,6 @@ class SpnavSession:
 
 # ------------------------------------------------------------------ motion → events (no I/O)
 
-def _qmul(a, b):
-    aw, ax, ay, az = a
-    bw, bx, by, bz = b
-    return (aw * bw - ax * bx - ay * by - az * bz, aw * bx + ax * bw + ay * bz - az * by,
-            aw * by - ax * bz + ay * bw + az * bx, aw * bz + ax * by - ay * bx + az * bw)
-
-
 def _qrot(q, v):
     """``v`` rotated by the unit quaternion ``q`` (w, x, y, z)."""
     w, x, y, z = q
@@ -282,18 +276,6 @@ def _qrot(q, v):
     ty = 2 * (z * vx - x * vz)
     tz = 2 * (x * vy - y * vx)
     return (vx + w * tx + y * tz - z * ty, vy + w * ty + z * tx - x * tz, vz + w * tz + x * ty - y * tx)
-
-
-def _rotvec(q):
-    """The rotation vector (axis × angle, rad) of the unit quaternion ``q``."""
-    w, x, y, z = q
-    if w < 0:
-        w, x, y, z = -w, -x, -y, -z
-    s = math.sqrt(x * x + y * y + z * z)
-    if s < 1e-12:
-        return (2 * x, 2 * y, 2 * z)
-    k = 2 * math.atan2(s, w) / s
-    return (k * x, k * y, k * z)
 
 
 def spnav_axes(v, zoom: str):
@@ -338,8 +320,8 @@ class SpnavMotion:
             self.ref = q
         if self.mapping != "puck":
             return None
-        rel = _qmul((self.ref[0], -self.ref[1], -self.ref[2], -self.ref[3]), q)
-        v = _rotvec(rel)
+        d = log_deg(_qmul(_conj(self.ref), q))  # the turn from the centre, reference frame
+        v = (math.radians(d[0]), math.radians(d[1]), math.radians(d[2]))
         angle = math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
         if angle <= self.dead:
             return self._stop(t_us)
@@ -359,7 +341,7 @@ class SpnavMotion:
         if w[0] * w[0] + w[1] * w[1] + w[2] * w[2] < self.still_rad * self.still_rad:
             return self._stop(t_us)
         ref = self.ref
-        rel = _qmul((ref[0], -ref[1], -ref[2], -ref[3]), self.quat)  # body → reference frame
+        rel = _qmul(_conj(ref), self.quat)  # body → reference frame
         k = dt * 1000.0 * self.direct_scale  # rad/s → mrad turned in this sample
         wr = _qrot(rel, (w[0] * k, w[1] * k, w[2] * k))
         acc = self._acc
