@@ -31,8 +31,8 @@ def test_a_replayed_turn_reaches_a_dsu_client(tmp_path):
 def test_hostile_datagrams_change_nothing(tmp_path):
     h = run_dsu_hostile(tmp_path, 10000)
     assert h["calm"]["rc"] == 0 and h["flood"]["rc"] == 0 and not h["flood"]["traceback"], h
-    f = h["flood"]  # all received (less what the kernel dropped for want of buffer on a loaded machine), all ignored
-    assert f["received"] + f["kernel_drops"] == 10000 and f["ignored"] == f["received"] >= 9000, h
+    f = h["flood"]  # sent in chunks the socket's buffer holds: every one read, every one ignored
+    assert f["received"] == f["ignored"] == 10000 and f["kernel_drops"] == 0, h
     assert h["flood"]["moves"] == h["calm"]["moves"] > 100, h  # the pointer did exactly what it does without them
 
 

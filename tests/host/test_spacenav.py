@@ -84,7 +84,7 @@ def test_puck_mapping_signs_through_libspnav(tmp_path):
         x, y, z = (1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0)
         for q in [(1.0, 0.0, 0.0, 0.0)] * 5 + [_turned(z, 20.0)] * 20 + [(1.0, 0.0, 0.0, 0.0)] * 5 + \
                 [_turned(y, -20.0)] * 20 + [_turned(x, 20.0)] * 20 + [(1.0, 0.0, 0.0, 0.0)] * 5:
-            out.orientation(q, t)
+            out.motion((0.0, 0.0, 0.0), (0.0, 0.0, 1.0), t, q)
             t += 5000
             time.sleep(0.005)
         time.sleep(0.3)

@@ -183,19 +183,19 @@ class SphereMouse:
         if typ == RawSample.TYPE:
             self._raw_sample(p, t)  # the pointer move first: what the hand feels
             motion = self.motion
-            if self.stream is not None and motion.uses_host_filter:
+            if self.stream is not None and motion.uses_host_filter and getattr(self.stream, "wants_pose", True):
                 self._publish_pose(t)
             if self._publish_motion is not None:
-                self._publish_motion(motion.gyro_dps, motion.accel_g, t)
+                self._publish_motion(motion.gyro_dps, motion.accel_g, t, motion.quat)
             motion.run_deferred()  # the filter's bias step and the still-detection's trend sums
         elif typ == Orientation.TYPE:
             dt = self.motion.orientation(p, t)
             if self.motion.uses_host_filter:
                 return
-            if self.stream is not None:
+            if self.stream is not None and getattr(self.stream, "wants_pose", True):
                 self.stream.publish_orientation(self.pose.at(self.motion.quat, t), t)
             if self._publish_motion is not None and not self.motion.raw_seen:
-                self._publish_motion(self.motion.gyro_dps, None, t)  # the rate from successive orientations
+                self._publish_motion(self.motion.gyro_dps, None, t, self.motion.quat)  # rate from successive orientations
             if not self.paused and not self.actions.frozen(t):
                 if self.mode == "tilt":
                     self._tilt_step(t, dt)

@@ -43,6 +43,9 @@ class Output:
     NAME = "output"
     #: the settings of ``[outputs.NAME]`` (each output has ``enabled``); see sphere.settings
     PARAMS: dict = {}
+    #: False: the output takes the orientation from :meth:`motion` and needs no smoothed pose (``orientation``
+    #: is not called); when no output wants one and there is no 3-D stream, the daemon computes none.
+    POSE = True
 
     def __init__(self, rate_hz: float = 100.0, clock=time.monotonic):
         self.period_s = 1.0 / rate_hz if rate_hz > 0 else 0.0
@@ -84,10 +87,11 @@ class Output:
     def mode(self, name: str) -> None:
         self.send_mode(name)
 
-    def motion(self, gyro_dps, accel_g, t_us=None) -> None:
+    def motion(self, gyro_dps, accel_g, t_us=None, quat=None) -> None:
         """The sphere's bias-corrected angular rate (°/s) and acceleration (g, None when the accelerometer did
-        not answer), sensor axes (x towards the screen, y left, z up at the reference pose), once per sample.
-        Outputs that speak rates (a 3-D mouse, a motion server) override it; :class:`Outputs` calls only those."""
+        not answer), sensor axes (x towards the screen, y left, z up at the reference pose), and its
+        orientation as the fusion filter gives it (sensor to NWU, unsmoothed), once per sample. Outputs that
+        speak rates (a 3-D mouse, a motion server) override it; :class:`Outputs` calls only those."""
 
     # -- to the program --
     def send_pose(self, q, angles_deg, moved_m, position_m, t_us) -> None:

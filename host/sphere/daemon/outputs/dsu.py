@@ -266,6 +266,7 @@ class DsuServer:
 class DsuOutput(Output):
     NAME = "dsu"
     PARAMS = DSU_PARAMS
+    POSE = False  # rates and acceleration only (motion())
 
     def __init__(self, host: str = "127.0.0.1", port: int = 26760, only_3d: bool = False, rate_hz: float = 250.0,
                  timeout_s: float = 5.0, tap_hold_ms: int = 100, log=None):
@@ -287,10 +288,7 @@ class DsuOutput(Output):
         host, port = self.server.address
         return f"DSU (cemuhook) motion server on {host}:{port} UDP, pad 1 ({'3-D mode only' if self.only_3d else 'every mode'})"
 
-    def orientation(self, q, t_us=None, position=None) -> None:
-        self.quat = q  # DSU sends rates and acceleration (motion), not the pose
-
-    def motion(self, gyro_dps, accel_g, t_us=None) -> None:
+    def motion(self, gyro_dps, accel_g, t_us=None, quat=None) -> None:
         server = self.server
         server.connected = True
         if t_us is None or not server.subscribers or not self.active:

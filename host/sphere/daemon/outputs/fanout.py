@@ -40,7 +40,13 @@ class Outputs:
     def _rate_outputs(self) -> list:
         from sphere.daemon.outputs.base import Output
 
+        self._pose = [o for o in self.outputs if getattr(o, "POSE", True)]
         return [o for o in self.outputs if getattr(type(o), "motion", Output.motion) is not Output.motion]
+
+    @property
+    def wants_pose(self) -> bool:
+        """Whether anyone takes the smoothed pose (the stream, or an output with POSE): else the daemon skips it."""
+        return self.stream is not None or bool(self._pose)
 
     @property
     def position(self):
@@ -80,13 +86,17 @@ class Outputs:
     def publish_orientation(self, quat, t_us=None) -> None:
         if self.stream is not None:
             self.stream.publish_orientation(quat, t_us)
-        self._each(lambda o: o.orientation(quat, t_us, self._position))
+        for out in self._pose:
+            try:
+                out.orientation(quat, t_us, self._position)
+            except Exception as e:  # one program gone must not stop the pointer or the others
+                self._drop(out, e)
 
-    def publish_motion(self, gyro_dps, accel_g, t_us=None) -> None:
-        """Each sample's rates and acceleration, to the outputs that use them (the stream does not)."""
+    def publish_motion(self, gyro_dps, accel_g, t_us=None, quat=None) -> None:
+        """Each sample's rates, acceleration and orientation, to the outputs that use them (the stream does not)."""
         for out in self._rates:
             try:
-                out.motion(gyro_dps, accel_g, t_us)
+                out.motion(gyro_dps, accel_g, t_us, quat)
             except Exception as e:
                 self._drop(out, e)
 
@@ -112,6 +122,7 @@ class Outputs:
         self._each(lambda o: o.close())
         self.outputs = []
         self._rates = []
+        self._pose = []
 
 
 def open_outputs(cfg, log=None) -> list:

@@ -289,8 +289,8 @@ def spnav_axes(v, zoom: str):
 
 class SpnavMotion:
     """The events a client gets for the sphere's motion, at most ``rate_hz`` while it moves and one zero event
-    when it stops. Feed :meth:`pose` (every published orientation) and :meth:`rates` (every sample); each
-    returns ``(values, period_ms)`` to send, or None."""
+    when it stops. Feed :meth:`update` every sample (the orientation, sensor to earth, the bias-corrected
+    rate in °/s and the device time); it returns ``(values, period_ms)`` to send, or None."""
 
     def __init__(self, mapping="puck", zoom="roll", rate_hz=100.0, dead_zone_deg=3.0, full_tilt_deg=30.0, curve=1.5,
                  full_scale=350, direct_scale=1.0, still_dps=3.0):
@@ -313,13 +313,15 @@ class SpnavMotion:
     def recentre(self) -> None:
         self.ref = None
 
-    def pose(self, q, t_us):
-        q = tuple(float(v) for v in q)
-        self.quat = q
-        if self.ref is None:
-            self.ref = q
-        if self.mapping != "puck":
-            return None
+    def update(self, q, gyro_dps, t_us):
+        self.hold(q, t_us)
+        if self.mapping == "puck":
+            return self._puck(t_us)
+        return self._direct(gyro_dps, t_us)
+
+    def _puck(self, t_us):
+        self._last_t = t_us
+        q = self.quat
         d = log_deg(_qmul(_conj(self.ref), q))  # the turn from the centre, reference frame
         v = (math.radians(d[0]), math.radians(d[1]), math.radians(d[2]))
         angle = math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
@@ -329,9 +331,9 @@ class SpnavMotion:
         k = level / angle
         return self._emit(t_us, spnav_axes((v[0] * k, v[1] * k, v[2] * k), self.zoom))
 
-    def rates(self, gyro_dps, t_us):
+    def _direct(self, gyro_dps, t_us):
         last, self._last_t = self._last_t, t_us
-        if self.mapping != "direct" or self.quat is None or last is None or t_us is None:
+        if last is None or t_us is None:
             return None
         dt = (t_us - last) * 1e-6
         if not 0.0 < dt < 0.5:
@@ -364,8 +366,8 @@ class SpnavMotion:
         return ([int(round(v)) for v in values], period_ms)
 
     def hold(self, q, t_us) -> None:
-        """Follow the pose without sending (nobody listens, or not in 3-D mode)."""
-        self.quat = tuple(float(v) for v in q)
+        """Follow the pose without sending (also when nobody listens, or not in 3-D mode)."""
+        self.quat = q if type(q) is tuple else tuple(float(v) for v in q)
         if self.ref is None:
             self.ref = self.quat
 
@@ -661,6 +663,7 @@ def system_socket_note(path: str) -> str | None:
 class SpacenavOutput(Output):
     NAME = "spacenav"
     PARAMS = SPACENAV_PARAMS
+    POSE = False  # the sphere's own orientation and rate each sample (motion()); no smoothed pose needed
 
     def __init__(self, path: str | None = None, name: str = "MARG sphere", protocol: int = 1, only_3d: bool = True,
                  log=None, **motion):
@@ -699,20 +702,14 @@ class SpacenavOutput(Output):
             self._send(self.track._stop(t_us), always=True)
         return False
 
-    def orientation(self, q, t_us=None, position=None) -> None:
-        if q is None:
+    def motion(self, gyro_dps, accel_g, t_us=None, quat=None) -> None:
+        if quat is None:
             return
-        self.quat = q
         if not self._listening(t_us):
-            self.track.hold(q, t_us)  # keep the pose, compute nothing
-            return
-        self._send(self.track.pose(q, t_us))
-
-    def motion(self, gyro_dps, accel_g, t_us=None) -> None:
-        if not self._listening(t_us):
+            self.track.hold(quat, t_us)  # keep the pose, compute nothing
             self.track._last_t = t_us
             return
-        self._send(self.track.rates(gyro_dps, t_us))
+        self._send(self.track.update(quat, gyro_dps, t_us))
 
     def recentre(self) -> None:
         self.track.recentre()
