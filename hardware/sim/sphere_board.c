@@ -40,6 +40,7 @@
 #include <stdint.h>
 #include "avr_ioport.h"
 #include "avr_uart.h"
+#include "avr_extint.h"
 #include "parts/uart_pty.h"
 #include "sensors.h"
 #include "mcu.h"
@@ -511,6 +512,20 @@ static void reset_avr(avr_t *avr, uint8_t kind, uint64_t seed)
 	mcu_watchdog_after_reset(avr, mcusr_before); /* WDRF still set keeps the watchdog on (mcu.c) */
 }
 
+/* INT0/INT1 in low-level mode (ISC = 00, the reset value): simavr 1.6 (avr_extint.c) then polls the pin every
+ * cycle while it is low and keeps polling after the program picks an edge mode (the poll reads the pin, never
+ * ISC), raising INT0 whenever it is low: a cycle timer due at every cycle, most of the board's time
+ * (avr_ioctl at the top of a profile) and no idle cycles to skip while the AVR sleeps. The datasheet's level
+ * interrupt ("triggered as long as the pin is held low", External Interrupts, EICRA) applies only while
+ * ISC = 00, which neither the firmware (rising edge, avr_board.cpp) nor the boot loaders use; simavr's
+ * non-strict mode raises it once per low level instead. simavr sets the strict mode again at every reset
+ * (after the board's own reset hook), so the board turns it off after each. */
+static void extint_level_poll_off(avr_t *avr)
+{
+	avr_extint_set_strict_lvl_trig(avr, 0, 0);
+	avr_extint_set_strict_lvl_trig(avr, 1, 0);
+}
+
 /* the watchdog's system reset where simavr 1.6 makes none (mcu.c, (2)): as simavr's own, WDRF and WDE set */
 static void watchdog_reset_avr(avr_t *avr)
 {
@@ -522,10 +537,17 @@ static void watchdog_reset_avr(avr_t *avr)
 static void on_reset(avr_t *avr)
 {
 	resets++;
+	/* a reset starts the program at the reset vector, asleep or not (ATmega328P datasheet, System Control and
+	 * Reset: "all I/O Registers are set to their initial values, and the program starts execution from the
+	 * Reset Vector"); simavr 1.6's avr_reset leaves avr->state alone, so a brown-out that came while the
+	 * firmware slept in its loop left it asleep with interrupts off until the watchdog */
+	if (avr->state == cpu_Sleeping)
+		avr->state = cpu_Running;
 	avr->data[mcusr_addr] = (uint8_t)(mcusr_before | reset_flag);
 	mcu_on_reset();
 	avr->pc = avr->reset_pc; /* the boot loader's first address with --bootloader (BOOTRST), else 0 */
 	tm_update.have_last_rise = 0; /* the program starts again: the gap before its first update is no overrun */
+	tm_update.high = tm_loop.high = 0; /* a pulse the reset cuts (the pin falls as PORTB clears) is no update */
 	if (the_board && !plain_reset)
 		board_avr_reset(the_board); /* the chips keep their power: one in the middle of a read holds SDA */
 	else if (the_board) {
@@ -806,6 +828,7 @@ int main(int argc, char **argv)
 		return 1;
 	}
 	avr_init(avr);
+	extint_level_poll_off(avr);
 	avr->frequency = 16000000;
 	avr->log = verbose > 3 ? LOG_TRACE : LOG_ERROR;
 	avr_load_firmware(avr, &fw);
@@ -990,6 +1013,7 @@ int main(int argc, char **argv)
 				log_fault(board_time_s(&board), "hang_end_by_reset", -1);
 			}
 			board_restart_timers(&board);
+			extint_level_poll_off(avr);
 			if (adapter) { /* the adapter is not reset with the AVR, but simavr cancelled its timer */
 				avr_cycle_timer_cancel(avr, adapter_timer, &uart_out);
 				avr_cycle_timer_register(avr, avr->frequency / 1000, adapter_timer, &uart_out);
