@@ -37,4 +37,5 @@ void loop() {
         wdt_reset();
     }
     board.service();
+    AvrBoard::idle();  // until the next interrupt
 }

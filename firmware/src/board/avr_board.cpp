@@ -3,6 +3,7 @@
 #include <Arduino.h>
 #include <avr/eeprom.h>
 #include <avr/interrupt.h>
+#include <avr/sleep.h>
 #include <avr/wdt.h>
 #include <util/atomic.h>
 #include <util/delay.h>
@@ -67,6 +68,24 @@ uint8_t AvrBoard::takeTicks() {
         g_ticks = 0;
     }
     return n;
+}
+
+// Idle sleep (datasheet §10.1 Sleep Modes: "Idle mode stops the CPU but allows ... USART, ... Timer/Counters,
+// ... and the interrupt system to continue operating"): the loop has nothing to do until an interrupt sets a
+// flag (the 200 Hz tick, a received byte, a transmitted one, INT0, timer0's millis), and every one of those
+// wakes it. Checked with interrupts off and slept with `sei; sleep` (the instruction after sei runs before
+// any interrupt), so a tick that comes between the check and the sleep wakes it at once. Saves the CPU's
+// idle current on a Nano; the virtual board skips the cycles the AVR sleeps.
+void AvrBoard::idle() {
+    set_sleep_mode(SLEEP_MODE_IDLE);
+    cli();
+    if (!g_ticks && !Serial.available()) {
+        sleep_enable();
+        sei();
+        sleep_cpu();
+        sleep_disable();
+    }
+    sei();
 }
 
 uint32_t AvrBoard::micros() { return ::micros(); }

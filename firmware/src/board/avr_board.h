@@ -15,6 +15,8 @@ public:
     void begin();                 // pins, INT0, Timer1 at 200 Hz
     static uint8_t takeTicks();   // periods elapsed since the last call (normally 1)
     void service();               // LED blinking for IDENTIFY, reboot once the reply is out
+    // Sleeps until the next interrupt (timer, UART, INT0) unless a period or a received byte already waits.
+    static void idle();
     void blink(uint8_t times);    // 60 ms blinks at power-up (before the sample clock runs)
 
     uint32_t micros() override;
