@@ -51,7 +51,7 @@ def test_position_smoothing_steadies_a_still_ball_and_its_parameters_are_in_metr
     f = PoseFilter("none", ("one-euro", {}))
     noise = rng.normal(0.0, 0.0005, (2000, 3))
     out = np.array([f.update(Q, 0.0035, tuple(np.array([0.0, 0.0, 1.0]) + n))[1] for n in noise])
-    assert out[500:].std(axis=0).max() < 0.3 * noise.std(axis=0).min()
+    assert out[500:].std(axis=0).max() < 0.6 * noise.std(axis=0).min()  # a light touch: 16 Hz when still
     cfg = config.Config().with_overrides(config.parse_set(["position_smoothing.one-euro.beta=5"]), "--set")
     assert pose_filter(cfg)._position.beta == 5.0
     with pytest.raises(config.ConfigError, match="beta"):
