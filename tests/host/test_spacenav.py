@@ -74,7 +74,7 @@ def test_puck_mapping_signs_through_libspnav(tmp_path):
     path = tmp_path / "puck.sock"
     out = sn.SpacenavOutput(str(path), log=lambda m: None, mapping="puck", rate_hz=100.0)
     out.mode("3d")
-    client = _client(path, "3")
+    client = _client(path, "20")  # it ends when the server closes
     t = 0
     try:
         deadline = time.monotonic() + 10
