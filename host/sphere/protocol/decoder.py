@@ -63,7 +63,8 @@ class FrameDecoder:
         self._buf = bytearray()
         self._discarding = False  # inside an oversize chunk: drop bytes up to the next delimiter
         self._last_seq: int | None = None
-        self._recent: deque = deque()  # (seq << 16 | crc) of the last DUPLICATE_WINDOW frames, oldest first
+        # (seq << 16 | crc) of the last DUPLICATE_WINDOW frames, oldest first; -1: no frame yet (no key is < 0)
+        self._recent: deque = deque((-1,) * DUPLICATE_WINDOW)
         self._recent_set: set = set()  # the same, for the lookup
 
     def restart(self) -> None:
@@ -72,7 +73,10 @@ class FrameDecoder:
         self._buf.clear()
         self._discarding = False
         self._last_seq = None
-        self._recent.clear()
+        self._forget_recent()
+
+    def _forget_recent(self) -> None:
+        self._recent = deque((-1,) * DUPLICATE_WINDOW)
         self._recent_set.clear()
 
     def feed(self, data: bytes) -> list[Packet]:
@@ -146,8 +150,7 @@ class FrameDecoder:
             if self._last_seq is not None:
                 self.stats.restarts += 1
             self._last_seq = None
-            self._recent.clear()
-            self._recent_set.clear()
+            self._forget_recent()
         key = seq << 16 | crc
         recent = self._recent_set
         if key in recent:
@@ -156,8 +159,7 @@ class FrameDecoder:
         recent.add(key)
         window = self._recent
         window.append(key)
-        if len(window) > DUPLICATE_WINDOW:
-            recent.discard(window.popleft())
+        recent.discard(window.popleft())  # the window holds DUPLICATE_WINDOW keys (placeholders at first)
         last = self._last_seq  # :meth:`_count_seq`, inlined
         if last is not None and (seq - last - 1) & 0xFF:
             self.stats.seq_gaps += 1
