@@ -485,6 +485,72 @@ def run_dsu_hostile(folder: Path, n: int = 10000) -> dict:
     return results
 
 
+def _rss_kib(pid: int) -> int:
+    with open(f"/proc/{pid}/status") as f:
+        return next(int(line.split()[1]) for line in f if line.startswith("VmRSS:"))
+
+
+def run_spnav_hostile(folder: Path, connects: int = 1000) -> dict:
+    """The turn replayed twice in pointer mode with the spacenav output on in every mode, a ctypes libspnav
+    client reading; the second time also a client that sends random bytes, ``connects`` connections opened
+    and closed, and one that connects and never reads. Pointer moves, what the good client got, the
+    daemon's memory before and after the hostile clients, its exit status."""
+    import socket
+
+    results = {}
+    for hostile in (False, True):
+        sock = folder / f"hostile{int(hostile)}.sock"
+        daemon = _daemon(folder, f"spnav-hostile{int(hostile)}",
+                         f"[outputs.spacenav]\nenabled = true\nsocket = \"{sock}\"\nmapping = \"direct\"\n"
+                         "only_3d = false\n")
+        deadline = time.monotonic() + 20
+        while not sock.exists() and daemon.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.02)
+        good = subprocess.Popen([sys.executable, str(HERE / "spnav_client.py"), "30"], stdout=subprocess.PIPE,
+                                text=True, env=dict(os.environ, SPNAV_SOCKET=str(sock)))
+        lines: list = []
+        reader = _reader(good, lines)
+        rss = []
+        held = []
+        time.sleep(0.5)
+        rss.append(_rss_kib(daemon.pid))
+        if hostile:
+            rng = random.Random(26)
+            noisy = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+            noisy.connect(str(sock))
+            noisy.sendall(bytes([0x42, 0x13, 0x37, 0xFF]) + rng.randbytes(4000))
+            held.append(noisy)
+            mute = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+            mute.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+            mute.connect(str(sock))
+            mute.sendall(struct.pack("=i", 0x7FAA5501))
+            held.append(mute)
+            for _ in range(connects):
+                c = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+                c.connect(str(sock))
+                c.close()
+        while daemon.poll() is None:  # memory through the run (the mute client never reads)
+            try:
+                rss.append(_rss_kib(daemon.pid))
+            except (OSError, StopIteration):
+                break
+            time.sleep(0.25)
+        _, err = daemon.communicate(timeout=60)
+        for h in held:
+            h.close()
+        good.wait(timeout=30)
+        reader.join(timeout=5)
+        client = [json.loads(line) for _, line in lines]
+        moves = re.search(r"stopped: (\d+) pointer moves", err)
+        motion = [(r["t"], r["v"]) for r in client if r["kind"] == "motion"]
+        results["hostile" if hostile else "calm"] = {
+            "rc": daemon.returncode, "moves": int(moves.group(1)) if moves else None,
+            "good": motion_figures(motion), "traceback": "Traceback" in err,
+            "dropped_logged": err.count("spacenav: dropped a client"),
+            "rss_growth_kib": (max(rss) - rss[0]) if len(rss) > 1 else None}
+    return results
+
+
 DSU_READER = """
 import socket, sys, time
 s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -609,9 +675,22 @@ def main(argv=None) -> int:
         print(f"outputs_bench: {why}", file=sys.stderr)
         return 1
     with tempfile.TemporaryDirectory() as d:
-        res = {"spacenav": spacenav_turns(Path(d)), "dsu": dsu_figures(run_dsu_turn(Path(d))),
-               "dsu_hostile": run_dsu_hostile(Path(d)), "cost_pct": output_costs()}
+        res = {"spacenav": spacenav_turns(Path(d)), "spacenav_hostile": run_spnav_hostile(Path(d)),
+               "dsu": dsu_figures(run_dsu_turn(Path(d))), "dsu_hostile": run_dsu_hostile(Path(d)),
+               "cost_pct": output_costs()}
     _print_spacenav(res["spacenav"])
+    h = res["spacenav_hostile"]
+    print(f"hostile clients (random bytes, 1,000 connects, one that never reads) during a replay, pointer mode:")
+    for label, target, value in (
+            ("exit status", "0", h["hostile"]["rc"]),
+            ("pointer moves, calm / hostile", "equal", f"{h['calm']['moves']} / {h['hostile']['moves']}"),
+            ("good client: ry summed, calm / hostile", "1571", f"{h['calm']['good']['sums'][4]} / "
+                                                               f"{h['hostile']['good']['sums'][4]}"),
+            ("good client: zero events", "1", h["hostile"]["good"]["zero_events"]),
+            ("clients dropped (said in the log)", "1", h["hostile"]["dropped_logged"]),
+            ("daemon memory growth, calm / hostile (KiB)", "alike",
+             f"{h['calm']['rss_growth_kib']} / {h['hostile']['rss_growth_kib']}")):
+        print(f"  {label:38s}{target:>12s}{str(value):>16s}")
     _print_dsu(res["dsu"], res["dsu_hostile"])
     print()
     print("extra CPU of the daemon's loop and the output's thread, a client connected and reading, 200 samples/s")

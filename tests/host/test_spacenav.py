@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from outputs_bench import HERE, figures, libspnav_missing, compile_simple, run_turn
+from outputs_bench import HERE, compile_simple, figures, libspnav_missing, run_spnav_hostile, run_turn
 from sphere import quaternion as quat
 from sphere.daemon.config import Config, parse_set
 from sphere.daemon.outputs.base import OutputUnavailable
@@ -245,3 +245,15 @@ def test_a_running_spacenavd_is_said_in_one_line(tmp_path, monkeypatch):
             sn.SpnavServer(str(system), "x")
     finally:
         held.close()
+
+
+@needs_libspnav
+def test_hostile_clients_during_a_replay_leave_the_pointer_and_a_real_client_alone(tmp_path):
+    h = run_spnav_hostile(tmp_path)
+    calm, hostile = h["calm"], h["hostile"]
+    assert calm["rc"] == hostile["rc"] == 0 and not hostile["traceback"], h
+    assert hostile["moves"] == calm["moves"] > 100, h  # the pointer did what it does without them
+    for g in (calm["good"], hostile["good"]):  # libspnav's client got the whole turn and its stop
+        assert 1571 * 0.95 < g["sums"][4] < 1571 * 1.05 and g["zero_events"] == 1 and g["still_events"] == 0, h
+    assert hostile["dropped_logged"] == 1, h  # the random bytes; the mute one is kept, its queue bounded
+    assert hostile["rss_growth_kib"] < calm["rss_growth_kib"] + 2048, h
