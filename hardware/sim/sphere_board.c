@@ -195,6 +195,9 @@ typedef struct {
 	int realtime;
 	double frame_start_s;
 	FILE *host_log; /* --host-log: frames leaving the UART and reaching the pty, for `sphere bench latency` */
+	/* the two ends' baud rates (pty only): the AVR's from UBRR0/U2X0, the host's from the pty's termios */
+	double host_baud;
+	uint64_t garbled_out, garbled_in;
 } uart_out_t;
 
 static double board_wall0; /* CLOCK_MONOTONIC s at simulated time 0 (--realtime pacing) */
@@ -310,11 +313,75 @@ static avr_cycle_count_t adapter_timer(avr_t *avr, avr_cycle_count_t when, void 
 	return when + avr->frequency / 1000;
 }
 
+/* The baud rate the AVR's UART runs at (ATmega328P datasheet, "USART0", Table 20-1: UBRR0 and U2X0). */
+static double avr_uart_baud(avr_t *avr)
+{
+	unsigned ubrr = avr->data[0xC4] | ((avr->data[0xC5] & 0x0F) << 8); /* UBRR0L, UBRR0H */
+	int u2x = avr->data[0xC0] & 0x02;                                  /* UCSR0A: U2X0 */
+	return (double)avr->frequency / ((u2x ? 8.0 : 16.0) * (ubrr + 1));
+}
+
+static double speed_baud(speed_t s)
+{
+	static const struct { speed_t s; double baud; } table[] = {
+		{B9600, 9600}, {B19200, 19200}, {B38400, 38400}, {B57600, 57600}, {B115200, 115200}, {B230400, 230400},
+		{B460800, 460800}, {B500000, 500000}, {B576000, 576000}, {B921600, 921600}, {B1000000, 1000000},
+		{B1152000, 1152000}, {B1500000, 1500000}, {B2000000, 2000000},
+	};
+	for (size_t i = 0; i < sizeof table / sizeof table[0]; i++)
+		if (table[i].s == s)
+			return table[i].baud;
+	return 0;
+}
+
+/* The host's rate as the pty's termios says: the adapter's UART runs at what the host set, from the moment it set
+ * it (a real driver's baud change is a USB control transfer done before its next write), so it is read at every
+ * byte that crosses. */
+static void host_baud_poll(uart_out_t *u)
+{
+	struct termios tio;
+	if (u->pty_fd > 0 && tcgetattr(u->pty_fd, &tio) == 0)
+		u->host_baud = speed_baud(cfgetospeed(&tio));
+}
+
+/* A byte crosses the serial line intact only when both ends run at the same rate: a UART tolerates about
+ * ±2 % between them (ATmega328P datasheet, "Asynchronous Operational Range", Table 20-2/20-3: 8 data bits,
+ * ±2.0 to ±3.0 %). Otherwise the receiver samples the wrong bits: a garbled byte (and a frame that fails). */
+static int rates_match(uart_out_t *u)
+{
+	host_baud_poll(u);
+	if (u->pty_fd <= 0 || u->host_baud <= 0)
+		return 1;
+	double avr = avr_uart_baud(u->avr);
+	return fabs(avr - u->host_baud) <= 0.03 * u->host_baud;
+}
+
+static uint8_t garble(uint8_t byte) { return (uint8_t)(byte * 37u + 11u); }
+
+static avr_irq_t *uart_in_irq;
+
+/* Host -> AVR: what simavr's pty thread hands over, garbled when the rates differ. */
+static void pty_to_avr_hook(struct avr_irq_t *irq, uint32_t value, void *param)
+{
+	(void)irq;
+	uart_out_t *u = param;
+	uint8_t byte = (uint8_t)value;
+	if (!rates_match(u)) {
+		byte = garble(byte);
+		u->garbled_in++;
+	}
+	avr_raise_irq(uart_in_irq, byte);
+}
+
 static void uart_hook(struct avr_irq_t *irq, uint32_t value, void *param)
 {
 	(void)irq;
 	uart_out_t *u = param;
 	uint8_t byte = (uint8_t)value;
+	if (!rates_match(u)) { /* the adapter's UART samples at the host's rate */
+		byte = garble(byte);
+		u->garbled_out++;
+	}
 	u->bytes++;
 	double now_s = (double)u->avr->cycle / u->avr->frequency;
 	if (byte == 0) {
@@ -355,7 +422,6 @@ typedef struct {
 
 static uart_send_t *sends;
 static size_t n_sends, send_i, send_pos;
-static avr_irq_t *uart_in_irq;
 static int uart_xon = 1;
 
 static void xon_hook(struct avr_irq_t *irq, uint32_t v, void *p) { (void)irq; (void)v; (void)p; uart_xon = 1; }
@@ -930,7 +996,11 @@ int main(int argc, char **argv)
 		/* the host's side (the adapter's packets, or each byte) is written by host_deliver(), not simavr's thread,
 		 * which keeps reading what the host sends */
 		avr_unconnect_irq(avr_io_getirq(avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_OUTPUT), pty.irq + IRQ_UART_PTY_BYTE_IN);
+		/* and what the host sends passes the rate check (pty_to_avr_hook) on its way to the AVR */
+		avr_unconnect_irq(pty.irq + IRQ_UART_PTY_BYTE_OUT, uart_in_irq);
+		avr_irq_register_notify(pty.irq + IRQ_UART_PTY_BYTE_OUT, pty_to_avr_hook, &uart_out);
 		uart_out.pty_fd = pty.port[0].s;
+
 		fcntl(uart_out.pty_fd, F_SETFL, fcntl(uart_out.pty_fd, F_GETFL) | O_NONBLOCK);
 		uart_out.realtime = realtime;
 		printf("sphere-board: UART on %s\n", pty.port[0].slavename);
@@ -1221,6 +1291,8 @@ int main(int argc, char **argv)
 		fprintf(sf, "  \"hmc5883l_measurements\": %u,\n  \"hmc5883l_held_by_lock\": %u,\n",
 			board.hmc.measurements, board.hmc.dropped_locked);
 		fprintf(sf, "  \"host_dropped_bytes\": %llu,\n", (unsigned long long)uart_out.host_dropped);
+		fprintf(sf, "  \"garbled_bytes_to_host\": %llu,\n  \"garbled_bytes_to_device\": %llu,\n",
+			(unsigned long long)uart_out.garbled_out, (unsigned long long)uart_out.garbled_in);
 		fprintf(sf, "  \"adapter\": %s%s%s,\n", adapter ? "\"" : "", adapter ? adapter : "null", adapter ? "\"" : "");
 		fprintf(sf, "  \"faults\": [");
 		for (size_t i = 0; i < n_fault_log; i++)

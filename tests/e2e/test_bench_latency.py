@@ -19,7 +19,7 @@ def test_bench_latency_rows_and_stages(tmp_path):
     need_board()
     out = tmp_path / "latency.json"
     r = subprocess.run([sys.executable, "-m", "sphere.cli", "bench", "latency", "--seconds", "9", "--adapters",
-                        "none,ftdi-16ms", "--json", str(out)], capture_output=True, text=True, timeout=600)
+                        "none,ftdi-16ms", "--bauds", "115200", "--json", str(out)], capture_output=True, text=True, timeout=600)
     assert r.returncode == 0, r.stderr[-2000:]
     assert "motion onset -> X pointer move" in r.stdout and "ftdi-16ms" in r.stdout
     rows = {row["row"]: row for row in json.loads(out.read_text())["rows"]}

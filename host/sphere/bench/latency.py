@@ -45,6 +45,7 @@ from pathlib import Path
 import numpy as np
 
 from sphere import argtypes
+from sphere.protocol.packets import FAST_BAUDS
 
 HELP = ("motion onset -> X pointer move through the virtual board: each USB adapter model and baud, "
         "sphere-mouse --backend x11 on Xvfb, latency per stage (percentiles)")
@@ -62,8 +63,9 @@ def add_arguments(p) -> None:
                    help="simulated (= wall) seconds per row, the first 3 still (default 20: 42 onsets a row)")
     p.add_argument("--adapters", type=_adapter_list, default=list(ADAPTERS),
                    help=f"comma-separated rows among {', '.join(ADAPTERS)} (default all)")
-    p.add_argument("--bauds", type=_baud_list, default=[115200],
-                   help="comma-separated baud rates the sphere runs at (default 115200)")
+    p.add_argument("--bauds", type=_baud_list, default=[115200, 1000000],
+                   help="comma-separated rates the link runs at: 115200, or 250000/500000/1000000 that sphere-mouse "
+                        "switches the sphere to (SET_BAUD; default 115200,1000000)")
     p.add_argument("--seed", type=argtypes.count, default=27, help="seed of the onsets' phases (default 27)")
     p.add_argument("--json", metavar="OUT", type=argtypes.out_file, help="also write every figure as JSON")
 
@@ -86,9 +88,9 @@ def _baud_list(text: str) -> list[int]:
     if not bauds:
         raise argparse.ArgumentTypeError(f"no baud rate in {text!r}: e.g. 115200 or 115200,1000000")
     for b in bauds:
-        if b != 115200:
-            raise argparse.ArgumentTypeError(f"baud {b}: the sphere runs at 115200 only (the firmware has no baud "
-                                             "switch yet)")
+        if b != 115200 and b not in FAST_BAUDS:
+            raise argparse.ArgumentTypeError(f"baud {b}: the sphere runs at 115200, or at "
+                                             f"{', '.join(map(str, FAST_BAUDS))} after SET_BAUD")
     return bauds
 
 
@@ -255,15 +257,16 @@ def run_row(name: str, baud: int, trace: Path, onsets_s, seconds: float, display
                 break
         if pty is None:
             raise RuntimeError(f"the virtual board did not start: {board.stderr.read().strip()[-300:]}")
-        mouse_cmd = [sys.executable, "-m", "sphere.mouse", "--port", pty, "--baud", str(baud), "--backend", "x11",
+        mouse_cmd = [sys.executable, "-m", "sphere.mouse", "--port", pty, "--backend", "x11",
                      "--display", display, "--no-stream", "--quiet", "--config", os.devnull,
-                     "--set", f"source.low_latency={'true' if low_latency else 'false'}"]
+                     "--set", f"source.low_latency={'true' if low_latency else 'false'}",
+                     "--set", f"source.baud_switch={0 if baud == 115200 else baud}"]
         mouse = subprocess.Popen(mouse_cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
         connected = {}
 
         def watch():
-            for line in mouse.stderr:
-                if "sphere found on" in line and "ns" not in connected:
+            for line in mouse.stderr:  # found, then (with --bauds above 115200) switched: the rate measured
+                if ("link at" in line if baud != 115200 else "sphere found on" in line) and "ns" not in connected:
                     connected["ns"] = time.monotonic_ns()
                 connected.setdefault("lines", []).append(line.rstrip())
 

@@ -192,6 +192,10 @@ CORE: dict[str, dict[str, Param]] = {
                                      "capacitor may reset anyway)"),
         "low_latency": Param(True, doc="ask the serial driver to pass bytes on at once (ASYNC_LOW_LATENCY: an FTDI "
                              "adapter's latency timer goes from 16 ms to 1 ms); false leaves the driver's default"),
+        "baud_switch": Param(1000000, doc="on a USB link, move a version-3 sphere to this exact rate after it connects "
+                             "(SET_BAUD, confirmed, back to 115200 when either side stops hearing the other; a 29-byte "
+                             "sample takes 0.29 ms at 1,000,000 instead of 2.5 ms); 0 = stay at `baud`. Never on "
+                             "Bluetooth", choices=(0, 250000, 500000, 1000000)),
         "hello_timeout_s": Param(0.5, doc="send GET_HELLO to a named port if no HELLO came within this time (Bluetooth "
                                         "links do not reset the board)", lo=0.01, hi=60.0),
         "discovery_timeout_s": Param(3.0, doc="give up on a candidate port that did not identify itself within this "

@@ -141,6 +141,11 @@ class DeviceClock:
         return a + b * (t_us / 1e6 - d0)
 
 
+#: after an age that grew came back, a new "growing" is said only this much later (a link that comes and goes
+#: is one line a minute, not one a second)
+QUIET_S = 60.0
+
+
 class SampleAges:
     """Ages of recent samples (median, p95) and whether they grow: a link whose age climbs (Bluetooth congestion,
     a stalled adapter) is said once, and once more when it is back."""
@@ -156,6 +161,7 @@ class SampleAges:
         self.best_median_s: float | None = None
         self._high_seconds = 0
         self.growing = False
+        self._ended_at = -1e18
 
     def add(self, age_s: float, host_s: float) -> str | None:
         """Note one sample's age; returns a line to log when the age starts or stops growing, else None."""
@@ -173,12 +179,13 @@ class SampleAges:
             self.best_median_s = med
         high = med > self.best_median_s + self.GROWING_S
         self._high_seconds = self._high_seconds + 1 if high else 0
-        if self._high_seconds >= 2 and not self.growing:
+        if self._high_seconds >= 2 and not self.growing and host_s - self._ended_at >= QUIET_S:
             self.growing = True
             return (f"the sphere's samples arrive {med * 1e3:.0f} ms old (was {self.best_median_s * 1e3:.1f} ms): "
                     "the link is congested (Bluetooth?) or the adapter stalls")
         if self.growing and not high:
             self.growing = False
+            self._ended_at = host_s
             return f"the sphere's samples arrive {med * 1e3:.1f} ms old again"
         return None
 
@@ -195,3 +202,4 @@ class SampleAges:
         self.best_median_s = None
         self._high_seconds = 0
         self.growing = False
+        self._ended_at = -1e18

@@ -204,6 +204,20 @@ def request_low_latency(ser) -> str | None:
             "timer (an FTDI adapter: the udev rule in host/packaging sets its latency_timer to 1 ms)")
 
 
+def switchable_port(port: str) -> bool:
+    """True when ``port`` is a USB-serial adapter (its tty's device sits on the USB bus) or a pseudo-terminal (the
+    virtual board): a link whose rate the host sets. False for a Bluetooth rfcomm port (the module's own UART runs at
+    the rate it is set to) and anything unknown."""
+    if _pty_index(port) is not None:
+        return True
+    name = os.path.basename(os.path.realpath(port))
+    try:
+        device = os.path.realpath(f"/sys/class/tty/{name}/device")
+    except OSError:
+        return False
+    return "/usb" in device and os.path.exists(f"/sys/class/tty/{name}/device")
+
+
 def open_port(port: str, baud: int = DEFAULT_BAUD, timeout_s: float = 0.1, *, reset_on_open: bool = True,
               write_timeout_s: float | None = None, exclusive: bool = True, allow_pids=(),
               low_latency: bool = False) -> serial.Serial:

@@ -22,8 +22,9 @@ import time
 
 from sphere.daemon.sources.base import LinkLost, Source, SourceError, version_problem
 from sphere.link.clock import DeviceClock, SampleAges
-from sphere.protocol import Echo, GetHello, Hello, PacketStream, RawSample, Reply
-from sphere.link.port import PortBusy, PortError, open_port, port_problem
+from sphere.protocol import Echo, GetHello, Hello, PacketStream, RawSample, Reply, SetBaud
+from sphere.protocol.packets import DEFAULT_BAUD
+from sphere.link.port import PortBusy, PortError, open_port, port_problem, request_low_latency, switchable_port
 
 DEFAULT_CANDIDATES = ("/dev/sphere",)
 #: USB-serial chips of the Arduino Nano and its clones: CH340, FT232R, CP2102.
@@ -33,6 +34,8 @@ IDENTIFY_FRAMES = 3
 #: How often a version-3 sphere is sent ECHO: its clock on ours (each sample's age, spec §5.4), and the lease
 #: that holds a faster baud rate (§5.3)
 ECHO_EVERY_S = 0.5
+#: at a faster rate, this long without an intact frame sends the port back to 115200 (the sphere went back)
+FALLBACK_S = 0.5
 
 
 def _is_glob(pattern: str) -> bool:
@@ -99,7 +102,7 @@ class SerialSource(Source):
                  reset_on_open: bool = False, hello_timeout_s: float = 0.5, discovery_timeout_s: float = 3.0,
                  link_timeout_s: float = 2.0, reconnect_interval_s: float = 1.0, log=None,
                  read_timeout_s: float = 0.02, usb_ids=DEFAULT_USB_IDS, comports=None, low_latency: bool = True,
-                 device_settings=()):
+                 device_settings=(), baud_switch: int = 0):
         super().__init__(reconnect_interval_s=reconnect_interval_s, link_timeout_s=link_timeout_s, log=log)
         self.port = port
         self.candidates = list(candidates)
@@ -110,6 +113,9 @@ class SerialSource(Source):
         self.discovery_timeout_s = discovery_timeout_s
         self.read_timeout_s = read_timeout_s
         self.low_latency = low_latency
+        self.baud_switch = baud_switch  # 0: stay at `baud` (spec §5.4)
+        self.link_baud = baud
+        self._good_frames, self._good_at = 0, 0.0
         self.device_settings = list(device_settings)  # [device] settings: sent at every connect
         self.serial = None
         self.port_name = None
@@ -127,7 +133,7 @@ class SerialSource(Source):
     def from_config(cls, cfg, log):
         s = cfg.source
         return cls(s.port, s.candidates, reset_on_open=s.reset_on_open, log=log, usb_ids=s.usb_ids,
-                   low_latency=s.low_latency, device_settings=cfg.device.settings, **serial_timing(s))
+                   device_settings=cfg.device.settings, **serial_timing(s))
 
     def _apply_device_settings(self, hello) -> None:
         """[device] settings, at every connect: the keys of a group not given keep what the sphere reports
@@ -264,6 +270,9 @@ class SerialSource(Source):
             adopted = self.stream.adopt(packets)
             if self.device_settings:  # a few ms at connect; the samples read meanwhile are counted, not used
                 self._apply_device_settings(self.stream.hello)
+            self.link_baud = self.baud
+            if self.baud_switch and self.baud == DEFAULT_BAUD and self.baud_switch != self.baud:
+                self._switch_baud(path)
             return adopted
         return None
 
@@ -284,10 +293,55 @@ class SerialSource(Source):
     def _read(self) -> bytes:
         return self._read_port(self.serial)
 
+    # -- a faster exact rate on USB (spec §5.4) --
+    def _switch_baud(self, path: str) -> bool:
+        """SET_BAUD to ``baud_switch``, confirmed by an ECHO answered at the new rate; back to 115200 when not. Only a
+        version-3 sphere on a USB-serial port or a pty (the virtual board): a Bluetooth module's link runs at the
+        rate the module is set to."""
+        hello = self.stream.hello
+        if hello is None or hello.protocol_version < 3 or not switchable_port(path):
+            return False
+        target = self.baud_switch
+        reply = self.link.command(SetBaud(target), timeout_s=0.5, retries=0)
+        if reply is None or not reply.ok:
+            self.log(f"{path}: the sphere did not take {target} baud ({'no reply' if reply is None else reply.to_json()['result']}); "
+                     f"staying at {self.baud}", logging.DEBUG)
+            return False
+        self._set_port_baud(target)
+        if self.link.command(Echo(), timeout_s=0.5, retries=0) is None:  # its first frame at the new rate
+            self._set_port_baud(DEFAULT_BAUD)  # the sphere comes back by itself within 1 s (no frame from us)
+            self.log(f"{path}: no answer at {target} baud: back to {DEFAULT_BAUD}")
+            return False
+        self.clock.restart(target)
+        self._good_frames, self._good_at = self.stream.stats.frames_ok, time.monotonic()
+        self.log(f"{path}: link at {target} baud")
+        return True
+
+    def _set_port_baud(self, baud: int) -> None:
+        self.serial.baudrate = baud  # pyserial rewrites the termios: the low-latency request again after it
+        if self.low_latency:
+            request_low_latency(self.serial)
+        self.link_baud = baud
+
+    def _watch_rate(self) -> None:
+        """At a rate other than 115200: no intact frame for FALLBACK_S means the sphere went back (a reset, a lost
+        lease): so does the port."""
+        now = time.monotonic()
+        if self.stream.stats.frames_ok != self._good_frames:
+            self._good_frames, self._good_at = self.stream.stats.frames_ok, now
+        elif now - self._good_at > FALLBACK_S:
+            self.log(f"{self.port_name}: nothing intact at {self.link_baud} baud for {FALLBACK_S:g} s: back to "
+                     f"{DEFAULT_BAUD}", logging.WARNING)
+            self._set_port_baud(DEFAULT_BAUD)
+            self.clock.restart(DEFAULT_BAUD)
+            self._good_at = now
+
     def _batch(self):
         batch = super()._batch()
         if self.link is None:
             return batch
+        if self.link_baud != DEFAULT_BAUD:
+            self._watch_rate()
         arrival = self.arrival_ns / 1e9 if batch else 0.0  # perf_counter: the clock the round trips are timed with
         for dp in batch:
             p = dp.packet
@@ -323,9 +377,10 @@ class SerialSource(Source):
 
 
 def serial_timing(s) -> dict:
-    """The timing keys of ``[source]`` as SerialSource's keyword arguments."""
+    """The link keys of ``[source]`` (rates, low latency, timing) as SerialSource's keyword arguments."""
     return dict(baud=s.baud, hello_timeout_s=s.hello_timeout_s, discovery_timeout_s=s.discovery_timeout_s,
-                link_timeout_s=s.link_timeout_s, reconnect_interval_s=s.reconnect_interval_s)
+                link_timeout_s=s.link_timeout_s, reconnect_interval_s=s.reconnect_interval_s,
+                low_latency=s.low_latency, baud_switch=s.baud_switch)
 
 
 def _serial_exception():
