@@ -92,6 +92,7 @@ static int have_loop_pin;
 static uint32_t vec_count[N_VECTORS];
 static avr_cycle_count_t vec_last[N_VECTORS];
 static int tick_vector = -1, tick_searched;
+static FILE *g_host_log; /* --host-log (below): also each entry of the sample clock's interrupt, "S simulated_s ns" */
 static vec_t loop_tick; /* tick ISR entry .. end of the MARG update */
 
 static void vector_hook(struct avr_irq_t *irq, uint32_t value, void *param)
@@ -102,6 +103,13 @@ static void vector_hook(struct avr_irq_t *irq, uint32_t value, void *param)
 	int v = (int)(intptr_t)param;
 	vec_count[v]++;
 	vec_last[v] = tm_update.board->avr->cycle;
+	if (v == tick_vector && g_host_log) { /* when a sample period starts: the time its sample's t_us stands for */
+		struct timespec now;
+		clock_gettime(CLOCK_MONOTONIC, &now);
+		avr_t *avr = tm_update.board->avr;
+		fprintf(g_host_log, "S %.9f %lld\n", (double)avr->cycle / avr->frequency,
+			(long long)now.tv_sec * 1000000000LL + now.tv_nsec);
+	}
 }
 
 /* Called at update ends: snapshot the vectors' counts once 0.5 s have passed, decide 0.5 s later. */
@@ -953,6 +961,7 @@ int main(int argc, char **argv)
 		fprintf(stderr, "sphere-board: cannot write %s: %s\n", host_log_path, strerror(errno));
 		return 1;
 	}
+	g_host_log = uart_out.host_log;
 	if (times_path && !(uart_out.times = fopen(times_path, "wb"))) {
 		fprintf(stderr, "sphere-board: cannot write %s: %s\n", times_path, strerror(errno));
 		return 1;

@@ -19,7 +19,7 @@ def test_bench_latency_rows_and_stages(tmp_path):
     need_board()
     out = tmp_path / "latency.json"
     r = subprocess.run([sys.executable, "-m", "sphere.cli", "bench", "latency", "--seconds", "9", "--adapters",
-                        "none,ftdi-16ms", "--bauds", "115200", "--json", str(out)], capture_output=True, text=True, timeout=600)
+                        "none,ftdi-16ms", "--bauds", "115200", "--no-monitor", "--json", str(out)], capture_output=True, text=True, timeout=600)
     assert r.returncode == 0, r.stderr[-2000:]
     assert "motion onset -> X pointer move" in r.stdout and "ftdi-16ms" in r.stdout
     rows = {row["row"]: row for row in json.loads(out.read_text())["rows"]}
@@ -36,3 +36,18 @@ def test_bench_latency_rows_and_stages(tmp_path):
     assert rows["none"]["stages_ms"]["adapter"]["max"] < 0.01
     ftdi = rows["ftdi-16ms"]["stages_ms"]["adapter"]
     assert 1.0 < ftdi["p50"] and ftdi["max"] <= 17.1
+
+
+def test_bench_latency_checks_sphere_monitor_against_the_board(tmp_path):
+    """The sample-age row: sphere monitor's last view and the truth from the board's log are both there."""
+    from simscenarios import need_board
+
+    need_board()
+    out = tmp_path / "latency.json"
+    r = subprocess.run([sys.executable, "-m", "sphere.cli", "bench", "latency", "--seconds", "8", "--adapters", "none",
+                        "--bauds", "115200", "--json", str(out)], capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stderr[-2000:]
+    age = json.loads(out.read_text())["sample_age"]
+    assert age["truth_ms"]["n"] >= 100 and age["monitor_ms"]["p50"] is not None
+    assert 0 < age["truth_ms"]["p50"] < 50  # a sample period, the firmware's work, the wire: a few ms
+    assert "sample age (ftdi, 115200), sphere monitor's last 2 s" in r.stdout

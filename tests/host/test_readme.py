@@ -35,7 +35,7 @@ COMMANDS = list(example_commands())
 SHORTER = {
     ("sphere", "bench", "decode"): ["--seconds", "2", "--repeat", "1"],
     ("sphere", "bench", "pointer"): ["--seconds", "30", "--filters", "none,one-euro"],
-    ("sphere", "bench", "latency"): ["--seconds", "6", "--adapters", "none", "--bauds", "115200"],
+    ("sphere", "bench", "latency"): ["--seconds", "6", "--adapters", "none", "--bauds", "115200", "--no-monitor"],
     ("sphere", "bench", "baud-switch"): ["--rounds", "4"],
     ("sphere", "eval"): ["--only", "07", "--seconds", "40", "--jobs", "1"],
 }

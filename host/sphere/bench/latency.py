@@ -67,6 +67,8 @@ def add_arguments(p) -> None:
                    help="comma-separated rates the link runs at: 115200, or 250000/500000/1000000 that sphere-mouse "
                         "switches the sphere to (SET_BAUD; default 115200,1000000)")
     p.add_argument("--seed", type=argtypes.count, default=27, help="seed of the onsets' phases (default 27)")
+    p.add_argument("--no-monitor", action="store_true",
+                   help="leave out the check of `sphere monitor`'s sample age against the board's truth")
     p.add_argument("--json", metavar="OUT", type=argtypes.out_file, help="also write every figure as JSON")
 
 
@@ -104,10 +106,11 @@ class HostLog:
     t0_ns: int
     uart: list  # (first byte s, delimiter s) per frame
     pty: list  # (simulated s, monotonic ns) per delimiter
+    periods: list = field(default_factory=list)  # (simulated s, monotonic ns) at each sample period's start
 
     @classmethod
     def read(cls, path: Path) -> "HostLog":
-        t0, uart, pty = 0, [], []
+        t0, uart, pty, periods = 0, [], [], []
         for line in path.read_text().splitlines():
             f = line.split()
             if f[0] == "T0":
@@ -116,7 +119,9 @@ class HostLog:
                 uart.append((float(f[1]), float(f[2])))
             elif f[0] == "P":
                 pty.extend([(float(f[1]), int(f[2]))] * int(f[3]))
-        return cls(t0, uart, pty)
+            elif f[0] == "S":
+                periods.append((float(f[1]), int(f[2])))
+        return cls(t0, uart, pty, periods)
 
 
 @dataclass
@@ -126,6 +131,7 @@ class Frame:
     pty_s: float
     pty_ns: int
     moving: bool  # a RAW_SAMPLE with a non-zero gyro reading
+    raw: bool = False  # a RAW_SAMPLE
 
 
 def frames_of(capture: bytes, log: HostLog) -> list[Frame]:
@@ -144,7 +150,7 @@ def frames_of(capture: bytes, log: HostLog) -> list[Frame]:
         p = got[0] if got else None
         moving = p is not None and p.TYPE == RawSample.TYPE and any(p.gyro)
         start, end = log.uart[u]
-        out.append(Frame(start, end, *log.pty[j], moving))
+        out.append(Frame(start, end, *log.pty[j], moving, p is not None and p.TYPE == RawSample.TYPE))
         u += 1
     return out
 
@@ -299,6 +305,58 @@ def run_row(name: str, baud: int, trace: Path, onsets_s, seconds: float, display
             if len(gaps) else {}}
 
 
+def true_ages(frames: list[Frame], log: HostLog, from_ns: int, to_ns: int) -> list[float]:
+    """The true age (ms) of each RAW_SAMPLE written to the pty between ``from_ns`` and ``to_ns``: its pty write's wall
+    time minus the moment its sample period began (the sample clock's interrupt; the firmware stamps t_us right
+    after it). That moment on the wall clock is its simulated time from T0, or later if the board ran behind."""
+    starts = np.array([s for s, _ in log.periods])
+    out = []
+    for f in frames:
+        if not f.raw or not from_ns <= f.pty_ns <= to_ns:
+            continue
+        k = int(np.searchsorted(starts, f.uart_start_s, side="right")) - 1
+        if k < 0:
+            continue
+        sim_s, wall_ns = log.periods[k]
+        began_ns = max(log.t0_ns + int(round(sim_s * 1e9)), wall_ns)
+        out.append((f.pty_ns - began_ns) / 1e6)
+    return out
+
+
+def monitor_check(trace: Path, seconds: float, tmp: Path, elf) -> dict:
+    """`sphere monitor` on the FTDI board (low latency, 115200): its last view's sample age against the truth of the
+    board's log over the same last 2 s."""
+    import re
+
+    from sphere.sim.board import board_command
+
+    log_path, cap_path = tmp / "monitor.log", tmp / "monitor.cap"
+    board = subprocess.Popen(board_command(elf, trace, seconds, capture=cap_path, pty=True, adapter="ftdi",
+                                           host_log=log_path), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        pty = next((line.split("UART on ", 1)[1].strip() for line in board.stdout if "UART on " in line), None)
+        if pty is None:
+            raise RuntimeError(f"the virtual board did not start: {board.stderr.read().strip()[-300:]}")
+        r = subprocess.run([sys.executable, "-m", "sphere.cli", "monitor", "--port", pty, "--seconds",
+                            f"{max(4.0, seconds - 3.0):g}"], capture_output=True, text=True, timeout=seconds * 4 + 60)
+        ended_ns = time.monotonic_ns()
+        board.wait(seconds * 4 + 60)
+    finally:
+        if board.poll() is None:
+            board.terminate()
+            board.wait(10)
+    m = re.search(r"sample age: median ([-\d.]+) ms, p95 ([-\d.]+) ms \(last 2 s", r.stdout)
+    if not m:
+        raise RuntimeError("sphere monitor showed no sample age: " + (r.stdout + r.stderr).strip()[-300:])
+    log = HostLog.read(log_path)
+    frames = frames_of(cap_path.read_bytes(), log)
+    truth = true_ages(frames, log, ended_ns - 2_000_000_000, ended_ns)
+    t = percentiles(truth)
+    shown = {"p50": float(m.group(1)), "p95": float(m.group(2))}
+    return {"monitor_ms": shown, "truth_ms": t,
+            "difference_ms": {k: shown[k] - t[k] for k in ("p50", "p95")} if t.get("n") else {}}
+
+
 # ---------------------------------------------------------------------------------------------------- the bench
 
 
@@ -320,6 +378,7 @@ def run(args) -> int:
         print(f"sphere bench latency: {e}", file=sys.stderr)
         return 1
     rows = []
+    monitor = None
     load_before = os.getloadavg()[0]
     try:
         with tempfile.TemporaryDirectory(prefix="sphere-latency-") as tmp:
@@ -329,13 +388,17 @@ def run(args) -> int:
                 for name in args.adapters:
                     print(f"  {name} at {baud} baud: {args.seconds:g} s ...", file=sys.stderr, flush=True)
                     rows.append(run_row(name, baud, trace, onsets_s, args.seconds, xvfb.display, tmp, elf))
+            if not args.no_monitor:
+                print(f"  sphere monitor's sample age against the board's truth: {args.seconds:g} s ...",
+                      file=sys.stderr, flush=True)
+                monitor = monitor_check(trace, args.seconds, tmp, elf)
     except RuntimeError as e:
         print(f"sphere bench latency: {e}", file=sys.stderr)
         return 1
     finally:
         xvfb.close()
     result = {"seconds_per_row": args.seconds, "seed": args.seed, "load_average": [load_before, os.getloadavg()[0]],
-              "rows": rows}
+              "rows": rows, "sample_age": monitor}
     report(result)
     if args.json:
         with open(args.json, "w") as f:
@@ -371,3 +434,9 @@ def report(result: dict) -> None:
              for r in rows if r["missed"] or r["unattributed"]]
     if notes:
         print("; ".join(notes))
+    age = result.get("sample_age")
+    if age and age["truth_ms"].get("n"):
+        shown, truth, diff = age["monitor_ms"], age["truth_ms"], age["difference_ms"]
+        print(f"sample age (ftdi, 115200), sphere monitor's last 2 s: median {shown['p50']:.2f} ms, p95 "
+              f"{shown['p95']:.2f} ms; the board's truth: median {truth['p50']:.2f} ms, p95 {truth['p95']:.2f} ms "
+              f"({truth['n']} samples); monitor - truth: {diff['p50']:+.2f} / {diff['p95']:+.2f} ms")
