@@ -89,3 +89,19 @@ def in_file(text: str) -> str:
     if not os.path.exists(text):
         raise argparse.ArgumentTypeError(f"{text!r}: no such file")
     return text
+
+
+def names_of(choices, what: str):
+    """An argparse type for a comma-separated list of names out of ``choices`` (a collection, or a function giving
+    one, called when the flag is parsed); ``what`` names one of them in the error line."""
+
+    def parse(text: str) -> list[str]:
+        known = list(choices() if callable(choices) else choices)
+        names = [s.strip() for s in text.split(",") if s.strip()]
+        bad = [s for s in names if s not in known]
+        if bad or not names:
+            raise argparse.ArgumentTypeError(f"{','.join(bad) or text!r}: not a {what}; the {what}s are "
+                                             + ", ".join(known))
+        return names
+
+    return parse

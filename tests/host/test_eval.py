@@ -112,12 +112,14 @@ def test_registry_is_one_table_with_defaults_inside_their_grids():
     assert set(registry.ALL) == set(registry.FILTERS) and set(registry.OURS) <= set(registry.FILTERS)
     for name, spec in registry.FILTERS.items():
         points = spec.grid_points()
-        assert points and all(set(p) == set(spec.grid) for p in points), name
+        keys = set(spec.grid) | (set(spec.structures[0]) if spec.structures else set())
+        assert points and all(set(p) == keys for p in points), name
         if spec.grid and name != "sphere":  # sphere's defaults live in its module, checked below
             assert {k: spec.defaults[k] for k in spec.grid} in points, name
     from sphere.fusion.sphere_filter import DEFAULTS
 
-    assert {k: DEFAULTS[k] for k in registry.FILTERS["sphere"].grid} in registry.FILTERS["sphere"].grid_points()
+    sp = registry.FILTERS["sphere"]
+    assert {k: DEFAULTS[k] for k in set(sp.grid) | set(sp.structures[0])} in sp.grid_points()
     f = registry.make("madgwick", 0.01, beta=0.05)
     assert f.beta == 0.05 and registry.make("madgwick", 0.01).beta == registry.FILTERS["madgwick"].defaults["beta"]
     kf = registry.make("dissertation-kf", 0.01).settings
@@ -132,11 +134,18 @@ def test_daemon_builds_its_filter_from_the_registry():
     from sphere.daemon.motion import host_filter
     from sphere.fusion import registry
 
-    f = host_filter("auto")
+    f = host_filter("sphere")
     assert type(f.inner) is type(registry.make("sphere")) and f.inner.settings == registry.make("sphere").settings
     assert host_filter("madgwick", beta=0.2).beta == 0.2
     with pytest.raises(ValueError, match="unknown host filter"):
         host_filter("nope")
+    # auto: the registry's daemon default when its library is installed, else the next live filter
+    auto = host_filter("auto")
+    want = registry.live_available()[0]
+    assert want == (registry.DAEMON_DEFAULT if _installed("vqf") else "sphere")
+    assert type(getattr(auto, "inner", auto)) is type(registry.make(want, 0.005))
+    if _installed("vqf"):
+        assert auto.inner.settings == registry.make("vqf", 0.005).settings
 
 
 def test_leave_one_out_chooses_on_the_other_trials():
@@ -202,7 +211,8 @@ def test_the_recorded_cv_run_matches_the_registry():
         assert rec["grid"] == {k: list(v) for k, v in spec.grid.items()}, name
         assert all(f["choice"] in points for f in rec["folds"]), name
         settings = registry.make(name, 0.01).settings
-        assert {k: settings[k] for k in spec.grid} == rec["all_trials_choice"], name
+        keys = set(spec.grid) | (set(spec.structures[0]) if spec.structures else set())
+        assert {k: settings[k] for k in keys} == rec["all_trials_choice"], name
         assert len(rec["folds"]) == len(doc["trials"]) >= 12
 
 
@@ -251,3 +261,30 @@ def test_plot_shows_the_diagnostics_under_the_error(tmp_path):
                  "--plot", str(tmp_path)]) == 0
     png = tmp_path / "error_32_disturbed_attached_magnet_1cm.png"
     assert png.stat().st_size > 10_000
+
+
+def test_vqf_per_sample_is_its_batch_and_honours_the_daemons_flags():
+    """The daemon runs VQF sample by sample (peers.VqfPeer.update): the same as VQF's own batch, the accelerometer
+    skipped while a tap is in progress (acc_valid=False), quat6D until a field is used."""
+    pytest.importorskip("vqf")
+    from sphere.fusion import bias_scenarios as synthetic, registry
+
+    tr = synthetic.trace("motion", seconds=6.0)
+    batch = registry.make("vqf", tr.dt_s).update_batch(tr.gyr_rad_s, tr.acc_m_s2, tr.mag_uT, tr.dt_s)
+    f = registry.make("vqf", tr.dt_s)
+    per = np.array([f.update(g, a, m, tr.dt_s) for g, a, m in zip(tr.gyr_rad_s, tr.acc_m_s2, tr.mag_uT)])
+    assert np.array_equal(per, batch)
+    # without a field: 6D (no heading correction), the same as the batch without one
+    f6 = registry.make("vqf", tr.dt_s)
+    q6 = [f6.update(g, a, None, tr.dt_s) for g, a in zip(tr.gyr_rad_s, tr.acc_m_s2)]
+    assert np.array_equal(np.array(q6), registry.make("vqf", tr.dt_s).update_batch(tr.gyr_rad_s, tr.acc_m_s2, None,
+                                                                                   tr.dt_s))
+    # acc_valid=False: the accelerometer is not used (a false reading changes nothing: gyro alone, as VQF's updateGyr)
+    b, c = registry.make("vqf", tr.dt_s), registry.make("vqf", tr.dt_s)
+    for g, acc in zip(tr.gyr_rad_s[:400], tr.acc_m_s2[:400]):
+        b.update(g, acc, None, tr.dt_s)
+        c.update(g, acc, None, tr.dt_s)
+    qb = b.update(tr.gyr_rad_s[400], (80.0, -50.0, 3.0), None, tr.dt_s, acc_valid=False)
+    c._f.updateGyr(np.array(tr.gyr_rad_s[400]))
+    assert np.array_equal(qb, c._f.getQuat6D())
+    assert not np.array_equal(qb, c.update(tr.gyr_rad_s[401], (80.0, -50.0, 3.0), None, tr.dt_s))

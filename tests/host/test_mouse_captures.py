@@ -85,7 +85,7 @@ def test_deferred_bias_step_changes_nothing(mode):
 
     def run(defer):
         cfg = Config().with_overrides({"stream": {"enabled": False}, "output": {"screen_width_px": 1280},
-                                       "mode": {"start": mode}}, "test")
+                                       "mode": {"start": mode}, "orientation": {"filter": "sphere"}}, "test")
         moves = []
 
         class Rec(RecordingBackend):
@@ -96,7 +96,7 @@ def test_deferred_bias_step_changes_nothing(mode):
         daemon = SphereMouse(cfg, ReplaySource(capture("sim_07_fast_rotation.bin"), speed=0), Rec(screen_size=None),
                              log=lambda m: None)
         m = daemon.motion
-        assert m._filter_deferred is not None and m.bias.enabled  # the default filter (sphere) has the split
+        assert m._filter_deferred is not None and m.bias.enabled  # SphereFilter has the split
         m.defer = defer
         quats = []
         handle = daemon.handle

@@ -327,22 +327,28 @@ CV_NOTE = ("leave-one-trial-out: for each trial, every free parameter is chosen 
            "table is the mean of those held-out scores")
 
 
-def _code_version() -> str:
-    """A digest of the code whose output --cache keeps (the fusion filters and the metric)."""
+def _code_version(name: str) -> str:
+    """A digest of the code whose output --cache keeps for filter ``name``: its module, its registry entry (defaults
+    and grid), the shared helpers and the metric (so a change to one filter leaves the others' results valid)."""
     import hashlib
+    import inspect
 
-    from sphere import broad
-    from sphere.fusion import registry
+    from sphere import broad, quaternion
+    from sphere.fusion import common, registry
 
+    spec = registry.FILTERS[name]
+    own = Path(inspect.getfile(type(spec.factory(0.005, (1.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0), **spec.defaults))
+                               if name in registry.OURS else registry.peers.PEERS[name]))
     h = hashlib.sha1()
-    for f in sorted(Path(registry.__file__).parent.glob("*.py")) + [Path(broad.__file__)]:
+    for f in (own, Path(common.__file__), Path(broad.__file__), Path(quaternion.__file__)):
         h.update(f.read_bytes())
+    h.update(json.dumps([spec.defaults, spec.grid], sort_keys=True, default=str).encode())  # its registry entry
     return h.hexdigest()[:16]
 
 
 def _cv_job(args):
     """Every (filter, grid point) on one trial; results from the cache where present."""
-    path, tasks, seconds, cache, version = args
+    path, tasks, seconds, cache, versions = args
     import hashlib
 
     from sphere import broad
@@ -351,7 +357,7 @@ def _cv_job(args):
     trial = None
     out = []
     for name, point in tasks:
-        key = hashlib.sha1(json.dumps([version, Path(path).name, Path(path).stat().st_size, seconds, name,
+        key = hashlib.sha1(json.dumps([versions[name], Path(path).name, Path(path).stat().st_size, seconds, name,
                                        sorted(point.items())], default=str).encode()).hexdigest()
         cached = Path(cache) / f"{key}.json" if cache else None
         if cached is not None and cached.exists():
@@ -378,7 +384,8 @@ def cross_validate(paths, names, seconds=None, jobs=1, cache=None, progress=None
     from sphere.fusion import crossval, registry
 
     tasks = [(n, p) for n in names for p in registry.FILTERS[n].grid_points()]
-    jobs_list = [(str(p), tasks, seconds, cache, _code_version()) for p in paths]
+    versions = {n: _code_version(n) for n in names}
+    jobs_list = [(str(p), tasks, seconds, cache, versions) for p in paths]
     rows = {}
     if jobs > 1 and len(paths) > 1:
         import multiprocessing
@@ -418,6 +425,26 @@ def cross_validate(paths, names, seconds=None, jobs=1, cache=None, progress=None
             "defaults": defaults,
             "scores": {"points": points, "total": [[e["total"] for e in row] for row in scores]},
         }
+        spec = registry.FILTERS[name]
+        if spec.structures and len(trials) >= 3:
+            keys = [spec.structure_of(p) for p in points]
+            order = sorted(set(keys), key=keys.index)
+            folds, s_all, g_all, figs = crossval.nested(trials, scores, [order.index(k) for k in keys])
+            nest = doc["cv"][name]["nested"] = {
+                "structures": [dict(k) for k in order],
+                "mean": {m: float(np.mean([f.errors[m] for f in folds])) for m in crossval.METRICS},
+                "folds": [{"trial": f.trial, "structure": dict(order[f.structure]), "choice": points[f.choice],
+                           "errors": f.errors} for f in folds],
+                "all_trials_structure": dict(order[s_all]),
+                "structure_loo": figs,  # each structure's leave-one-out figure over all trials
+                "all_trials_choice": points[g_all],
+            }
+            # the flat leave-one-out above chose among structures and parameters alike; the nested figure is the
+            # filter's figure (its structure chosen on held-out data too)
+            doc["cv"][name]["flat_mean"] = doc["cv"][name]["mean"]
+            doc["cv"][name]["mean"] = nest["mean"]
+            doc["cv"][name]["folds"] = nest["folds"]
+            doc["cv"][name]["all_trials_choice"] = nest["all_trials_choice"]
     if "vqf" in doc["cv"]:
         ref = doc["cv"]["vqf"]["mean"]["total"]
         for v in doc["cv"].values():

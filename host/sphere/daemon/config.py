@@ -132,10 +132,10 @@ def _source_kinds():
 def _host_filters():
     """``auto`` and the filters the fusion registry marks live (only ``auto`` without sphere.fusion)."""
     try:
-        from sphere.fusion.registry import LIVE
+        from sphere.fusion.registry import live_available
     except ImportError:
         return ("auto",)
-    return ("auto", *LIVE)
+    return ("auto", *live_available())
 
 
 def _device_settings(items) -> str | None:
@@ -272,8 +272,9 @@ CORE: dict[str, dict[str, Param]] = {
                              "packets; `auto` = host when raw samples arrive and sphere.fusion is installed", choices=("auto", "host", "device")),
         "use_mag": Param(False, doc="let the host filter use the magnetometer (needs a calibrated one; without it yaw "
                                "drifts slowly, which pointing does not mind)"),
-        "filter": Param("auto", doc="host filter: `sphere` (sphere.fusion's SphereFilter: rejects taps, vibration and hand "
-                             "acceleration, learns the gyro bias at rest), `madgwick`; `auto` = the best installed", choices=_host_filters),
+        "filter": Param("auto", doc="host filter: `vqf` (the VQF library, Laidig & Seel 2023: the best on data nobody "
+                             "tuned on, host/docs/fusion.md), `sphere` (sphere.fusion's SphereFilter), `madgwick`; "
+                             "`auto` = vqf if installed (the daemon extra installs it), else sphere", choices=_host_filters),
         "beta": Param(0.1, doc="gain β (rad/s) of the host Madgwick filter", lo=0.0, hi=2.0),
     },
     "stream": {

@@ -291,20 +291,23 @@ class _NwuFilter:
         pass
 
 
-def host_filter(name: str = "auto", beta: float | None = 0.1):
-    """The host fusion filter by its name in ``sphere.fusion.registry`` (the filters it marks live:
-    ``sphere``, our best, and ``madgwick``), or ``auto`` = the first of them. Built by the registry with its
-    defaults, so the daemon runs the same settings as `sphere eval`; ``beta`` (when not None) replaces
-    Madgwick's. None when sphere.fusion is not installed. Returns NWU quaternions."""
+def host_filter(name: str = "auto", beta: float | None = 0.1, dt_s: float = 0.005):
+    """The host fusion filter by its name in ``sphere.fusion.registry`` (the filters it marks live: ``vqf``, the
+    default, ``sphere`` and ``madgwick``), or ``auto`` = the first of them that is installed. Built by the registry
+    with its defaults, so the daemon runs the same settings as `sphere eval`; ``beta`` (when not None) replaces
+    Madgwick's; ``dt_s`` is the sample step for a filter built for a fixed rate (VQF). None when sphere.fusion is
+    not installed. Returns NWU quaternions."""
     try:
         from sphere.fusion import registry
     except ImportError:  # the daemon works without the fusion package (device orientation only)
         return None
+    known = registry.live_available()
     if name == "auto":
-        name = registry.LIVE[0]
-    if name not in registry.LIVE:
-        raise ValueError(f"unknown host filter {name!r}; known: auto, {', '.join(registry.LIVE)}")
-    f = registry.make(name, **({"beta": beta} if name == "madgwick" and beta is not None else {}))
+        name = known[0]
+    if name not in known:
+        missing = " (its package is not installed: pip install 'marg-sphere[daemon]')" if name in registry.LIVE else ""
+        raise ValueError(f"unknown host filter {name!r}{missing}; known: auto, {', '.join(known)}")
+    f = registry.make(name, dt_s, **({"beta": beta} if name == "madgwick" and beta is not None else {}))
     return f if f.earth_frame == "NWU" else _NwuFilter(f)
 
 
@@ -318,7 +321,7 @@ class MotionTracker:
         self.use_mag = use_mag
         self.filter = None
         if orientation_source in ("auto", "host"):
-            self.filter = host_filter(filter_name, beta)
+            self.filter = host_filter(filter_name, beta, 1.0 / imu_rate_hz)
         inner = getattr(self.filter, "inner", self.filter)
         # the work that may wait until the sample's pointer move is out: SphereFilter's bias step (every 10th
         # sample) and GyroBias's still detection (but on a window's last sample); ``raw()`` leaves it, the daemon calls run_deferred() after the move

@@ -64,6 +64,25 @@ def _smooth_gate(t, rest_s=REST_S):
     return x * x * (3.0 - 2.0 * x)
 
 
+def integrate_rate(w: np.ndarray, dt: float, q0) -> np.ndarray:
+    """The true orientation (N, 4) from a body rate w (N, 3, rad/s; sample i the mean rate over (t[i−1], t[i]]):
+    an exact axis-angle step for each interval, q[i] = q[i−1] ⊗ exp(½ w[i] dt), from q[0] = q0."""
+    n = len(w)
+    q = np.empty((n, 4))
+    q[0] = q0
+    ang = np.linalg.norm(w, axis=1) * dt
+    axis = w / np.maximum(np.linalg.norm(w, axis=1), 1e-300)[:, None]
+    dq = np.concatenate([np.cos(ang / 2)[:, None], np.sin(ang / 2)[:, None] * axis], axis=1)
+    for i in range(1, n):
+        q[i] = quat.multiply(q[i - 1], dq[i])
+    return q / np.linalg.norm(q, axis=1, keepdims=True)
+
+
+def earth_field(field_ut: float = EARTH_FIELD_UT, dip_deg: float = DIP_DEG) -> np.ndarray:
+    """The earth's field in ENU (µT): north (+y) and down by the dip."""
+    return field_ut * np.array([0.0, np.cos(dip_deg * DEG), -np.sin(dip_deg * DEG)])
+
+
 def trace(scenario: str, seconds: float = 40.0, rate_hz: float = 200.0, seed: int = 0, *,
           translation: float = 1.0, noise: float = 1.0, bias0_dps=BIAS0_DPS, rest_s: float = REST_S) -> Trace:
     """One synthetic trace; see the module docstring for the scenarios. ``translation`` and ``noise`` scale
@@ -85,15 +104,8 @@ def trace(scenario: str, seconds: float = 40.0, rate_hz: float = 200.0, seed: in
         for amp_dps, f_hz in ((60.0, 0.13 + 0.05 * k), (35.0, 0.41 + 0.07 * k), (15.0, 1.1 + 0.2 * k)):
             w[:, k] += amp_dps * DEG * np.sin(2 * np.pi * f_hz * tm + rng.uniform(0, 2 * np.pi))
     w *= _smooth_gate(tm, rest_s)[:, None]
-    # true orientation: exact axis-angle step for each interval (start level, x axis pointing north-east)
-    q = np.empty((n, 4))
-    q[0] = quat.from_axis_angle(np.array([0.0, 0.0, 1.0]), 0.6)
-    ang = np.linalg.norm(w, axis=1) * dt
-    axis = w / np.maximum(np.linalg.norm(w, axis=1), 1e-300)[:, None]
-    dq = np.concatenate([np.cos(ang / 2)[:, None], np.sin(ang / 2)[:, None] * axis], axis=1)
-    for i in range(1, n):
-        q[i] = quat.multiply(q[i - 1], dq[i])
-    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    # true orientation (start level, x axis pointing north-east)
+    q = integrate_rate(w, dt, quat.from_axis_angle(np.array([0.0, 0.0, 1.0]), 0.6))
     # hand translation in the earth frame: position sines of a few cm; acceleration analytically
     acc_lin = np.zeros((n, 3))
     for k in range(3):
@@ -103,7 +115,7 @@ def trace(scenario: str, seconds: float = 40.0, rate_hz: float = 200.0, seed: in
     acc_lin *= translation * gate[:, None]
     qc = quat.conjugate(q)
     acc = quat.rotate(qc, acc_lin + np.array([0.0, 0.0, G]))
-    m_earth = EARTH_FIELD_UT * np.array([0.0, np.cos(DIP_DEG * DEG), -np.sin(DIP_DEG * DEG)])
+    m_earth = earth_field()
     mag = quat.rotate(qc, np.broadcast_to(m_earth, (n, 3)))
     bias = np.broadcast_to(np.asarray(bias0_dps, float) * DEG, (n, 3)).copy()
     if scenario == "step":

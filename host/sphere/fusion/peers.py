@@ -77,7 +77,7 @@ class VqfPeer(_Peer):
         self._vqf_mod = _need("vqf", "vqf")
         self.dt_s = float(dt_s)
         self._f = self._vqf_mod.VQF(self.dt_s)
-        self._has_mag = True
+        self._mag_used = False  # quat9D once a field was used, quat6D before
 
     @property
     def settings(self) -> dict:
@@ -98,17 +98,22 @@ class VqfPeer(_Peer):
 
     @property
     def quat(self) -> np.ndarray:
-        return np.asarray(self._f.getQuat9D() if self._has_mag else self._f.getQuat6D(), dtype=float)
+        return np.asarray(self._f.getQuat9D() if self._mag_used else self._f.getQuat6D(), dtype=float)
 
-    def update(self, gyr_rad_s, acc_m_s2, mag_uT, dt_s):
-        g = np.ascontiguousarray(gyr_rad_s, dtype=float)
-        a = np.ascontiguousarray(acc_m_s2, dtype=float)
-        if mag_uT is None:
-            self._has_mag = False
-            self._f.update(g, a)
-        else:
-            self._f.update(g, a, np.ascontiguousarray(mag_uT, dtype=float))
-        return self.quat
+    def update(self, gyr_rad_s, acc_m_s2, mag_uT, dt_s, *, acc_valid: bool = True, mag_valid: bool = True):
+        """One sample (VQF's own ``updateGyr``, ``updateAcc``, ``updateMag``: what its ``update`` does in turn).
+        ``acc_valid=False`` (a tap in progress) skips the accelerometer, ``mag_valid=False`` or ``mag_uT=None`` the
+        magnetometer; the output is ``quat9D`` once a field has been used, ``quat6D`` before (a stream without a
+        magnetometer). The step is VQF's, fixed at construction (``dt_s`` is not used: a live link's jitter of a
+        few µs is below what VQF's fixed-rate filters would notice)."""
+        f = self._f
+        f.updateGyr(np.array(gyr_rad_s, dtype=float))
+        if acc_valid:
+            f.updateAcc(np.array(acc_m_s2, dtype=float))
+        if mag_uT is not None and mag_valid:
+            f.updateMag(np.array(mag_uT, dtype=float))
+            self._mag_used = True
+        return f.getQuat9D() if self._mag_used else f.getQuat6D()
 
     #: ``update_batch(..., diagnostics=True)`` returns VQF's own per-sample rest flag, bias and disturbance flag
     diagnostics = ("rest", "bias_rad_s", "mag_disturbed")
@@ -117,10 +122,10 @@ class VqfPeer(_Peer):
         g = np.ascontiguousarray(gyr, dtype=float)
         a = np.ascontiguousarray(acc, dtype=float)
         if mag is None:
-            self._has_mag = False
             out = self._f.updateBatch(g, a)
             q = np.asarray(out["quat6D"])
         else:
+            self._mag_used = True
             out = self._f.updateBatch(g, a, np.ascontiguousarray(mag, dtype=float))
             q = np.asarray(out["quat9D"])
         if not diagnostics:

@@ -26,7 +26,7 @@ from sphere.fusion import peers
 from sphere.fusion.common import ecompass
 from sphere.fusion.kalman import DissertationKF
 from sphere.fusion.madgwick import Madgwick
-from sphere.fusion.sphere_filter import SphereFilter
+from sphere.fusion.sphere_filter import STRUCTURES, SphereFilter
 
 #: seconds of still data at the start used as the start-up gyro calibration for madgwick and the KF
 STARTUP_BIAS_S = 1.0
@@ -44,12 +44,32 @@ class Filter:
     #: usable by the daemon (per-sample update with acc_valid / mag_valid)
     live: bool = False
 
+    #: structure variants (dicts of the filter's part switches), simplest first; ``--cv`` chooses among them as it
+    #: chooses parameters (nested: crossval.nested)
+    structures: tuple = ()
+    #: point → the same point with the parameters its structure does not use set to one value (so that equal
+    #: filters are one point)
+    canonical: Callable | None = None
+
     def grid_points(self) -> list[dict]:
-        """Every combination of the grid's values (one point, the defaults, for a filter without a grid)."""
-        if not self.grid:
-            return [{}]
+        """Every combination of the structures and the grid's values, structures first and in their order (one
+        point, the defaults, for a filter without either); points that build the same filter appear once."""
         keys = sorted(self.grid)
-        return [dict(zip(keys, vals)) for vals in itertools.product(*(self.grid[k] for k in keys))]
+        params = [dict(zip(keys, vals)) for vals in itertools.product(*(self.grid[k] for k in keys))]
+        out = []
+        for s in self.structures or ({},):
+            for p in params:
+                pt = dict(s, **p)
+                if self.canonical is not None:
+                    pt = self.canonical(pt)
+                if pt not in out:
+                    out.append(pt)
+        return out
+
+    def structure_of(self, point: dict) -> tuple:
+        """The structure a grid point belongs to (its part switches), as a hashable key."""
+        keys = sorted(self.structures[0]) if self.structures else []
+        return tuple((k, point[k]) for k in keys)
 
 
 def _madgwick(dt_s, q0, bias, **p):
@@ -65,8 +85,12 @@ def _sphere(dt_s, q0, bias, **p):
     return SphereFilter(**p)
 
 
+#: the step a live peer is built with when the caller gives none (the sphere's sample rate, 200 Hz)
+LIVE_DT_S = 0.005
+
+
 def _peer(name):
-    return lambda dt_s, q0, bias: peers.PEERS[name](dt_s)
+    return lambda dt_s, q0, bias: peers.PEERS[name](LIVE_DT_S if dt_s is None else dt_s)
 
 
 FILTERS: dict[str, Filter] = {
@@ -75,16 +99,28 @@ FILTERS: dict[str, Filter] = {
     "dissertation-kf": Filter(_kf, {"gyro_noise_rad_s": 0.5, "robust": "huber-norm", "threshold": 0.036},
                               {"gyro_noise_rad_s": (0.1, 0.5), "robust": ("huber-norm",),
                                "threshold": (0.012, 0.024, 0.036, 0.07, 0.15)}, startup_bias=True),
-    "sphere": Filter(_sphere, {},
-                     {"tau_acc_s": (3.0, 4.5), "bias_sigma_motion_dps": (0.1, 0.3, 1.0), "bias_forget_s": (30.0, 100.0)}, live=True),
-    **{name: Filter(_peer(name)) for name in peers.PEERS},
+    "sphere": Filter(_sphere, {}, {"tau_acc_s": (3.0, 4.5)}, live=True, structures=STRUCTURES),
+    **{name: Filter(_peer(name), live=name == "vqf") for name in peers.PEERS},
 }
 
 OURS = ("madgwick", "dissertation-kf", "sphere")
 PEERS = tuple(peers.PEERS)
 ALL = tuple(FILTERS)
-#: the filters the daemon can run, best first (its ``auto``)
-LIVE = tuple(n for n in ("sphere", "madgwick") if FILTERS[n].live)
+#: the daemon's ``[orientation] filter = auto``: the filter that wins on the held-out folds of the shipped BROAD
+#: trials (nested leave-one-trial-out, `sphere eval --cv`) and on the stress seeds (sphere.fusion.stress), see
+#: host/docs/fusion.md
+DAEMON_DEFAULT = "vqf"
+#: the filters the daemon can run, the default first, then ours (its ``auto`` takes the first one installed)
+LIVE = (DAEMON_DEFAULT, *(n for n in ("sphere", "vqf", "madgwick") if n != DAEMON_DEFAULT and FILTERS[n].live))
+#: what a peer in LIVE needs installed
+_LIVE_NEEDS = {"vqf": "vqf"}
+
+
+def live_available() -> tuple:
+    """The names of LIVE whose libraries are installed, in LIVE's order."""
+    import importlib.util
+
+    return tuple(n for n in LIVE if n not in _LIVE_NEEDS or importlib.util.find_spec(_LIVE_NEEDS[n]) is not None)
 
 
 def startup_gyro_bias(gyr_rad_s, dt_s: float, seconds: float = STARTUP_BIAS_S, max_std_rad_s: float = 0.02):
