@@ -169,7 +169,7 @@ class DsuServer:
         self.received = 0
         self.bad: dict[str, int] = {}
         self.sent = 0
-        self.connected = False  # the sphere's data are arriving (slot 0 is reported connected)
+        self.last_motion = None  # when the sphere's last sample came (slot 0 is connected within 1 s of it)
         try:
             self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
             self.sock.bind((host, port))
@@ -215,7 +215,8 @@ class DsuServer:
             for slot in payload[4:4 + count]:
                 if slot >= 4:
                     raise BadDatagram("ports")
-                info = shared(slot, slot == SLOT and self.connected) + b"\0"
+                live = self.last_motion is not None and self.clock() - self.last_motion < 1.0
+                info = shared(slot, slot == SLOT and live) + b"\0"
                 self.sock.sendto(message(MSG_PORTS, info, self.server_id), addr)
         elif mtype == MSG_PAD_DATA:
             if len(payload) < 8:
@@ -290,7 +291,7 @@ class DsuOutput(Output):
 
     def motion(self, gyro_dps, accel_g, t_us=None, quat=None) -> None:
         server = self.server
-        server.connected = True
+        server.last_motion = server.clock()
         if t_us is None or not server.subscribers or not self.active:
             return
         self._t_us = t_us

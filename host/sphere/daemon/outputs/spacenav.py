@@ -475,9 +475,6 @@ class SpnavServer:
         self._thread.start()
 
     # -- from the daemon's loop --
-    def has_clients(self) -> bool:
-        return bool(self.clients)
-
     def motion(self, values, period_ms: int) -> None:
         zero = not any(values)
         self._send_all(lambda s: s.motion(values, period_ms), droppable=not zero)
