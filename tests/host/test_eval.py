@@ -288,3 +288,21 @@ def test_vqf_per_sample_is_its_batch_and_honours_the_daemons_flags():
     c._f.updateGyr(np.array(tr.gyr_rad_s[400]))
     assert np.array_equal(qb, c._f.getQuat6D())
     assert not np.array_equal(qb, c.update(tr.gyr_rad_s[401], (80.0, -50.0, 3.0), None, tr.dt_s))
+
+
+def test_the_daemon_extra_installs_its_default_filter():
+    """VQF is the daemon's default filter, so `pip install 'marg-sphere[daemon]'` (and so ./scripts/setup) installs it."""
+    import sys
+    from pathlib import Path
+
+    if sys.version_info >= (3, 11):
+        import tomllib
+    else:  # pragma: no cover
+        tomllib = pytest.importorskip("tomli")
+    from sphere.fusion import registry
+
+    meta = tomllib.loads((Path(__file__).parents[2] / "pyproject.toml").read_text())
+    daemon = meta["project"]["optional-dependencies"]["daemon"]
+    assert registry.DAEMON_DEFAULT == "vqf" and any(d.split(">")[0].split("=")[0].strip() == "vqf" for d in daemon)
+    assert registry.live_available()[0] == "vqf"  # installed here, as setup installs it
+
