@@ -92,6 +92,15 @@ def test_sphere_bench_stress_prints_each_filter_and_the_ratio_to_vqf():
     for kind in ("fast_rest", "magnet_attached"):
         e = {f: np.mean([stress.score(stress.trace(kind, s), f)["total"] for s in (1000, 1001)]) for f in ("sphere", "vqf")}
         assert got[kind] == pytest.approx(e["sphere"] / e["vqf"], abs=0.006)
+    # --no-mag: as the daemon runs by default, without the magnetometer; the ratio is the inclination's
+    r = subprocess.run([sys.executable, "-m", "sphere.cli", "bench", "stress", "--seeds", "1", "--kinds", "fast_rest",
+                        "--no-mag"], capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stderr
+    assert "without the magnetometer" in r.stdout and "ratio = mean inclination" in r.stdout
+    tr = stress.trace("fast_rest", 1000)
+    e = {f: stress.score(tr, f, mag=False)["inclination"] for f in ("sphere", "vqf")}
+    assert stress.score(tr, "sphere", mag=False) != stress.score(tr, "sphere")
+    assert float(r.stdout.splitlines()[-1].split()[-2]) == pytest.approx(e["sphere"] / e["vqf"], abs=0.006)
 
 
 # -- the structure switches and the nested choice ---------------------------------------------------------------

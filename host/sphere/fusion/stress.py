@@ -188,12 +188,15 @@ def trace(kind: str, seed: int, seconds: float = SECONDS, rate_hz: float = RATE_
     return StressTrace(kind, seed, dt, gyr, acc, mag, q, t >= REST_S)
 
 
-def score(tr: StressTrace, name: str, **params) -> dict:
-    """Filter ``name`` (the registry's, ``params`` replacing its defaults) on one trace: BROAD's RMSEs (°)."""
+def score(tr: StressTrace, name: str, mag: bool = True, **params) -> dict:
+    """Filter ``name`` (the registry's, ``params`` replacing its defaults) on one trace: BROAD's RMSEs (°).
+    ``mag=False`` runs it without the magnetometer (as the daemon does by default, ``[orientation] use_mag``): its
+    heading then only integrates the gyro, and the inclination is the figure that counts."""
     from sphere.fusion import peers, registry
 
-    f = registry.make_for_trial(name, tr.gyr_rad_s, tr.acc_m_s2, tr.mag_uT, tr.dt_s, **params)
-    q = peers.to_enu(f.update_batch(tr.gyr_rad_s, tr.acc_m_s2, tr.mag_uT, tr.dt_s), f.earth_frame)
+    m = tr.mag_uT if mag else None
+    f = registry.make_for_trial(name, tr.gyr_rad_s, tr.acc_m_s2, m, tr.dt_s, **params)
+    q = peers.to_enu(f.update_batch(tr.gyr_rad_s, tr.acc_m_s2, m, tr.dt_s), f.earth_frame)
     tot, hd, inc = broad.error_angles_deg(q[tr.scored], tr.quat[tr.scored])
     rms = lambda x: float(np.sqrt(np.mean(x * x)))  # noqa: E731
     return {"total": rms(tot), "heading": rms(hd), "inclination": rms(inc)}
