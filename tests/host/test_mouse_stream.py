@@ -107,3 +107,48 @@ def test_daemon_streams_orientation_in_3d_mode(tmp_path, stream):
     assert abs(rel[3]) > 0.68 and abs(rel[1]) < 0.05 and abs(rel[2]) < 0.05  # about the vertical
     assert {"type": "event", "event": "double_tap"} == {k: v for k, v in msgs[-1].items() if k != "t_us"}
     assert backend.moves == 0 and backend.clicks == []
+
+
+def test_camera_frames_only_to_a_client_that_asks_for_them(stream):
+    """The AR view's frames (issue 30): a JPEG with the pose drawn at its exposure, sent only to a client that
+    sent {"subscribe": "frames"}; the daemon keeps frames only while one watches (frames_wanted)."""
+    import base64
+
+    import numpy as np
+
+    cv2 = pytest.importorskip("cv2")
+    from websockets.asyncio.client import connect
+
+    image = np.zeros((48, 64, 3), np.uint8)
+    image[10:20, 30:40] = (0, 200, 0)
+    frame = {"index": 7, "image": image, "t_exposure_s": 1.0, "radius_m": 0.04, "position": [0.0, 0.0, 1.0],
+             "rotation": None, "outline": {"centre": [35.0, 15.0], "radius": 5.0, "verdict": "accepted"},
+             "camera": {"width": 64, "height": 48, "fx": 50.0, "fy": 50.0, "cx": 32.0, "cy": 24.0, "dist": [0] * 5}}
+
+    async def go():
+        async with connect(f"ws://127.0.0.1:{stream.port}/ws") as plain, \
+                connect(f"ws://127.0.0.1:{stream.port}/ws") as watcher:
+            assert not stream.frames_wanted
+            await watcher.send(json.dumps({"subscribe": "frames"}))
+            await plain.send("not json at all")  # ignored
+            deadline = time.monotonic() + 5
+            while not stream.frames_wanted and time.monotonic() < deadline:
+                await asyncio.sleep(0.02)
+            assert stream.frames_wanted
+            stream.publish_frame(frame)
+            got = json.loads(await asyncio.wait_for(watcher.recv(), 5))
+            try:
+                other = json.loads(await asyncio.wait_for(plain.recv(), 0.5))
+            except asyncio.TimeoutError:
+                other = None
+            return got, other
+
+    got, other = asyncio.run(go())
+    assert other is None
+    assert got["type"] == "frame" and got["index"] == 7 and got["outline"]["centre"] == [35.0, 15.0]
+    img = cv2.imdecode(np.frombuffer(base64.b64decode(got["jpeg"]), np.uint8), cv2.IMREAD_COLOR)
+    assert img.shape == (48, 64, 3) and img[15, 35, 1] > 150
+    deadline = time.monotonic() + 5
+    while stream.frames_wanted and time.monotonic() < deadline:  # the watcher left
+        time.sleep(0.02)
+    assert not stream.frames_wanted

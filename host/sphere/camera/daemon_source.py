@@ -124,6 +124,31 @@ class CameraPosition:
         p = self.live.sensor(t, q_sensor_to_earth, acc_m_s2)
         return None if p is None else [float(v) for v in p]
 
+    def watch_frames(self, on: bool) -> None:
+        """An AR view is (not) watching: keep each frame's image and the pose at its exposure."""
+        self.live.keep_frames = on
+        self.live.source.keep_images = on
+
+    def ar_frame(self) -> dict | None:
+        """The newest frame for an AR view, once: its image (BGR), the camera's intrinsics, the ball's pose at the
+        frame's exposure (position from the hybrid tracker, orientation from the sphere through the camera's
+        alignment) and the detector's outline (None when the ball was not found in it)."""
+        rec = self.live.ar_frame
+        if rec is None:
+            return None
+        self.live.ar_frame = None
+        f, verdict, p, R = rec
+        cam = self.live.source.camera
+        fix = f.fix
+        return {"index": f.index, "image": f.image, "t_exposure_s": f.t_exposure,
+                "camera": {"width": cam.width, "height": cam.height, "fx": cam.fx, "fy": cam.fy, "cx": cam.cx,
+                           "cy": cam.cy, "dist": list(cam.dist)},
+                "radius_m": self.live.source.radius_m,
+                "position": None if p is None else [float(v) for v in p],
+                "rotation": None if R is None else [[float(v) for v in row] for row in R],
+                "outline": None if fix is None else {"centre": [float(v) for v in fix.center_px],
+                                                      "radius": float(fix.radius_px), "verdict": verdict}}
+
     def diagnostics(self) -> dict:
         """What the camera and the tracker did so far (the 3-D stream's ``camera`` field)."""
         trk = self.live.tracker

@@ -35,6 +35,11 @@ COLD_START_INLIERS = 0.6
 #: hand over a third of the ball leaves ~0.65-0.8; a box or a blob of the ball's colour ~0.4-0.5).
 TRACK_INLIERS = 0.6
 COLD_START_RESIDUAL_PX = 0.4
+#: ... or, when the fit's own residual says the outline is a sharp circle, from fewer points: a ball partly
+#: behind a hand at the start (half of its outline hidden leaves 47-55 of 96 rays, fitting to 0.11-0.15 px;
+#: a same-coloured thing in the clutter fits 37-50 rays to 0.44-0.68 px)
+PARTIAL_INLIERS = 0.45
+PARTIAL_RESIDUAL_PX = 0.25
 
 
 @dataclass
@@ -129,8 +134,10 @@ class BallDetector:
             if r_in < self.min_radius_px * 0.6:
                 continue
             roundness = min(1.0, (r_in / max(r_area, 1e-9)) ** 2)  # 1 for a disc, lower when elongated
+            # the radius the rays search over: the area's (a ball partly hidden is a clipped disc whose inscribed
+            # circle is far smaller than the ball and off its centre)
             out.append((np.array([x0 + (x + px + 0.5) * scale - 0.5, y0 + (y + py + 0.5) * scale - 0.5]),
-                        max(r_in, r_area if roundness > 0.6 else r_in), roundness))
+                        max(r_in, r_area), roundness))
         return out
 
     # -- outline -----------------------------------------------------------------------------------------
@@ -280,9 +287,9 @@ class BallDetector:
                 continue
             # the whole frame (a cold start, or the track lost): measure the likeliest few and keep the
             # most circle-like outline, if it is clearly one
-            cands.sort(key=lambda c: -(c[1] * c[2] * c[2]))
-            found = [d for d in (self._measure(bgr, centre, r0) for centre, r0, _ in cands[:4]) if d is not None
-                     and d.inliers >= COLD_START_INLIERS * self.n_rays and d.residual_px <= COLD_START_RESIDUAL_PX]
+            cands.sort(key=lambda c: -(c[1] * c[2]))  # large and round first (a clipped disc is about half round)
+            found = [d for d in (self._measure(bgr, centre, r0) for centre, r0, _ in cands[:5])
+                     if d is not None and self.clear_outline(d)]
             if found:
                 best = max(found, key=lambda d: d.inliers / self.n_rays - 0.1 * d.residual_px)
                 best.candidates = len(cands)
@@ -290,6 +297,13 @@ class BallDetector:
                     self.colour = best.colour
                 return best
         return None
+
+    def clear_outline(self, d: Detection) -> bool:
+        """Without a track, an outline counts as the ball when most of it is seen and fits a circle, or when
+        half of it is seen and fits one sharply (the fit's own residual)."""
+        n = self.n_rays
+        return ((d.inliers >= COLD_START_INLIERS * n and d.residual_px <= COLD_START_RESIDUAL_PX)
+                or (d.inliers >= PARTIAL_INLIERS * n and d.residual_px <= PARTIAL_RESIDUAL_PX))
 
     def _measure(self, bgr, centre, r0, fine_only: bool = False):
         H, W = bgr.shape[:2]
@@ -301,13 +315,17 @@ class BallDetector:
             return None
         rgb = np.ascontiguousarray(bgr[y0:y1, x0:x1, ::-1], dtype=np.float32)
         # first 48 rays over a wide range; then 96 from the fitted centre, over the fitted outline ± 40 %
-        passes = ((self.n_rays // 2, (0.35, 1.9)), (self.n_rays, (0.6, 1.4)))
-        for n_rays, span in passes[1:] if fine_only else passes:
+        fine = (self.n_rays, (0.6, 1.4))
+        passes = [fine] if fine_only else [(self.n_rays // 2, (0.35, 1.9)), fine]
+        while passes:
+            n_rays, span = passes.pop(0)
             fit = self._fit(rgb, centre, r0, (x0, y0), n_rays, span)
             if fit is None:
                 return out
             c, alpha, mask, u, pts = fit
-            if mask.sum() < max(8, 0.4 * len(u)):
+            # the coarse pass from a candidate's centre may start well off a partly hidden ball's: a third of
+            # its rays on one circle is enough to aim the fine pass, which decides
+            if mask.sum() < max(8, (0.4 if n_rays == self.n_rays else 0.3) * len(u)):
                 return out
             centre_new = self.camera.project(c[None, :])[0]
             r_new = float(np.mean(np.linalg.norm(pts[mask] - centre_new, axis=1)))
@@ -315,8 +333,14 @@ class BallDetector:
                     or np.linalg.norm(centre_new - centre) > r0 + 2.0:
                 return out
             if n_rays == self.n_rays:
-                out = self._detection(c, alpha, u[mask], centre_new, r_new, len(u))
-                out.colour = self._last_colour
+                det = self._detection(c, alpha, u[mask], centre_new, r_new, len(u))
+                det.colour = self._last_colour
+                if out is not None and det.inliers < out.inliers:
+                    return out
+                # searched from a centre far off a partly hidden ball's: once more from the fitted one
+                if out is None and not fine_only and det.inliers < COLD_START_INLIERS * self.n_rays:
+                    passes.append(fine)
+                out = det
             centre, r0 = centre_new, r_new
         return out
 

@@ -40,6 +40,7 @@ class Run:
     losses: list = field(default_factory=list)  # (t0, t1) of full occlusions
     alignment_ready_s: float | None = None  # when the hybrid's camera-to-earth rotation formed
     orientation: dict | None = None  # with a marker on the shell: orientation errors (°)
+    fixes: list = field(default_factory=list)  # (t_mid, error of the fix against the truth (m), the gate's verdict)
 
 
 def run(rt: RenderedTrial, hue_deg: float = 120.0) -> Run:
@@ -67,6 +68,7 @@ def run(rt: RenderedTrial, hue_deg: float = 120.0) -> Run:
     last_cam = None
     hint = None
     per_frame, det_ms, detected = [], [], 0
+    fixes = []
     last_blob, blob_hint = None, None
     t_ready = None
     frame_iter = {k: None for k in range(len(start))}
@@ -87,7 +89,8 @@ def run(rt: RenderedTrial, hue_deg: float = 120.0) -> Run:
             t1 = time.perf_counter()
             if d is not None:
                 detected += 1
-                hyb.camera(t_exp, d.center_cam, d.cov)
+                verdict = hyb.camera(t_exp, d.center_cam, d.cov)
+                fixes.append((f.t_mid, float(np.linalg.norm(d.center_cam - f.truth_cam)), verdict))
                 if mdet is not None:
                     pose = mdet.detect(f.image, d.center_px, d.radius_px, d.center_cam)
                     if pose is not None:
@@ -135,7 +138,7 @@ def run(rt: RenderedTrial, hue_deg: float = 120.0) -> Run:
         align_err = float(np.degrees(np.arccos(np.clip((np.trace(dR) - 1) / 2, -1, 1))))
     losses = [(o.t0, o.t1) for o in rt.scene.occlusions if o.cover >= 1.0]
     run_ = Run(t_imu_host, truth, est, len(start), detected, np.array(per_frame), np.array(det_ms),
-               dict(hyb.stats), align_err, ~tr.movement.astype(bool), losses, t_ready)
+               dict(hyb.stats), align_err, ~tr.movement.astype(bool), losses, t_ready, fixes=fixes)
     if mdet is not None:
         run_.orientation = _orientation_errors(rt, R_host, R_hyb, markers)
     return run_
@@ -222,8 +225,24 @@ def latency_ms(t, est, truth_fn, max_ms: int = 200, min_ms: int = -50) -> float 
 def figures(r: Run, rt: RenderedTrial) -> dict:
     out = {m: method_figures(r, rt, r.est[m]) for m in METHODS}
     out["hybrid"]["output_rate_hz"] = float(1.0 / np.median(np.diff(r.t_out)))
+    out["camera"].update(fix_figures(r.fixes))
     out["hybrid"]["alignment_ready_s"] = r.alignment_ready_s
     return out
+
+
+#: the gate's verdicts that let a fix into the output
+USED = ("init", "accepted", "reacquired")
+
+
+def fix_figures(fixes, off_m: float = 0.05) -> dict:
+    """The camera's own fixes (each against the truth at its exposure): how many are more than ``off_m`` off,
+    before the hybrid's gate and after it (those it used), and the worst of each."""
+    err = np.array([e for _, e, _ in fixes]) if fixes else np.zeros(0)
+    used = np.array([v in USED for _, _, v in fixes], bool) if fixes else np.zeros(0, bool)
+    return {"fixes": int(len(err)), "fixes_used": int(used.sum()),
+            "fixes_over_50mm": int((err > off_m).sum()), "fixes_over_50mm_after_gate": int((err[used] > off_m).sum()),
+            "worst_fix_m": float(err.max()) if len(err) else None,
+            "worst_fix_after_gate_m": float(err[used].max()) if used.any() else None}
 
 
 def method_figures(r: Run, rt: RenderedTrial, est: np.ndarray) -> dict:

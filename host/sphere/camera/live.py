@@ -284,8 +284,8 @@ class LiveTracker:
         self.tracker = CameraImuTracker()
         self.lead_s = lead_s
         self._pending: list[Frame] = []
-        self.frames_out: list = []  # (Frame, fix status) of the frames used, for an AR view (kept when asked)
-        self.keep_frames = False
+        self.keep_frames = False  # an AR view is watching: keep the newest frame with the pose drawn on it
+        self.ar_frame = None  # (Frame, the gate's verdict, position at its exposure, body → camera or None)
         source.hint_fn = self._hint
 
     def _hint(self, t_exposure):
@@ -305,6 +305,5 @@ class LiveTracker:
                 if f.fix is not None:
                     status = self.tracker.camera(f.t_exposure, f.fix.center_cam, f.fix.cov)
                 if self.keep_frames:
-                    self.frames_out.append((f, status))
-                    del self.frames_out[:-8]
+                    self.ar_frame = (f, status, *self.tracker.pose_at(f.t_exposure))
         return self.tracker.imu(t, q_sensor_to_earth, acc_sensor, lead_s=self.lead_s)

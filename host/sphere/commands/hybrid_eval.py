@@ -160,6 +160,11 @@ def _print_trial(name, t):
         f = lambda v: "–" if v is None else f"{v:.2f}°"  # noqa: E731
         print(f"  marker seen in {o['frames_with_marker']} frames; orientation error (RMS) host filter "
               f"{f(o['host_filter_rms_deg'])}, with the marker's heading correction {f(o['with_marker_rms_deg'])}")
+    c = t["methods"]["camera"]
+    if "fixes" in c:
+        print(f"  camera fixes {c['fixes']}, more than 50 mm off: {c['fixes_over_50mm']} (worst "
+              f"{1000 * (c['worst_fix_m'] or 0):.0f} mm); after the hybrid's gate {c['fixes_over_50mm_after_gate']} "
+              f"(worst {1000 * (c['worst_fix_after_gate_m'] or 0):.0f} mm)")
     print(f"  wall clock per frame (detection and both filters, on this machine as loaded; CPU time: sphere camera "
           f"bench) {t['ms_per_frame']['mean']:.2f} ms (p95 {t['ms_per_frame']['p95']:.2f}), "
           f"hybrid output {t['methods']['hybrid']['output_rate_hz']:.0f} Hz; tracker {t['tracker']}")
@@ -210,6 +215,10 @@ def _print_summary(doc):
     for label, v, lim in checks:
         state = "–" if v is None else ("met" if v <= lim else "MISSED")
         print(f"  {label:58} {state:7} {'' if v is None else f'{v:.4g}'}")
+    over = {n: t["methods"]["camera"].get("fixes_over_50mm_after_gate") for n, t in doc["trials"].items()}
+    worst = max((v for v in over.values() if v is not None), default=None)
+    print(f"  {'camera fixes more than 50 mm off after the gate: 0 on every trial (issue 30)':58} "
+          f"{'–' if worst is None else ('met' if worst == 0 else 'MISSED'):7} {'' if worst is None else worst}")
     per_trial = {n: t for n, t in doc["trials"].items()}
     for n, t in per_trial.items():
         bad = [k for k in ("rmse_lateral_m", "rmse_depth_m") if (t["methods"]["hybrid"].get(k) or 0) > TARGETS[k]]

@@ -53,6 +53,7 @@ class SphereMouse:
     def __init__(self, cfg, source, backend, stream=None, status=None, log=None, camera=None):
         self.cfg = cfg
         self.camera = camera  # sphere.camera.daemon_source.CameraPosition: the ball's position for the stream
+        self._ar_watching = False  # a page's AR view asked for the camera's frames
         self.source = source
         self.backend = backend
         self.stream = stream
@@ -247,6 +248,14 @@ class SphereMouse:
             q, position = self.pose.at(self.motion.quat, t_us, position)
         self.stream.position = None if position is None else [float(v) for v in position]
         self.stream.camera = self.camera.diagnostics()
+        watching = bool(getattr(self.stream, "frames_wanted", False))
+        if watching != self._ar_watching:
+            self._ar_watching = watching
+            self.camera.watch_frames(watching)
+        if watching:
+            frame = self.camera.ar_frame()
+            if frame is not None:
+                self.stream.publish_frame(frame)
         self.stream.publish_orientation(q, t_us)
 
     def _sensors_changed(self, bits: int) -> None:

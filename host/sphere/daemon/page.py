@@ -6,7 +6,14 @@ towards the screen at the reference pose, y green to the left, z blue up), a flo
 directional lighting with a shadow; the shell is see-through so the axes show inside it. The sphere turns with the orientation relative to the pose at
 connection or at the last recentre, and moves with ``position`` (metres, relative to the first position
 received) when a pose source sends one. The status text has ids the tests read (``status``, ``quat``,
-``mode``, ``event``, ``count``, ``turn``, ``position``, ``renderer``).
+``mode``, ``event``, ``count``, ``turn``, ``position``, ``renderer``, ``cameradiag``).
+
+The AR view (the "camera view" box, or ``/?ar=1``; with a camera): the webcam's frames, each with a virtual
+object drawn where the hybrid tracker puts the ball at the frame's exposure (a ring of the ball's size and
+its three axes, orientation from the sphere through the camera's alignment) and the detector's outline
+(dashed; none when the camera lost the ball: the object stays on it from the IMU). Projected with the
+camera's intrinsics and OpenCV's lens distortion, as the detector measures. ``window.arLog`` keeps, per
+frame drawn, the frame's index and the object's centre (px) for tests.
 
     static_response("/static/three.module.min.js")  # -> (body text, content type) or None
 """
@@ -48,16 +55,20 @@ PAGE_HTML = r"""<!doctype html>
   #view { display: block; width: 100vw; height: 100vh; }
   #legend span { display: inline-block; width: 10px; height: 10px; margin: 0 3px 0 8px; }
   button { margin-top: 6px; }
+  #ar { position: absolute; right: 10px; bottom: 10px; max-width: 60vw; max-height: 70vh; display: none;
+        border: 1px solid #444; background: #000; }
 </style>
 <script type="importmap">{"imports": {"three": "/static/three.module.min.js"}}</script>
 </head>
 <body>
 <div id="view"></div>
+<canvas id="ar" width="640" height="480"></canvas>
 <div id="hud">
   <div><b>MARG sphere</b> · <span id="status">connecting…</span> · <span id="renderer">starting</span></div>
   <div>mode <span id="mode">?</span> · messages <span id="count">0</span></div>
   <div>quat <span id="quat">–</span> · turned <span id="turn">0.0</span>° from the reference pose</div>
   <div>position <span id="position">–</span></div>
+  <div>camera <span id="cameradiag">–</span> · <label><input type="checkbox" id="arbox"> camera view (AR)</label></div>
   <div>last event <span id="event">–</span></div>
   <div id="legend"><span style="background:#f44"></span>x <span style="background:#4d4"></span>y
        <span style="background:#48f"></span>z</div>
@@ -173,9 +184,61 @@ function draw(position) {
   if (!pending) { pending = true; requestAnimationFrame(() => { pending = false; view.render(); }); }
 }
 
+// -- the AR view: the webcam's frame, the ball's pose drawn on it, the detector's outline --
+window.arLog = [];
+let socket = null, arOn = new URLSearchParams(location.search).get("ar") === "1", arBusy = false;
+$("arbox").checked = arOn;
+function project(c, p) {  // camera frame (m) -> pixels, OpenCV's model (k1, k2, p1, p2, k3)
+  const x = p[0] / p[2], y = p[1] / p[2], [k1, k2, p1, p2, k3] = c.dist, r2 = x * x + y * y;
+  const radial = 1 + r2 * (k1 + r2 * (k2 + r2 * k3));
+  const xd = x * radial + 2 * p1 * x * y + p2 * (r2 + 2 * x * x);
+  const yd = y * radial + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y;
+  return [c.fx * xd + c.cx, c.fy * yd + c.cy];
+}
+function drawAR(m, img) {
+  const cv = $("ar"), g = cv.getContext("2d"), c = m.camera;
+  if (cv.width !== c.width || cv.height !== c.height) { cv.width = c.width; cv.height = c.height; }
+  g.drawImage(img, 0, 0);
+  let entry = { index: m.index, centre: null, outline: m.outline ? m.outline.centre : null };
+  if (m.position && m.position[2] > 0.05) {
+    const p = m.position, ctr = project(c, p), r = c.fx * m.radius_m / p[2];
+    g.lineWidth = 2; g.strokeStyle = "rgba(255,255,255,0.9)";
+    g.beginPath(); g.arc(ctr[0], ctr[1], r * 1.15, 0, 2 * Math.PI); g.stroke();  // a ring around the ball
+    if (m.rotation) {  // its axes (x red, y green, z blue), 1.8 radii long, from the sphere's orientation
+      [["#ff4444", 0], ["#44dd44", 1], ["#4488ff", 2]].forEach(([colour, i]) => {
+        const R = m.rotation, L = 1.8 * m.radius_m;
+        const tip = project(c, [p[0] + R[0][i] * L, p[1] + R[1][i] * L, p[2] + R[2][i] * L]);
+        g.strokeStyle = colour; g.beginPath(); g.moveTo(ctr[0], ctr[1]); g.lineTo(tip[0], tip[1]); g.stroke();
+      });
+    }
+    g.fillStyle = "#ffdd33"; g.beginPath(); g.arc(ctr[0], ctr[1], 2.5, 0, 2 * Math.PI); g.fill();
+    entry.centre = ctr; entry.radius = r;
+  }
+  if (m.outline) {  // the detector's outline
+    g.setLineDash([5, 4]); g.strokeStyle = "#33ddff"; g.lineWidth = 1.5;
+    g.beginPath(); g.arc(m.outline.centre[0], m.outline.centre[1], m.outline.radius, 0, 2 * Math.PI); g.stroke();
+    g.setLineDash([]);
+  }
+  window.arLog.push(entry);
+}
+function onFrame(m) {
+  if (!arOn || !m.jpeg || arBusy) return;  // a frame still decoding: this one is skipped
+  arBusy = true;
+  const img = new Image();
+  img.onload = () => { drawAR(m, img); arBusy = false; };
+  img.onerror = () => { arBusy = false; };
+  img.src = "data:image/jpeg;base64," + m.jpeg;
+}
+function setAR(on) {
+  arOn = on; $("ar").style.display = on ? "block" : "none";
+  if (on && socket && socket.readyState === 1) socket.send(JSON.stringify({ subscribe: "frames" }));
+}
+$("arbox").onchange = () => setAR($("arbox").checked);
+
 function connect() {
   const ws = new WebSocket("ws://" + location.host + "/ws");
-  ws.onopen = () => { $("status").textContent = "connected"; document.body.dataset.connected = "1"; };
+  socket = ws;
+  ws.onopen = () => { $("status").textContent = "connected"; document.body.dataset.connected = "1"; setAR(arOn); };
   ws.onclose = () => { $("status").textContent = "disconnected (retrying)"; setTimeout(connect, 1000); };
   ws.onmessage = (msg) => {
     const m = JSON.parse(msg.data);
@@ -189,7 +252,13 @@ function connect() {
         position = m.position;
         $("position").textContent = m.position.map((v) => v.toFixed(3)).join(" ") + " m";
       }
-    } else if (m.type === "mode") { $("mode").textContent = m.mode; }
+      if (m.camera) {
+        const d = m.camera;
+        $("cameradiag").textContent = d.found + "/" + d.frames + " frames with the ball, " + d.gated +
+          " fixes rejected" + (d.alignment ? "" : ", learning how the camera stands");
+      }
+    } else if (m.type === "frame") { onFrame(m); return; }
+    else if (m.type === "mode") { $("mode").textContent = m.mode; }
     else if (m.type === "event") { $("event").textContent = m.event; }
     else if (m.type === "recentre" && m.quat) { ref = m.quat; pos0 = null; }
     draw(position);

@@ -9,6 +9,12 @@ the built-in page that shows a 3-D object turning with the sphere.
                              frames seen, with the ball, fixes used, rejected by the gate (an implausible jump
                              against the IMU's prediction), re-acquisitions, too late; the camera-to-earth
                              rotation known
+        {"type": "frame", "index": k, "jpeg": "<base64>", "camera": {"width", "height", "fx", "fy", "cx", "cy",
+         "dist": [k1, k2, p1, p2, k3]}, "radius_m": 0.04, "position": [x, y, z] | null,
+         "rotation": [[...], [...], [...]] | null, "outline": {"centre": [u, v], "radius": r, "verdict": ...} | null}
+                             the camera's newest frame with the ball's pose at its exposure (camera frame;
+                             rotation body → camera) and the detector's outline, for the page's AR view: only to a
+                             client that sent {"subscribe": "frames"}, at most rate_hz a second
         {"type": "event", "event": "single_tap", "t_us": ...}
         {"type": "mode", "mode": "tilt"}
         {"type": "recentre", "quat": [w, x, y, z]}
@@ -79,6 +85,8 @@ class OrientationStream:
         self.position = None
         self.camera = None  # the camera's diagnostics (sphere.camera.daemon_source.CameraPosition.diagnostics)
         self.clients = set()
+        self.frame_clients = set()  # clients that asked for the camera's frames (the page's AR view)
+        self._frame = None
         self.sent = 0
         self._quat = None
         self._t_us = None
@@ -97,6 +105,16 @@ class OrientationStream:
         self._quat = quat
         self._t_us = t_us
         self._dirty = True
+
+    @property
+    def frames_wanted(self) -> bool:
+        """A client watches the camera's frames (the daemon then keeps them)."""
+        return bool(self.frame_clients)
+
+    def publish_frame(self, frame: dict) -> None:
+        """The camera's newest frame (sphere.camera.daemon_source.CameraPosition.ar_frame); coded as JPEG in the
+        server's thread, not the daemon's."""
+        self._frame = frame
 
     def publish_event(self, event: str, t_us=None) -> None:
         self._queue.append({"type": "event", "event": event, "t_us": t_us})
@@ -190,12 +208,14 @@ class OrientationStream:
         try:
             if self.mode is not None:
                 await ws.send(json.dumps({"type": "mode", "mode": self.mode}))
-            async for _ in ws:  # messages from clients are ignored
-                pass
+            async for text in ws:  # a client may ask for the camera's frames; anything else is ignored
+                if _subscription(text) == "frames":
+                    self.frame_clients.add(ws)
         except Exception:
             pass
         finally:
             self.clients.discard(ws)
+            self.frame_clients.discard(ws)
 
     async def _main(self) -> None:
         from websockets.asyncio.server import ServerConnection, broadcast, serve
@@ -245,9 +265,38 @@ class OrientationStream:
                     for m in messages:
                         broadcast(self.clients, json.dumps(m))
                         self.sent += 1
+                frame, self._frame = self._frame, None
+                if frame is not None and self.frame_clients:
+                    broadcast(self.frame_clients, json.dumps(_frame_message(frame)))
+                    self.sent += 1
 
     def stop(self) -> None:
         if self._loop is not None and self._stop_event is not None:
             self._loop.call_soon_threadsafe(self._stop_event.set)
         if self._thread is not None:
             self._thread.join(5)
+
+
+def _subscription(text) -> str | None:
+    """What a client's message subscribes to (``{"subscribe": "frames"}``), or None for anything else."""
+    if not isinstance(text, str) or len(text) > 200:
+        return None
+    try:
+        msg = json.loads(text)
+    except ValueError:
+        return None
+    return msg.get("subscribe") if isinstance(msg, dict) else None
+
+
+def _frame_message(frame: dict) -> dict:
+    """A frame for the page: its image as base64 JPEG (quality 85) beside the pose and outline."""
+    import base64
+
+    import cv2
+
+    ok, jpeg = (False, None) if frame.get("image") is None else \
+        cv2.imencode(".jpg", frame["image"], [cv2.IMWRITE_JPEG_QUALITY, 85])
+    out = {k: v for k, v in frame.items() if k != "image"}
+    out["type"] = "frame"
+    out["jpeg"] = base64.b64encode(jpeg.tobytes()).decode("ascii") if ok else None
+    return out

@@ -67,6 +67,14 @@ class Outputs:
         if self.stream is not None:
             self.stream.camera = value
 
+    @property
+    def frames_wanted(self) -> bool:
+        return bool(getattr(self.stream, "frames_wanted", False))
+
+    def publish_frame(self, frame) -> None:  # the camera's frames, for the page's AR view
+        if self.stream is not None:
+            self.stream.publish_frame(frame)
+
     def _each(self, call) -> None:
         for out in list(self.outputs):
             try:
