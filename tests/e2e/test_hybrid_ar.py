@@ -45,10 +45,9 @@ def test_ar_overlay_stays_on_the_ball_through_an_occlusion(tmp_path):
         broad.trial_paths()
     except broad.BroadMissing as e:
         pytest.skip(f"BROAD trials are needed: {e}")
-    from sphere.camera import render, trials
+    from sphere.camera import trials
 
-    occl = [render.Occlusion(3.0, 4.0, 0.35), render.Occlusion(7.0, 8.0, 1.0)]
-    rt = trials.rendered_trial("14", 64.0, 9.0, occlusions=occl, jpeg_quality=85)
+    rt = trials.rendered_trial("14", 64.0, 9.0, occlusions=trials.eval_occlusions(), jpeg_quality=85)
     session = tmp_path / "s"
     # the sphere runs 10 s before the camera's first frame: time for Chromium to open the page
     trials.write_session(rt, session, lead_s=10.0)

@@ -109,30 +109,18 @@ def score_messages(messages, rt, lead_s: float, hybrid_eval_run):
 
 
 def run(args) -> int:
-    try:
-        import cv2  # noqa: F401
-    except ImportError:
-        print("sphere bench hybrid-replay: OpenCV is missing; install the camera extra: pip install -e '.[camera]'",
-              file=sys.stderr)
-        return 1
+    from sphere.commands.hybrid_eval import _parse, refused
+
+    stretches = _parse(args.trials)
+    code = refused("sphere bench hybrid-replay", args.seconds, [n for n, _ in stretches])
+    if code is not None:
+        return code
     import numpy as np
 
-    from sphere import broad
     from sphere.camera import evaluation as ev
-    from sphere.camera import render, trials
-    from sphere.commands.hybrid_eval import _parse
+    from sphere.camera import trials
 
-    if args.seconds < 9.0:
-        print("sphere bench hybrid-replay: --seconds must be at least 9 (the 1 s loss is at 7-8 s)", file=sys.stderr)
-        return 2
-    stretches = _parse(args.trials)
-    try:
-        for name, _ in stretches:
-            broad.find_trial(name)
-    except broad.BroadMissing as e:
-        print(f"sphere bench hybrid-replay: {e}", file=sys.stderr)
-        return 2
-    occl = [render.Occlusion(3.0, 4.0, 0.35), render.Occlusion(7.0, 8.0, 1.0)]
+    occl = trials.eval_occlusions()
     tmp = tempfile.TemporaryDirectory(prefix="sphere-hybrid-replay-")
     folder = Path(args.keep) if args.keep else Path(tmp.name)
     doc = {"speed": args.speed, "seconds": args.seconds, "target_ratio": TARGET_RATIO, "trials": {}}

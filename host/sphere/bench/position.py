@@ -54,9 +54,9 @@ def _stretches(text: str):
 def render_runs(stretches, seconds: float, seed: int):
     """[(name, Run, RenderedTrial)] of the hybrid tracker on each rendered stretch (hybrid-eval's scene)."""
     from sphere.camera import evaluation as ev
-    from sphere.camera import render, trials
+    from sphere.camera import trials
 
-    occl = [render.Occlusion(3.0, 4.0, 0.35), render.Occlusion(7.0, 8.0, 1.0)]
+    occl = trials.eval_occlusions()
     out = []
     for name, start in stretches:
         rt = trials.rendered_trial(name, start, seconds, occlusions=occl, seed=seed, jpeg_quality=85)
@@ -109,21 +109,16 @@ def evaluate(runs, name: str, params: dict):
 
 
 def run(args) -> int:
-    try:
-        import cv2  # noqa: F401
-    except ImportError:
-        print("sphere bench position: OpenCV is missing; install the camera extra: pip install -e '.[camera]'",
-              file=sys.stderr)
-        return 1
+    from sphere.commands.hybrid_eval import refused
+
+    code = refused("sphere bench position", args.seconds,
+                   [n for n, _ in _stretches(args.train) + _stretches(args.test)])
+    if code is not None:
+        return code
     from sphere import broad
     from sphere.smoothing.registry import POSITION, POSITION_DEFAULT
 
-    if args.seconds < 9.0:
-        print("sphere bench position: --seconds must be at least 9 (the 1 s loss is at 7-8 s)", file=sys.stderr)
-        return 2
     try:
-        for name, _ in _stretches(args.train) + _stretches(args.test):
-            broad.find_trial(name)  # every name checked before minutes of rendering
         train = render_runs(_stretches(args.train), args.seconds, TRAIN_SEED)
         test = render_runs(_stretches(args.test), args.seconds, TEST_SEED)
     except (broad.BroadMissing, ValueError) as e:

@@ -62,6 +62,11 @@ class RenderedTrial:
                         self.truth_cam(mid[k]))
 
 
+def eval_occlusions() -> list:
+    """`sphere hybrid-eval`'s hand: over a third of the ball at 3-4 s and over all of it at 7-8 s of a stretch."""
+    return [render.Occlusion(3.0, 4.0, 0.35), render.Occlusion(7.0, 8.0, 1.0)]
+
+
 def load_positions(path) -> np.ndarray:
     """BROAD's ``opt_pos`` (N, 3), metres (not part of :class:`sphere.broad.Trial`)."""
     from scipy.io import loadmat

@@ -61,26 +61,42 @@ def _parse(text: str):
     return out
 
 
-def run(args) -> int:
+def refused(prog: str, seconds: float, names=()) -> int | None:
+    """The checks every command on rendered trials makes before minutes of rendering (OpenCV installed,
+    stretches of at least 9 s, each trial there): None, or the exit code after its one line."""
     try:
         import cv2  # noqa: F401
     except ImportError:
-        print("sphere hybrid-eval: OpenCV is missing; install the camera extra: pip install -e '.[camera]'",
-              file=sys.stderr)
+        print(f"{prog}: OpenCV is missing; install the camera extra: pip install -e '.[camera]'", file=sys.stderr)
         return 1
+    if seconds < 9.0:
+        print(f"{prog}: --seconds must be at least 9 (the 1 s loss is at 7-8 s)", file=sys.stderr)
+        return 2
+    from sphere import broad
+
+    try:
+        for name in names:
+            broad.find_trial(name)
+    except broad.BroadMissing as e:
+        print(f"{prog}: {e}", file=sys.stderr)
+        return 2
+    return None
+
+
+def run(args) -> int:
+    if not 0 <= args.jpeg <= 100:
+        print("sphere hybrid-eval: --jpeg must be a JPEG quality 1-100, or 0 for raw frames", file=sys.stderr)
+        return 2
+    code = refused("sphere hybrid-eval", args.seconds)
+    if code is not None:
+        return code
     import numpy as np
 
     from sphere import broad
     from sphere.camera import evaluation as ev
-    from sphere.camera import render, trials
+    from sphere.camera import trials
 
-    if not 0 <= args.jpeg <= 100:
-        print("sphere hybrid-eval: --jpeg must be a JPEG quality 1-100, or 0 for raw frames", file=sys.stderr)
-        return 2
-    if args.seconds < 9.0:
-        print("sphere hybrid-eval: --seconds must be at least 9 (the 1 s loss is at 7-8 s)", file=sys.stderr)
-        return 2
-    occl = [render.Occlusion(3.0, 4.0, 0.35), render.Occlusion(7.0, 8.0, 1.0)]
+    occl = trials.eval_occlusions()
     doc = {"settings": {"seconds": args.seconds, "distance_m": args.distance, "hue_deg": args.hue,
                         "jpeg_quality": args.jpeg or None,
                         "camera": "640x480, 30 fps, 60° HFOV, barrel distortion", "ball_diameter_m": 0.08,
