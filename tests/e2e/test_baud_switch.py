@@ -1,5 +1,6 @@
 """SET_BAUD through the user's path: sphere-mouse's serial source on the virtual board (which garbles bytes whose
-two ends run at different rates) moves the link to 1,000,000 baud and back to 115200 when the sphere resets."""
+two ends run at different rates) moves the link to 1,000,000 baud, back to 115200 when the sphere resets, and up
+again at the restarted sphere's HELLO."""
 
 from __future__ import annotations
 
@@ -49,9 +50,14 @@ def test_sphere_mouse_switches_the_virtual_board_to_1m_and_follows_a_reset_back(
         while time.monotonic() < deadline and not any("back to 115200" in line for line in lines):
             time.sleep(0.1)
         assert any("back to 115200" in line for line in lines), lines
+        # its HELLO at 115200 (a restart) has the link moved up again
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline and sum("link at 1000000 baud" in line for line in lines) < 2:
+            time.sleep(0.1)
+        assert sum("link at 1000000 baud" in line for line in lines) == 2, "\n".join(lines)
         after = src.stats.frames_ok
         time.sleep(2.0)
-        assert src.link_baud == 115200 and src.stats.frames_ok > after + 100, lines
+        assert src.link_baud == 1000000 and src.stats.frames_ok > after + 100, lines
         daemon.stop()
         t.join(5)
     finally:

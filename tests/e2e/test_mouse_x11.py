@@ -25,27 +25,14 @@ WIDTH, HEIGHT = 1280, 1024
 @pytest.fixture(scope="module")
 def xvfb():
     """A private Xvfb on a free display number (Xvfb picks it and writes it to -displayfd)."""
-    r, w = os.pipe()
-    proc = subprocess.Popen(
-        ["Xvfb", "-displayfd", str(w), "-screen", "0", f"{WIDTH}x{HEIGHT}x24", "-nolisten", "tcp", "-noreset"],
-        pass_fds=(w,), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-    )
-    os.close(w)
-    number = b""
-    deadline = time.monotonic() + 15
-    while not number.endswith(b"\n") and time.monotonic() < deadline:
-        chunk = os.read(r, 16)
-        if not chunk:
-            break
-        number += chunk
-    os.close(r)
-    if not number.strip():
-        proc.kill()
-        pytest.fail("Xvfb did not start")
-    display = f":{number.decode().strip()}"
-    yield display
-    proc.terminate()
-    proc.wait(10)
+    from sphere.bench._xvfb import Xvfb, XvfbUnavailable
+
+    try:
+        server = Xvfb(WIDTH, HEIGHT)
+    except XvfbUnavailable as e:
+        pytest.fail(str(e))
+    yield server.display
+    server.close()
 
 
 def xdotool(display, *args) -> str:

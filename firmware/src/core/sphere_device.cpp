@@ -382,7 +382,7 @@ __attribute__((noinline)) void SphereDevice::tick() {
     last_t_us_ = t0;
     watchLink();
     readSensors(t0);
-    handleEvents();
+    if (!link_quiet_) handleEvents();  // an event waits latched in the ADXL345 while nothing may be sent (spec §5.4)
     if (raw_flags_ & RAW_ACCEL_OK) tap_active_ = guard_.update(raw_[0]);
     else tap_active_ = false;
     if (tap_active_) raw_flags_ |= RAW_TAP_ACTIVE;

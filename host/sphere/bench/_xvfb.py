@@ -17,12 +17,12 @@ class XvfbUnavailable(Exception):
 class Xvfb:
     """``Xvfb -displayfd``: the server picks a free display number and writes it to the pipe."""
 
-    def __init__(self, width: int = 1920, height: int = 1080, timeout_s: float = 15.0):
+    def __init__(self, width: int = 1920, height: int = 1080, depth: int = 24, timeout_s: float = 15.0):
         if shutil.which("Xvfb") is None:
             raise XvfbUnavailable("Xvfb is not installed (apt-get install xvfb)")
         r, w = os.pipe()
         self.proc = subprocess.Popen(
-            ["Xvfb", "-displayfd", str(w), "-screen", "0", f"{width}x{height}x24", "-nolisten", "tcp", "-noreset"],
+            ["Xvfb", "-displayfd", str(w), "-screen", "0", f"{width}x{height}x{depth}", "-nolisten", "tcp", "-noreset"],
             pass_fds=(w,), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
         os.close(w)
         number = b""

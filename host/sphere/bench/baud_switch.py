@@ -69,7 +69,7 @@ def run(args) -> int:
     from sphere.protocol import Echo, PacketStream, SetBaud
     from sphere.protocol.packets import DEFAULT_BAUD
     from sphere.sim import trace as T
-    from sphere.sim.board import board_command, firmware_elf
+    from sphere.sim.board import BoardUnavailable, board_command, firmware_elf, start_pty_board
 
     seconds = 20 + args.rounds * 2.0
     try:
@@ -82,17 +82,12 @@ def run(args) -> int:
         stats_path = Path(tmp) / "stats.json"
         cmd = board_command(elf, trace, seconds, pty=True, adapter=None if args.adapter == "none" else args.adapter,
                             stats=stats_path)
-        board = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         try:
-            pty = None
-            for line in board.stdout:
-                if "UART on " in line:
-                    pty = line.split("UART on ", 1)[1].strip()
-                    break
-            if pty is None:
-                print(f"sphere bench baud-switch: the virtual board did not start: {board.stderr.read()[-300:]}",
-                      file=sys.stderr)
-                return 1
+            board, pty = start_pty_board(cmd)
+        except BoardUnavailable as e:
+            print(f"sphere bench baud-switch: {e}", file=sys.stderr)
+            return 1
+        try:
             ser = open_port(pty, DEFAULT_BAUD, timeout_s=0.01, reset_on_open=False, low_latency=True)
             counter = Counter()
             link = DeviceLink(ser, PacketStream("device"), on_packet=counter)

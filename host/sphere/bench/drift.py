@@ -155,33 +155,22 @@ def daemon_path(capture: bytes, cfg=None) -> np.ndarray:
 
 
 class Xvfb:
-    """A private Xvfb (its display number from -displayfd), large enough for a 60° turn at 48 px/°."""
+    """A private Xvfb (sphere.bench._xvfb), large enough for a 60° turn at 48 px/°."""
 
     SIZE = (8192, 8192)
 
     def __enter__(self):
-        r, w = os.pipe()
-        self.proc = subprocess.Popen(["Xvfb", "-displayfd", str(w), "-screen", "0", f"{self.SIZE[0]}x{self.SIZE[1]}x8",
-                                      "-nolisten", "tcp", "-noreset"], pass_fds=(w,),
-                                     stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-        os.close(w)
-        number = b""
-        deadline = time.monotonic() + 15
-        while not number.endswith(b"\n") and time.monotonic() < deadline:
-            chunk = os.read(r, 16)
-            if not chunk:
-                break
-            number += chunk
-        os.close(r)
-        if not number.strip():
-            self.proc.kill()
-            raise RuntimeError("Xvfb did not start")
-        self.display = f":{number.decode().strip()}"
+        from sphere.bench._xvfb import Xvfb as _Server, XvfbUnavailable
+
+        try:
+            self.server = _Server(*self.SIZE, depth=8)
+        except XvfbUnavailable as e:
+            raise RuntimeError(str(e)) from None
+        self.display = self.server.display
         return self
 
     def __exit__(self, *exc):
-        self.proc.terminate()
-        self.proc.wait(10)
+        self.server.close()
 
 
 class PointerSampler:

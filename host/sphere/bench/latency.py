@@ -246,23 +246,16 @@ class PointerRecorder(threading.Thread):
 
 
 def run_row(name: str, baud: int, trace: Path, onsets_s, seconds: float, display: str, tmp: Path, elf) -> dict:
-    from sphere.sim.board import board_command
+    from sphere.sim.board import board_command, start_pty_board
 
     adapter, low_latency = ADAPTERS[name]
     log_path, cap_path = tmp / f"{name}-{baud}.log", tmp / f"{name}-{baud}.cap"
-    cmd = board_command(elf, trace, seconds, capture=cap_path, pty=True, adapter=adapter, host_log=log_path)
-    board = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    board, pty = start_pty_board(board_command(elf, trace, seconds, capture=cap_path, pty=True, adapter=adapter,
+                                               host_log=log_path))
     mouse = None
     recorder = PointerRecorder(display)
     recorder.start()
     try:
-        pty = None
-        for line in board.stdout:
-            if "UART on " in line:
-                pty = line.split("UART on ", 1)[1].strip()
-                break
-        if pty is None:
-            raise RuntimeError(f"the virtual board did not start: {board.stderr.read().strip()[-300:]}")
         mouse_cmd = [sys.executable, "-m", "sphere.mouse", "--port", pty, "--backend", "x11",
                      "--display", display, "--no-stream", "--quiet", "--config", os.devnull,
                      "--set", f"source.low_latency={'true' if low_latency else 'false'}",
@@ -297,7 +290,9 @@ def run_row(name: str, baud: int, trace: Path, onsets_s, seconds: float, display
     # from 0.5 s after the daemon found the port: its start-up (HELLO, gyro bias) is not the steady state
     got = attribute(onsets_s, connected["ns"] + 500_000_000, frames, samples, log.t0_ns)
     gaps = np.asarray(recorder.gaps_ns, dtype=float) / 1e6
-    return {"row": name, "baud": baud, "onsets": len(onsets_s), "moves": len(got["ms"]["total"]),
+    fell_back = any("back to 115200" in line for line in connected.get("lines", []))
+    return {"row": name, "baud": baud, "fell_back_to_115200": fell_back, "onsets": len(onsets_s),
+            "moves": len(got["ms"]["total"]),
             "missed": got["missed"], "unattributed": got["unattributed"], "skipped_before_connect": got["skipped"],
             "stages_ms": {k: percentiles(v) for k, v in got["ms"].items()},
             "pointer_reads_per_s": recorder.reads / max(1e-9, gaps.sum() / 1e3),
@@ -328,15 +323,12 @@ def monitor_check(trace: Path, seconds: float, tmp: Path, elf) -> dict:
     board's log over the same last 2 s."""
     import re
 
-    from sphere.sim.board import board_command
+    from sphere.sim.board import board_command, start_pty_board
 
     log_path, cap_path = tmp / "monitor.log", tmp / "monitor.cap"
-    board = subprocess.Popen(board_command(elf, trace, seconds, capture=cap_path, pty=True, adapter="ftdi",
-                                           host_log=log_path), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    board, pty = start_pty_board(board_command(elf, trace, seconds, capture=cap_path, pty=True, adapter="ftdi",
+                                               host_log=log_path))
     try:
-        pty = next((line.split("UART on ", 1)[1].strip() for line in board.stdout if "UART on " in line), None)
-        if pty is None:
-            raise RuntimeError(f"the virtual board did not start: {board.stderr.read().strip()[-300:]}")
         r = subprocess.run([sys.executable, "-m", "sphere.cli", "monitor", "--port", pty, "--seconds",
                             f"{max(4.0, seconds - 3.0):g}"], capture_output=True, text=True, timeout=seconds * 4 + 60)
         ended_ns = time.monotonic_ns()
@@ -392,7 +384,7 @@ def run(args) -> int:
                 print(f"  sphere monitor's sample age against the board's truth: {args.seconds:g} s ...",
                       file=sys.stderr, flush=True)
                 monitor = monitor_check(trace, args.seconds, tmp, elf)
-    except RuntimeError as e:
+    except RuntimeError as e:  # BoardUnavailable, a daemon that did not start
         print(f"sphere bench latency: {e}", file=sys.stderr)
         return 1
     finally:
@@ -430,8 +422,10 @@ def report(result: dict) -> None:
               f"{f('age', 'p50', 7)} {f('age', 'p95', 5)} | {f('wire', 'p50', 5)} | {f('adapter', 'p50', 11)} "
               f"{f('adapter', 'p95', 5)} | {f('host', 'p50', 8)} {f('host', 'p95', 5)} {f('host', 'p99', 5)} | "
               f"{f('lag', 'p95', 7)} {r['pointer_reads_per_s']:7.0f}")
-    notes = [f"{r['row']}: {r['missed']} onsets without a move, {r['unattributed']} unattributed"
+    notes = [f"{r['row']} at {r['baud']}: {r['missed']} onsets without a move, {r['unattributed']} unattributed"
              for r in rows if r["missed"] or r["unattributed"]]
+    notes += [f"{r['row']} at {r['baud']}: the daemon fell back to 115200 during the row"
+              for r in rows if r.get("fell_back_to_115200")]
     if notes:
         print("; ".join(notes))
     age = result.get("sample_age")

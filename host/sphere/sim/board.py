@@ -218,6 +218,18 @@ def board_command(elf, trace, seconds: float, capture=None, pty=False, realtime=
     return cmd
 
 
+def start_pty_board(cmd: list) -> tuple[subprocess.Popen, str]:
+    """Start sphere-board with ``--pty`` (``board_command(..., pty=True)``); returns the process and its pty path once
+    the board says it (``sphere-board: UART on /dev/pts/N``). Raises BoardUnavailable with the board's own words when
+    it ends before that."""
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    for line in proc.stdout:
+        if "UART on " in line:
+            return proc, line.split("UART on ", 1)[1].strip()
+    proc.wait(10)
+    raise BoardUnavailable(f"the virtual board did not start: {proc.stderr.read().strip()[-300:]}")
+
+
 def run_board(elf, trace, seconds: float, capture=None, *, interactive: bool = False, **kw) -> BoardRun:
     """Run the board to completion; returns its stats (the JSON the board writes) and the capture path.
 

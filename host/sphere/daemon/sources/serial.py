@@ -34,8 +34,13 @@ IDENTIFY_FRAMES = 3
 #: How often a version-3 sphere is sent ECHO: its clock on ours (each sample's age, spec §5.4), and the lease
 #: that holds a faster baud rate (§5.3)
 ECHO_EVERY_S = 0.5
-#: at a faster rate, this long without an intact frame sends the port back to 115200 (the sphere went back)
+#: at a faster rate, this long of bytes without an intact frame among them (at least GARBAGE_BYTES) sends the port
+#: back to 115200: the sphere went back
 FALLBACK_S = 0.5
+GARBAGE_BYTES = 32
+#: how long the switch waits for the REPLY to SET_BAUD, then for the one to ECHO at the new rate (the sphere's own
+#: confirmation window is 1 s: spec §5.4)
+SWITCH_REPLY_S = 1.0
 
 
 def _is_glob(pattern: str) -> bool:
@@ -115,7 +120,10 @@ class SerialSource(Source):
         self.low_latency = low_latency
         self.baud_switch = baud_switch  # 0: stay at `baud` (spec §5.4)
         self.link_baud = baud
-        self._good_frames, self._good_at = 0, 0.0
+        self._good_frames, self._good_at, self._bytes_at_good = 0, 0.0, 0
+        self._switch_again = False  # a sphere that restarted (HELLO seq 0) is moved to the faster rate again
+        self._heard_at_default: int | None = None  # frames_ok when the port fell back: heard again, up again
+        self._held: list = []  # packets read while switching, for the next batch
         self.device_settings = list(device_settings)  # [device] settings: sent at every connect
         self.serial = None
         self.port_name = None
@@ -273,7 +281,7 @@ class SerialSource(Source):
             self.link_baud = self.baud
             if self.baud_switch and self.baud == DEFAULT_BAUD and self.baud_switch != self.baud:
                 self._switch_baud(path)
-            return adopted
+            return adopted + self._take_held()
         return None
 
     def _read_port(self, ser) -> bytes:
@@ -302,39 +310,56 @@ class SerialSource(Source):
         if hello is None or hello.protocol_version < 3 or not switchable_port(path):
             return False
         target = self.baud_switch
-        reply = self.link.command(SetBaud(target), timeout_s=0.5, retries=0)
+        self.link.on_packet = self._held.append  # what arrives meanwhile goes to the daemon, not lost
+        try:
+            return self._switch_to(path, target)
+        finally:
+            self.link.on_packet = None
+
+    def _switch_to(self, path: str, target: int) -> bool:
+        self.serial.write(b"\x00")  # ends whatever the sphere took in at another rate, so SET_BAUD arrives whole
+        reply = self.link.command(SetBaud(target), timeout_s=SWITCH_REPLY_S, retries=0)
         if reply is None or not reply.ok:
-            self.log(f"{path}: the sphere did not take {target} baud ({'no reply' if reply is None else reply.to_json()['result']}); "
-                     f"staying at {self.baud}", logging.DEBUG)
+            self.log(f"{path}: the sphere did not take {target} baud "
+                     f"({'no reply' if reply is None else reply.to_json()['result']}); staying at {self.baud}")
             return False
         self._set_port_baud(target)
-        if self.link.command(Echo(), timeout_s=0.5, retries=0) is None:  # its first frame at the new rate
+        if self.link.command(Echo(), timeout_s=SWITCH_REPLY_S, retries=0) is None:  # its first frame at the new rate
             self._set_port_baud(DEFAULT_BAUD)  # the sphere comes back by itself within 1 s (no frame from us)
             self.log(f"{path}: no answer at {target} baud: back to {DEFAULT_BAUD}")
             return False
         self.clock.restart(target)
         self._good_frames, self._good_at = self.stream.stats.frames_ok, time.monotonic()
+        self._bytes_at_good = self.stream.stats.bytes_in
         self.log(f"{path}: link at {target} baud")
         return True
+
+    def _take_held(self) -> list:
+        held, self._held = self._held, []
+        return held
 
     def _set_port_baud(self, baud: int) -> None:
         self.serial.baudrate = baud  # pyserial rewrites the termios: the low-latency request again after it
         if self.low_latency:
             request_low_latency(self.serial)
         self.link_baud = baud
+        self.serial.write(b"\x00")  # a delimiter at the new rate first (spec §2: any time): the next frame starts clean
 
     def _watch_rate(self) -> None:
-        """At a rate other than 115200: no intact frame for FALLBACK_S means the sphere went back (a reset, a lost
-        lease): so does the port."""
+        """At a rate other than 115200: bytes for FALLBACK_S of which none made an intact frame mean the sphere went
+        back (a reset, a lost lease) and talks at another rate: so does the port. Silence is not that (a stalled
+        link keeps its rate; link_timeout_s judges it)."""
         now = time.monotonic()
-        if self.stream.stats.frames_ok != self._good_frames:
-            self._good_frames, self._good_at = self.stream.stats.frames_ok, now
-        elif now - self._good_at > FALLBACK_S:
+        s = self.stream.stats
+        if s.frames_ok != self._good_frames:
+            self._good_frames, self._good_at, self._bytes_at_good = s.frames_ok, now, s.bytes_in
+        elif now - self._good_at > FALLBACK_S and s.bytes_in - self._bytes_at_good >= GARBAGE_BYTES:
             self.log(f"{self.port_name}: nothing intact at {self.link_baud} baud for {FALLBACK_S:g} s: back to "
                      f"{DEFAULT_BAUD}", logging.WARNING)
             self._set_port_baud(DEFAULT_BAUD)
             self.clock.restart(DEFAULT_BAUD)
-            self._good_at = now
+            self._good_at, self._bytes_at_good = now, s.bytes_in
+            self._heard_at_default = s.frames_ok  # once the sphere is heard at 115200, up again
 
     def _batch(self):
         batch = super()._batch()
@@ -354,7 +379,15 @@ class SerialSource(Source):
             elif p.TYPE == Reply.TYPE and p.cmd_type == Echo.TYPE:
                 self.clock.reply(p, arrival)
             elif p.TYPE == Hello.TYPE and p.seq == 0:
-                self.clock.restart()  # the sphere restarted, its clock too
+                self.clock.restart()  # the sphere restarted, its clock too; and at 115200 (spec §5.4)
+                self._switch_again = bool(self.baud_switch) and self.link_baud == DEFAULT_BAUD
+        if self._heard_at_default is not None and self.stream.stats.frames_ok > self._heard_at_default + 2:
+            self._heard_at_default = None
+            self._switch_again = bool(self.baud_switch) and self.link_baud == DEFAULT_BAUD
+        if self._switch_again:
+            self._switch_again = False
+            self._switch_baud(self.port_name)
+            batch = batch + self._take_held()
         hello = self.stream.hello
         if hello is not None and hello.protocol_version >= 3:
             now = time.perf_counter()
