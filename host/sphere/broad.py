@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from sphere import quaternion as quat
+from sphere.errors import SphereError
 from sphere.paths import broad_dir
 
 WHERE_TO_GET = (
@@ -21,7 +22,7 @@ WHERE_TO_GET = (
 )
 
 
-class BroadMissing(FileNotFoundError):
+class BroadMissing(SphereError, FileNotFoundError):
     """The BROAD trials are not where the settings say."""
 
 

@@ -21,6 +21,13 @@ import os
 import sys
 from pathlib import Path
 
+from sphere.errors import SphereError
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover - Python 3.10: the tomli package (a dependency there) is the same parser
+    import tomli as tomllib
+
 PACKAGE_DIR = Path(__file__).resolve().parent
 #: The package's data folder (installed with it; links into the repository in a checkout).
 DATA_DIR = PACKAGE_DIR / "data"
@@ -55,6 +62,43 @@ def cache_dir() -> Path:
 def config_file() -> Path:
     """The config file shared with sphere-mouse (its ``[paths]`` table holds ``broad_dir``)."""
     return _xdg("XDG_CONFIG_HOME", ".config") / "sphere-mouse" / "config.toml"
+
+
+class ConfigFileError(SphereError, ValueError):
+    """A config file that cannot be read as TOML; the message names the file and says why."""
+
+
+def read_config(path: Path | str | None = None, explicit: bool | None = None) -> dict:
+    """The TOML tables of a config file: the one reader of ``config.toml`` (sphere-mouse's settings and the
+    tools' ``[paths]``). ``path`` None reads :func:`config_file`. A missing file is ``{}`` (the defaults)
+    unless it was named (``explicit``, by default: a path was given), then an error; so are a folder, a device
+    or FIFO (reading one might never end), bad TOML, a file not in UTF-8 and one that cannot be read, each
+    a :class:`ConfigFileError` with one line."""
+    if explicit is None:
+        explicit = path is not None
+    path = Path(path) if path is not None else config_file()
+    try:
+        exists = path.exists()
+    except OSError as e:  # a folder on the way that cannot be searched
+        raise ConfigFileError(f"{path}: cannot read: {e.strerror}") from None
+    if not exists:
+        if explicit:
+            raise ConfigFileError(f"{path}: no such config file")
+        return {}
+    if path.is_dir():
+        raise ConfigFileError(f"{path} is a folder, not a config file")
+    if not path.is_file() and str(path) != os.devnull:
+        raise ConfigFileError(f"{path} is not a regular file: give a TOML text file "
+                              "(sphere-mouse --print-config writes one)")
+    try:
+        with open(path, "rb") as f:
+            return tomllib.load(f)
+    except tomllib.TOMLDecodeError as e:
+        raise ConfigFileError(f"{path}: not valid TOML: {e}") from None
+    except UnicodeDecodeError as e:
+        raise ConfigFileError(f"{path}: not a UTF-8 text file (byte {e.start}): save it as UTF-8") from None
+    except OSError as e:
+        raise ConfigFileError(f"{path}: cannot read: {e.strerror}") from None
 
 
 def data_home() -> Path:
@@ -145,16 +189,14 @@ def vectors_file() -> Path:
 def configured(key: str) -> Path | None:
     """``[paths] KEY`` of the config file shared with sphere-mouse (sphere.daemon.paths_config), or None."""
     path = config_file()
-    if not path.is_file():
-        return None
-    if sys.version_info >= (3, 11):
-        import tomllib
-    else:  # pragma: no cover - the daemon extra brings tomli on 3.10
-        import tomli as tomllib
     try:
-        value = tomllib.loads(path.read_text()).get("paths", {}).get(key)
-    except (tomllib.TOMLDecodeError, OSError, AttributeError) as e:
-        raise SystemExit(f"sphere: {path}: {e}; fix the file ([paths] {key} = \"/some/path\")")
+        table = read_config(path, explicit=False).get("paths", {})
+    except ConfigFileError as e:
+        raise SystemExit(f"sphere: {e}; fix the file ([paths] {key} = \"/some/path\")") from None
+    value = table.get(key) if isinstance(table, dict) else None
+    if not isinstance(table, dict) or (value is not None and not isinstance(value, str)):
+        raise SystemExit(f"sphere: {path}: [paths] must be a table and {key} a string; fix the file "
+                         f"([paths] {key} = \"/some/path\")")
     return Path(value).expanduser() if value else None
 
 

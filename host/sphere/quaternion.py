@@ -1,31 +1,45 @@
-"""Quaternion arithmetic on numpy arrays; scalar first, [w, x, y, z], Hamilton product.
+"""Quaternions, scalar first, [w, x, y, z], Hamilton product: the project's one definition of the product and
+of the earth-frame rotation.
 
-Every function accepts a single quaternion of shape (4,) or a batch of shape (N, 4).
+Two forms of the same arithmetic: :func:`mul` and :func:`conj` on one quaternion as a tuple of floats (the
+per-sample paths: the daemon, the pointer smoothing, the scripted sphere, the filters), and the functions on
+numpy arrays (:func:`multiply`, :func:`conjugate`, :func:`rotate` …), which accept a single quaternion of
+shape (4,) or a batch of shape (N, 4). :func:`multiply` is :func:`mul` applied to the array's components, so
+the product is written once.
 """
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
-#: Rotation that turns an NWU earth frame (x north, y west, z up) into ENU: q_ENU = Q_NWU_TO_ENU ⊗ q_NWU.
-Q_NWU_TO_ENU = np.array([np.sqrt(0.5), 0.0, 0.0, np.sqrt(0.5)])
+#: Rotation that turns an NWU earth frame (x north, y west, z up, the device's: protocol/spec.md §4.3) into ENU
+#: (x east, y north, z up, the host filters'): q_ENU = Q_NWU_TO_ENU ⊗ q_NWU, a turn of +90° about z.
+Q_NWU_TO_ENU = (math.sqrt(0.5), 0.0, 0.0, math.sqrt(0.5))
+
+
+def mul(p, q) -> tuple:
+    """Hamilton product p ⊗ q (seed digest eq. 24) of two quaternions given as four numbers each; the numbers
+    may also be numpy arrays of equal shape (:func:`multiply` uses that)."""
+    p0, p1, p2, p3 = p
+    q0, q1, q2, q3 = q
+    return (p0 * q0 - p1 * q1 - p2 * q2 - p3 * q3,
+            p0 * q1 + p1 * q0 + p2 * q3 - p3 * q2,
+            p0 * q2 - p1 * q3 + p2 * q0 + p3 * q1,
+            p0 * q3 + p1 * q2 - p2 * q1 + p3 * q0)
+
+
+def conj(q) -> tuple:
+    """The conjugate (the inverse of a unit quaternion) of four numbers."""
+    return (q[0], -q[1], -q[2], -q[3])
 
 
 def multiply(p: np.ndarray, q: np.ndarray) -> np.ndarray:
-    """Hamilton product p ⊗ q (seed digest eq. 24)."""
-    p = np.asarray(p, dtype=float)
-    q = np.asarray(q, dtype=float)
-    p0, p1, p2, p3 = np.moveaxis(p, -1, 0)
-    q0, q1, q2, q3 = np.moveaxis(q, -1, 0)
-    return np.stack(
-        [
-            p0 * q0 - p1 * q1 - p2 * q2 - p3 * q3,
-            p0 * q1 + p1 * q0 + p2 * q3 - p3 * q2,
-            p0 * q2 - p1 * q3 + p2 * q0 + p3 * q1,
-            p0 * q3 + p1 * q2 - p2 * q1 + p3 * q0,
-        ],
-        axis=-1,
-    )
+    """Hamilton product p ⊗ q of arrays of shape (4,) or (N, 4) (broadcast against each other)."""
+    p = np.moveaxis(np.asarray(p, dtype=float), -1, 0)
+    q = np.moveaxis(np.asarray(q, dtype=float), -1, 0)
+    return np.stack(mul(p, q), axis=-1)
 
 
 def conjugate(q: np.ndarray) -> np.ndarray:

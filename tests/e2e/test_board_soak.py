@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from sphere.protocol import encode_frame
-from sphere.protocol.packets import Hello, Orientation, RawSample
+from sphere.protocol.packets import ORI_CONVERGING, Hello, Orientation, RawSample
 from sphere.sim import soak as S
 
 
@@ -203,8 +203,8 @@ def test_an_orientation_check_in_a_start_up_is_not_judged():
     as skipped. The same fault's doing without the flag, 2.5 s or more after the reset, counts."""
     ends = [{"kind": "glitch_nack", "t_start": 1.0, "t_end": 1.0, "chips": ["itg3200"]}]
     ref = _turning(0.5, 3.5, 100.0)
-    for dev, r in ((_turning(0.5, 3.5, 100.0, flags=S.CONVERGING, offset_deg=10.0), ref),
-                   (_turning(0.5, 3.5, 100.0, offset_deg=10.0), _turning(0.5, 3.5, 100.0, flags=S.CONVERGING))):
+    for dev, r in ((_turning(0.5, 3.5, 100.0, flags=ORI_CONVERGING, offset_deg=10.0), ref),
+                   (_turning(0.5, 3.5, 100.0, offset_deg=10.0), _turning(0.5, 3.5, 100.0, flags=ORI_CONVERGING))):
         worst, rows = S.orientation_excess(dev, r, ends, [])
         assert rows[0]["excess_deg"] is None and rows[0]["skipped"].startswith("converging") and worst.first_s is None
     a, b = _turning(0.5, 1.05, 100.0), _turning(1.05, 3.5, 100.0, offset_deg=10.0)  # turned 10° by the fault
@@ -217,8 +217,8 @@ def test_start_ups_say_how_long_the_firmware_converged_after_each_reset():
     start-up the next reset cuts short has no length (it never ended)."""
     def q(t, flags, seq):
         return (t, Orientation(t_us=int(t * 1e6), flags=flags, quat=(16384, 0, 0, 0)), seq)
-    items = [(0.0, _hello(), 0), q(0.5, S.CONVERGING, 1), q(2.7, 0, 2), q(5.2, S.CONVERGING, 3), q(8.0, S.CONVERGING, 4),
-             q(9.5, S.CONVERGING, 5), q(13.1, 0, 6)]
+    items = [(0.0, _hello(), 0), q(0.5, ORI_CONVERGING, 1), q(2.7, 0, 2), q(5.2, ORI_CONVERGING, 3), q(8.0, ORI_CONVERGING, 4),
+             q(9.5, ORI_CONVERGING, 5), q(13.1, 0, 6)]
     ups = S.start_ups(S.read_frames(*_stream(items)), [5.0, 9.0])
     assert ups == [{"t": 0.0, "seconds": 2.7}, {"t": 5.0, "seconds": None}, {"t": 9.0, "seconds": 4.1}]
 

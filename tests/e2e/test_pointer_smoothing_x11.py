@@ -147,7 +147,8 @@ def test_stream_pose_jitter_from_the_websocket(tmp_path):
     """The 3-D stream's own messages: orientation jitter ≤ 0.05° lying still and ≤ 0.1° held in the air."""
     from websockets.sync.client import connect
 
-    from sphere.smoothing.pose import _conj, _qmul, log_deg
+    from sphere.quaternion import conj, mul
+    from sphere.smoothing.pose import log_deg
 
     capture = tmp_path / "held.bin"
     h = hold_capture(capture, [("rest", 4.5, "", 0.0, ""), ("held", 4.0, "", 0.0, "")])
@@ -178,7 +179,7 @@ def test_stream_pose_jitter_from_the_websocket(tmp_path):
     assert len(messages) > 100, len(messages)
     t = np.array([m[0] for m in messages], dtype=float) * 1e-6 - 1.0  # raw_packets start at 1 s device time
     q0 = messages[0][1]
-    r = np.array([log_deg(_qmul(q, _conj(q0))) for _, q in messages])
+    r = np.array([log_deg(mul(q, conj(q0))) for _, q in messages])
 
     def jitter(a, b):
         sq, n = 0.0, 0

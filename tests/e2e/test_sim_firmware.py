@@ -283,7 +283,9 @@ def test_a_warm_reset_mid_turn_keeps_the_tracked_gyro_bias():
 
     from sphere.protocol.packets import Hello
     from sphere.sim import trace as T
-    from sphere.sim.soak import CONVERGING, _angle_deg, _at, _conj, _qmul, _quats
+    from sphere.quaternion import conj, mul
+    from sphere.protocol.packets import ORI_CONVERGING
+    from sphere.sim.soak import _angle_deg, _at, _quats
 
     need_board()
     elf = need_firmware()
@@ -305,9 +307,9 @@ def test_a_warm_reset_mid_turn_keeps_the_tracked_gyro_bias():
             assert hellos[1].reset_cause == 0b0001 and bias_bits == 0, hellos[1]  # power_on: nothing kept
         tc, qc, _ = _quats(clean)
         tr, qr, flags = _quats(frames)
-        after = (tr > hello_t[1]) & ~(flags & CONVERGING).astype(bool)
+        after = (tr > hello_t[1]) & ~(flags & ORI_CONVERGING).astype(bool)
         t0 = float(tr[after][0]) + 0.5  # the start-up convergence over
-        d = lambda t: _qmul(_conj(_at(t, tc, qc)), _at(t, tr, qr))  # the reset run against the clean one
+        d = lambda t: mul(conj(_at(t, tc, qc)), _at(t, tr, qr))  # the reset run against the clean one
         d0 = d(t0)
         drift[kind] = max(_angle_deg(d(t), d0) for t in np.arange(t0, seconds - 0.1, 0.1))
         print(f"{kind} at {reset_s} s mid-turn: converged at {t0 - 0.5:.2f} s, then turned {drift[kind]:.2f}° "

@@ -14,7 +14,8 @@ import pytest
 
 pytest.importorskip("serial")
 
-from sphere.link.device import DeviceLink, LinkLost  # noqa: E402
+from sphere.errors import LinkLost  # noqa: E402
+from sphere.link.device import DeviceLink  # noqa: E402
 from sphere.protocol import GetCalibration, GetHello, PacketStream, Reply, SaveCalibration, encode_frame  # noqa: E402
 from sphere.daemon.scripted_sphere import hello_packet  # noqa: E402
 from sphere.link.port import open_port  # noqa: E402

@@ -6,6 +6,7 @@ import json
 
 import numpy as np
 
+from sphere.chips import STANDARD_GRAVITY_M_S2
 from sphere.cli import main
 from sphere.fusion import hybrid
 
@@ -93,7 +94,7 @@ def _run_tracker(delay=0.04, stamp="exposure", outlier_at=None, seconds=6.0, noi
     t_cam = np.arange(0.02, seconds, 1 / 30)
     p_cam = _motion(t_cam)[0] @ R.T + T + rng.normal(0, noise, (len(t_cam), 3))
     _, a = _motion(t_imu)
-    acc = a + [0, 0, hybrid.STANDARD_GRAVITY] + rng.normal(0, 0.05, a.shape)
+    acc = a + [0, 0, STANDARD_GRAVITY_M_S2] + rng.normal(0, 0.05, a.shape)
     out = np.full((len(t_imu), 3), np.nan)
     k = 0
     for i, t in enumerate(t_imu):
@@ -135,7 +136,7 @@ def test_an_outlier_fix_is_gated_and_a_lost_track_is_reacquired():
     # a track that jumps for good (the camera was bumped) is taken up after three agreeing fixes
     trk2 = hybrid.CameraImuTracker()
     for k in range(40):
-        trk2.imu(k * 0.01, [1, 0, 0, 0], [0, 0, hybrid.STANDARD_GRAVITY])
+        trk2.imu(k * 0.01, [1, 0, 0, 0], [0, 0, STANDARD_GRAVITY_M_S2])
         if k % 3 == 0:
             trk2.camera(k * 0.01, [0.0, 0.0, 1.0] if k < 20 else [0.3, 0.0, 1.0])
     assert trk2.stats["reacquired"] == 1
@@ -160,7 +161,7 @@ def test_a_marker_corrects_the_heading_the_host_filter_lost():
     drifted = Rotation.from_euler("z", 20, degrees=True).as_quat()[[3, 0, 1, 2]]  # w, x, y, z
     t = trk.t
     for k in range(15):
-        trk.imu(t + 0.005 * (k + 1), drifted, [0.0, 0.0, hybrid.STANDARD_GRAVITY])
+        trk.imu(t + 0.005 * (k + 1), drifted, [0.0, 0.0, STANDARD_GRAVITY_M_S2])
     before = trk.orientation(drifted)
     assert np.degrees(np.arccos((np.trace(before @ R.T) - 1) / 2)) > 19
     seen = R  # the marker sees the body at its true orientation: camera ← body = R · I

@@ -46,6 +46,10 @@ try:
     from sphere.daemon.scripted_sphere import ScriptedSphere, hello_packet
 except ImportError:  # --against a revision from before the module's rename (it was sphere.daemon.synthetic)
     from sphere.daemon.synthetic import ScriptedSphere, hello_packet
+try:
+    from sphere.errors import SphereError
+except ImportError:  # --against a revision from before sphere.errors
+    SphereError = Exception
 from sphere.protocol import FrameDecoder
 
 
@@ -342,7 +346,7 @@ COMPARED = (("p50_us", "latency p50 µs"), ("p99_us", "latency p99 µs"),
             ("work_us", "work per frame µs CPU"))
 
 
-class UsageError(Exception):
+class UsageError(SphereError):
     pass
 
 

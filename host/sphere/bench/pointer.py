@@ -49,6 +49,8 @@ from types import SimpleNamespace
 import numpy as np
 
 from sphere import argtypes
+from sphere import quaternion as quat
+from sphere.protocol.packets import RAW_ACCEL_OK, RAW_GYRO_OK, RAW_MAG_FRESH, RAW_MAG_OK
 
 HELP = "pointer tremor, jitter, lag per band, overshoot and drift for every smoothing filter, through the daemon's path"
 
@@ -104,7 +106,7 @@ def raw_packets(motion, rate_hz: float = RATE_HZ):
     for i in range(n):
         t = i / ct.gyro_rate_hz
         m = min(int(t * ct.mag_rate_hz), len(ct.mag_lsb) - 1)
-        flags = 0x07 | (0x08 if m != last_mag else 0)
+        flags = RAW_ACCEL_OK | RAW_GYRO_OK | RAW_MAG_OK | (RAW_MAG_FRESH if m != last_mag else 0)
         last_mag = m
         t_us = int(round(1_000_000 + t * 1e6))
         out.append((t_us, RawSample(t_us=t_us & 0xFFFFFFFF, flags=flags, accel=tuple(int(v) for v in ct.accel_lsb[i]),
@@ -417,7 +419,7 @@ def _row(label: str, f: dict, params: dict) -> str:
 def pose_path(rec: Recording, name: str, params: dict | None = None) -> np.ndarray:
     """The pose the daemon streams (its PoseFilter, as in SphereMouse) as rotation vectors (°, earth frame)
     relative to the first pose, continuous (unwrapped sample to sample)."""
-    from sphere.smoothing.pose import PoseFilter, _conj, _qmul, log_deg
+    from sphere.smoothing.pose import PoseFilter, log_deg
 
     f = PoseFilter(name, **(params or {}))
     out = np.zeros((len(rec.poses), 3))
@@ -428,7 +430,7 @@ def pose_path(rec: Recording, name: str, params: dict | None = None) -> np.ndarr
             continue
         qf = f.at(q, t_us)
         if last is not None:
-            r = r + np.array(log_deg(_qmul(qf, _conj(last))))
+            r = r + np.array(log_deg(quat.mul(qf, quat.conj(last))))
         last = qf
         out[i] = r
     return out

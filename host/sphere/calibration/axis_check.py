@@ -32,6 +32,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from sphere import chips
+from sphere import quaternion as quat
 from sphere.protocol.packets import BOARD_PROFILES
 
 BLOCK_S = 0.05  # values are averaged over blocks of this much device time
@@ -118,12 +119,11 @@ def _rotations(t, gyro_lsb, bias_lsb=None) -> np.ndarray:
     half = 0.5 * ang
     k = np.where(ang > 0, np.sin(half) / np.where(ang > 0, ang, 1.0), 0.5)
     inc = np.column_stack([np.cos(half), step * k[:, None]]).tolist()
-    a0, a1, a2, a3 = 1.0, 0.0, 0.0, 0.0
-    rows = [(a0, a1, a2, a3)]
-    for b0, b1, b2, b3 in inc:  # q ⊗ increment, written out (a Python loop over floats: fast enough)
-        a0, a1, a2, a3 = (a0 * b0 - a1 * b1 - a2 * b2 - a3 * b3, a0 * b1 + a1 * b0 + a2 * b3 - a3 * b2,
-                          a0 * b2 - a1 * b3 + a2 * b0 + a3 * b1, a0 * b3 + a1 * b2 - a2 * b1 + a3 * b0)
-        rows.append((a0, a1, a2, a3))
+    a = (1.0, 0.0, 0.0, 0.0)
+    rows = [a]
+    for b in inc:  # q ⊗ increment (a Python loop over floats: fast enough)
+        a = quat.mul(a, b)
+        rows.append(a)
     out[:] = rows
     return out
 
@@ -161,7 +161,6 @@ def _pairs(t, x, gyro_t, gyro_q, block_s=BLOCK_S, lag_s=LAG_S, min_turn_deg=MIN_
         i2.append(i + lag)
     i1, i2 = np.concatenate(i1), np.concatenate(i2)
     i1, i2 = i1[tm[i2] - tm[i1] <= lag_s + 0.5 * block_s], i2[tm[i2] - tm[i1] <= lag_s + 0.5 * block_s]
-    from sphere import quaternion as quat
 
     dq = quat.multiply(quat.conjugate(qi[i1]), qi[i2])
     turn = 2 * np.degrees(np.arccos(np.clip(np.abs(dq[:, 0]), 0, 1)))

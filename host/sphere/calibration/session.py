@@ -26,6 +26,7 @@ import numpy as np
 
 from sphere import chips
 from sphere.calibration import fit as calibration
+from sphere.protocol.packets import RAW_ACCEL_OK, RAW_GYRO_OK, RAW_MAG_FRESH, RAW_MAG_OK
 
 STILL_S = 3.0  # gyro bias: still this long (device seconds)
 FACE_S = 2.0  # each face: still this long
@@ -98,12 +99,12 @@ class SeriesBuilder:
 
     def add(self, p, t_s: float) -> None:
         """One RAW_SAMPLE at device time ``t_s`` (seconds, unwrapped)."""
-        if not (p.flags & 1 and p.flags & 2):
+        if not (p.flags & RAW_ACCEL_OK and p.flags & RAW_GYRO_OK):
             return
         self.t.append(t_s)
         self.accel.append(p.accel)
         self.gyro.append(p.gyro)
-        if p.flags & 4 and p.flags & 8:
+        if p.flags & RAW_MAG_OK and p.flags & RAW_MAG_FRESH:
             self.mag_t.append(t_s)
             self.mag.append(p.mag)
 

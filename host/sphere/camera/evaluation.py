@@ -18,7 +18,8 @@ import numpy as np
 from sphere.camera.detect import BallDetector, blob_position
 from sphere.camera.live import hint_from
 from sphere.camera.trials import RenderedTrial
-from sphere.fusion.hybrid import STANDARD_GRAVITY, CameraImuTracker, _rot
+from sphere.chips import STANDARD_GRAVITY_M_S2
+from sphere.fusion.hybrid import CameraImuTracker, _rot
 
 IMU_LATENCY_S = 0.004  # serial link: a 40-byte frame at 115200 Bd plus the host's read
 NOMINAL_CAMERA_LATENCY_S = 0.040  # what the host assumes from the middle of the exposure to arrival
@@ -189,7 +190,7 @@ def _imu_only(rt: RenderedTrial, hyb: CameraImuTracker) -> np.ndarray:
     truth = rt.truth_cam(t)
     p = truth[k0].copy()
     v = (truth[k0 + 1] - truth[k0 - 1]) / (t[k0 + 1] - t[k0 - 1])
-    g = STANDARD_GRAVITY
+    g = STANDARD_GRAVITY_M_S2
     f = np.einsum("nij,nj->ni", np.array([_rot(q) for q in rt.q_host_enu]), rt.trial.acc_m_s2)
     for i in range(k0, n):
         if i > k0:

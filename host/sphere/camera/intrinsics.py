@@ -15,12 +15,13 @@ from pathlib import Path
 import numpy as np
 
 from sphere.camera.model import Camera
+from sphere.errors import SphereError
 
 MIN_VIEWS = 5
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
 
 
-class CalibrationError(ValueError):
+class CalibrationError(SphereError, ValueError):
     """Calibration cannot go on (one line: what was wrong, what to do)."""
 
 

@@ -19,10 +19,11 @@ import numpy as np
 
 from sphere.camera.detect import BallDetector
 from sphere.camera.model import Camera
+from sphere.errors import SphereError
 from sphere.fusion.hybrid import CameraImuTracker
 
 
-class CameraError(RuntimeError):
+class CameraError(SphereError, RuntimeError):
     """The camera cannot be used (one line: what was wrong, what to do)."""
 
 

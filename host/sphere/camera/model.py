@@ -13,8 +13,10 @@ from pathlib import Path
 
 import numpy as np
 
+from sphere.errors import SphereError
 
-class CameraFileError(ValueError):
+
+class CameraFileError(SphereError, ValueError):
     """A camera file that cannot be used (one line saying what is wrong)."""
 
 

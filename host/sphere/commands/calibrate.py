@@ -16,6 +16,7 @@ from sphere.calibration.axis_check import TURN_DEG
 from sphere.calibration.session import COVERAGE_BINS, COVERAGE_TARGET, FACE_S, STILL_S, TURN_MIN_S, TURN_S
 from sphere.calibration.session import FACES as _FACES
 from sphere.calibration.session import SeriesBuilder
+from sphere.errors import SphereError
 
 FACES = tuple(f[0] for f in _FACES)
 DEFAULT_TIMEOUT_S = 120.0
@@ -250,7 +251,7 @@ class _Progress:
         self.key, self.width, self.last = None, 0, 0.0
 
 
-class _StepFailed(Exception):
+class _StepFailed(SphereError):
     """A step that did not get what it asked for; the message says what was missing and what to do."""
 
 
@@ -425,7 +426,7 @@ def _step_turn(link, progress, timeout_s):
 
 def _run_port(args) -> int:
     from sphere.link.capture import CaptureError
-    from sphere.link.device import LinkLost
+    from sphere.errors import LinkLost
     from sphere.link.port import PortError, open_port
 
     try:

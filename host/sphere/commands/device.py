@@ -7,6 +7,7 @@ import argparse
 import sys
 
 from sphere import argtypes
+from sphere.errors import SphereError
 
 HELP = "read, change and save the sphere's settings (tap, free fall, stream, filter, board), identify, reboot"
 DESCRIPTION = """\
@@ -44,7 +45,7 @@ def _keys() -> str:
     return "\n".join(lines)
 
 
-class _Failed(Exception):
+class _Failed(SphereError):
     """What went wrong; ``code`` 2 for a bad command line or port (nothing was sent), 1 for a sphere that did
     not answer or refused."""
 

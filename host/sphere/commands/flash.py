@@ -9,6 +9,8 @@ import sys
 import time
 from pathlib import Path
 
+from sphere.errors import SphereError
+
 HELP = "write the firmware to the Nano (finds the image and the bootloader's baud rate, runs avrdude)"
 DESCRIPTION = (
     "Write the sphere's firmware to an Arduino Nano over USB. The image is $SPHERE_FIRMWARE, the checkout's "
@@ -20,7 +22,7 @@ DESCRIPTION = (
 HELLO_TIMEOUT_S = 6.0
 
 
-class FlashError(Exception):
+class FlashError(SphereError):
     """Flashing cannot go on; the message says what to do. ``code`` 2: a bad flag, image or port (nothing was
     written); 1: the board did not answer or avrdude failed."""
 

@@ -80,7 +80,8 @@ class _Plot:
 
 
 def run(args) -> int:
-    from sphere.link.device import DeviceLink, LinkLost
+    from sphere.errors import LinkLost
+    from sphere.link.device import DeviceLink
     from sphere.link.monitor import LinkMonitor
     from sphere.link.clock import DeviceClock
     from sphere.protocol import Echo, GetHello, Hello, RawSample, Reply

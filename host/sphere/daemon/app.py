@@ -8,6 +8,7 @@ from sphere.daemon.actions import Action, EventActions
 from sphere.daemon.config import smoothing_params
 from sphere.daemon.motion import G_M_S2, GyroBias, MotionTracker
 from sphere.daemon.pointer import PointerMapper, PointerSettings, TiltMapper, TiltSettings
+from sphere.protocol.packets import RAW_ACCEL_OK, RAW_GYRO_OK, RAW_GYRO_STALE, RAW_MAG_OK, RAW_TAP_ACTIVE
 from sphere.protocol import Event, Hello, Orientation, RawSample, Status
 from sphere.smoothing.pose import PoseFilter
 from sphere.smoothing.registry import POSITION
@@ -24,10 +25,8 @@ BUTTONS = {"left_click": "left", "right_click": "right", "middle_click": "middle
 logger = logging.getLogger("sphere.daemon")
 
 #: RAW_SAMPLE flags (protocol/spec.md §4.2) of the sensors the status line reports when they stop answering.
-SENSOR_FLAGS = (("accelerometer", 0x01), ("gyroscope", 0x02), ("magnetometer", 0x04))
-GYRO_OK = 0x02
-TAP_ACTIVE = 0x10
-GYRO_STALE = 0x40  # protocol v2: the gyro value is held from the last good read
+SENSOR_FLAGS = (("accelerometer", RAW_ACCEL_OK), ("gyroscope", RAW_GYRO_OK), ("magnetometer", RAW_MAG_OK))
+_SENSORS_OK = RAW_ACCEL_OK | RAW_GYRO_OK | RAW_MAG_OK
 #: What the loop does for a request a signal handler made (handlers only set a flag).
 REQUESTS = ("recentre", "pause", "stop")
 
@@ -217,14 +216,14 @@ class SphereMouse:
 
     def _raw_sample(self, p, t) -> None:
         flags = p.flags
-        if flags & 0x07 != self.sensor_flags:
-            self._sensors_changed(flags & 0x07)
+        if flags & _SENSORS_OK != self.sensor_flags:
+            self._sensors_changed(flags & _SENSORS_OK)
         dt = self.motion.raw(p, t)
         self.now_us = t
         if self.actions._pending is not None:
             for a in self.actions.due(t):
                 self.do(a)
-        if self.paused or self.actions.frozen(t) or flags & (TAP_ACTIVE | GYRO_STALE) or not flags & GYRO_OK:
+        if self.paused or self.actions.frozen(t) or flags & (RAW_TAP_ACTIVE | RAW_GYRO_STALE) or not flags & RAW_GYRO_OK:
             return  # without the gyroscope nothing says how the sphere turns: the pointer holds still
         if self.mode == "pointer":
             dx, dy = self.mapper.update(self.motion.gyro_dps, dt, self.motion.up)
@@ -265,9 +264,9 @@ class SphereMouse:
         before = self.sensor_flags
         self.sensor_flags = bits
         self.sensors_missing = tuple(name for name, bit in SENSOR_FLAGS if not bits & bit)
-        found = self.hello.sensors_found if self.hello is not None else 0x07
+        found = self.hello.sensors_found if self.hello is not None else _SENSORS_OK
         for name, bit in SENSOR_FLAGS:
-            extra = ": the pointer holds still until it answers again" if bit == GYRO_OK else ""
+            extra = ": the pointer holds still until it answers again" if bit == RAW_GYRO_OK else ""
             if bits & bit:
                 if self._sensors_reported & bit:
                     self._sensors_reported &= ~bit

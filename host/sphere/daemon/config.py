@@ -22,6 +22,8 @@ import os
 import sys
 from pathlib import Path
 
+from sphere import paths
+from sphere.errors import SphereError
 from sphere.settings import Param, ParamError, Registry, Settings, load as load_object
 from sphere.smoothing.registry import DEFAULT as _SMOOTHING
 from sphere.smoothing.registry import POSITION as _POSITION_FILTERS
@@ -73,7 +75,7 @@ MOVED_KEYS = {
 }
 
 
-class ConfigError(Exception):
+class ConfigError(SphereError):
     """A config file, override or flag that cannot be used; the message says which and why."""
 
 
@@ -388,8 +390,7 @@ def smoothing_params(cfg: Config, name: str, registry: Registry = _SMOOTHING_FIL
 
 
 def default_path() -> Path:
-    base = os.environ.get("XDG_CONFIG_HOME") or os.path.join(os.path.expanduser("~"), ".config")
-    return Path(base) / "sphere-mouse" / "config.toml"
+    return paths.config_file()
 
 
 def _suggest(word: str, options) -> str:
@@ -476,26 +477,11 @@ def load(path: Path | str | None = None, required: bool = False) -> Config:
     explicit = path is not None
     path = Path(path) if explicit else default_path()
     try:
-        exists = path.exists()
-    except OSError as e:  # a folder on the way that cannot be searched
-        raise ConfigError(f"{path}: cannot read: {e.strerror}") from None
-    if not exists:
-        if explicit or required:
-            raise ConfigError(f"{path}: no such config file")
+        data = paths.read_config(path, explicit=explicit or required)
+    except paths.ConfigFileError as e:
+        raise ConfigError(str(e)) from None
+    if not data and not path.exists():
         return Config()
-    if path.is_dir():
-        raise ConfigError(f"{path} is a folder, not a config file")
-    if not path.is_file() and str(path) != os.devnull:  # a device or a FIFO: reading it might never end
-        raise ConfigError(f"{path} is not a regular file: give a TOML text file (sphere-mouse --print-config writes one)")
-    try:
-        with open(path, "rb") as f:
-            data = tomllib.load(f)
-    except tomllib.TOMLDecodeError as e:
-        raise ConfigError(f"{path}: not valid TOML: {e}") from None
-    except UnicodeDecodeError as e:
-        raise ConfigError(f"{path}: not a UTF-8 text file (byte {e.start}): save it as UTF-8") from None
-    except OSError as e:
-        raise ConfigError(f"{path}: cannot read: {e.strerror}") from None
     known = sections()
     checked = validate(data, str(path), known=known)
     cfg = Config(checked, origin=str(path), _sections=known)

@@ -11,6 +11,8 @@ from __future__ import annotations
 import math
 
 from sphere import chips
+from sphere import quaternion
+from sphere.protocol.packets import RAW_ACCEL_OK, RAW_GYRO_OK, RAW_GYRO_STALE, RAW_MAG_OK, RAW_TAP_ACTIVE
 
 G_M_S2 = chips.STANDARD_GRAVITY_M_S2
 DEG = math.pi / 180.0
@@ -259,14 +261,7 @@ def body_rate_dps(q0, q1, dt_s: float):
     return (x * k, y * k, z * k)
 
 
-_ENU_TO_NWU = (math.sqrt(0.5), 0.0, 0.0, -math.sqrt(0.5))  # conj of protocol/spec.md's NWU→ENU rotation
-
-
-def _qmul(p, q):
-    p0, p1, p2, p3 = p
-    q0, q1, q2, q3 = q
-    return (p0 * q0 - p1 * q1 - p2 * q2 - p3 * q3, p0 * q1 + p1 * q0 + p2 * q3 - p3 * q2,
-            p0 * q2 - p1 * q3 + p2 * q0 + p3 * q1, p0 * q3 + p1 * q2 - p2 * q1 + p3 * q0)
+_ENU_TO_NWU = quaternion.conj(quaternion.Q_NWU_TO_ENU)
 
 
 class _NwuFilter:
@@ -280,11 +275,11 @@ class _NwuFilter:
         q = self.inner.update(*args, **kwargs)  # defer_bias passes through to SphereFilter
         if type(q) is not tuple or type(q[0]) is not float:  # SphereFilter's own: a tuple of floats
             q = tuple(float(v) for v in q)
-        return _qmul(_ENU_TO_NWU, q)
+        return quaternion.mul(_ENU_TO_NWU, q)
 
     @property
     def quat(self):
-        return _qmul(_ENU_TO_NWU, tuple(float(v) for v in self.inner.quat))
+        return quaternion.mul(_ENU_TO_NWU, tuple(float(v) for v in self.inner.quat))
 
     @quat.setter
     def quat(self, q):  # SphereFilter initialises itself from its first samples
@@ -371,17 +366,17 @@ class MotionTracker:
         ax, ay, az = a[0] * ka, a[1] * ka, a[2] * ka
         anorm = math.sqrt(ax * ax + ay * ay + az * az)
         flags = sample.flags
-        self.accel_g = (ax, ay, az) if flags & 0x01 else None
-        if flags & 0x42 != 0x02:
+        self.accel_g = (ax, ay, az) if flags & RAW_ACCEL_OK else None
+        if flags & (RAW_GYRO_OK | RAW_GYRO_STALE) != RAW_GYRO_OK:
             # gyro_ok clear (spec §4.2: the chip did not answer, its values are 0) or gyro_stale set (a value held
             # from the last good read): not a rate. Nothing moves, nothing is learnt, the orientation holds.
             self.gyro_dps = (0.0, 0.0, 0.0)
             return dt
-        tap_active = bool(flags & 0x10)
-        accel_ok = bool(flags & 0x01) and anorm > 0.0
+        tap_active = bool(flags & RAW_TAP_ACTIVE)
+        accel_ok = bool(flags & RAW_ACCEL_OK) and anorm > 0.0
         km = _MAG_UT_PER_LSB
         m = sample.mag
-        mag_ok = bool(flags & 0x04) and -4096 not in m
+        mag_ok = bool(flags & RAW_MAG_OK) and -4096 not in m
         mag = (m[0] * km, m[1] * km, m[2] * km) if mag_ok else None
         if accel_ok and not tap_active:
             self.bias.add(gyro, anorm, dt, mag, (ax, ay, az), self.defer)
@@ -403,7 +398,7 @@ class MotionTracker:
             gd = self.gyro_dps
             q = self.filter.update((gd[0] * DEG, gd[1] * DEG, gd[2] * DEG), (ax * G_M_S2, ay * G_M_S2, az * G_M_S2),
                                    mag, dt, acc_valid=accel_ok and not tap_active, **(self._defer if self.defer else {}))
-            # _NwuFilter gives a tuple of floats (_qmul's); another filter's output is made one
+            # _NwuFilter gives a tuple of floats (quaternion.mul's); another filter's output is made one
             self.quat = q if type(q) is tuple and type(q[0]) is float else tuple(float(v) for v in q)
             self.up = up_from_quat(self.quat)
         elif self.quat is None:

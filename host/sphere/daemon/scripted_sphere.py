@@ -18,25 +18,24 @@ from __future__ import annotations
 import math
 
 from sphere import chips
+from sphere import quaternion
 from sphere.protocol import Event, Hello, Orientation, RawSample, Status, encode_frame
+from sphere.protocol.packets import (CAL_GYRO_BIAS_ESTIMATED, CAL_GYRO_BIAS_VALID, ORI_MAG_USED, RAW_ACCEL_OK, RAW_GYRO_OK,
+                                     RAW_MAG_FRESH, RAW_MAG_OK, RAW_TAP_ACTIVE, SENSOR_ADXL345, SENSOR_HMC5883L,
+                                     SENSOR_ITG3200, STREAM_ORIENTATION, STREAM_RAW, STREAM_STATUS)
 
 EARTH_FIELD_NWU_UT = (20.0, 0.0, -44.0)
+_ALL_SENSORS = SENSOR_ADXL345 | SENSOR_ITG3200 | SENSOR_HMC5883L
+_CALIBRATION_STATE = CAL_GYRO_BIAS_VALID | CAL_GYRO_BIAS_ESTIMATED  # the device measured its gyro bias at start
 EVENT_CODES = {"single_tap": 1, "double_tap": 2, "free_fall": 3}
 
 
 def hello_packet(raw_rate_hz=200, orientation_rate_hz=100) -> Hello:
     return Hello(
-        protocol_version=1, firmware_version=(0, 1, 0), sensors_found=7, adxl345_devid=0xE5, itg3200_whoami=0x69,
-        hmc5883l_id=tuple(b"H43"), imu_rate_hz=200, mag_rate_hz=75, stream_mode=7, raw_rate_hz=raw_rate_hz,
-        orientation_rate_hz=orientation_rate_hz, calibration_state=0x21,
+        protocol_version=1, firmware_version=(0, 1, 0), sensors_found=_ALL_SENSORS, adxl345_devid=0xE5, itg3200_whoami=0x69,
+        hmc5883l_id=tuple(b"H43"), imu_rate_hz=200, mag_rate_hz=75, stream_mode=STREAM_RAW | STREAM_ORIENTATION | STREAM_STATUS, raw_rate_hz=raw_rate_hz,
+        orientation_rate_hz=orientation_rate_hz, calibration_state=_CALIBRATION_STATE,
     )
-
-
-def _qmul(p, q):
-    p0, p1, p2, p3 = p
-    q0, q1, q2, q3 = q
-    return (p0 * q0 - p1 * q1 - p2 * q2 - p3 * q3, p0 * q1 + p1 * q0 + p2 * q3 - p3 * q2,
-            p0 * q2 - p1 * q3 + p2 * q0 + p3 * q1, p0 * q3 + p1 * q2 - p2 * q1 + p3 * q0)
 
 
 def _to_sensor(q, v):
@@ -81,14 +80,15 @@ class ScriptedSphere:
         ang = math.sqrt(wx * wx + wy * wy + wz * wz) * dt
         if ang > 0:
             s = math.sin(ang / 2) / (ang / dt)
-            self.q = _qmul(self.q, (math.cos(ang / 2), wx * s, wy * s, wz * s))
+            self.q = quaternion.mul(self.q, (math.cos(ang / 2), wx * s, wy * s, wz * s))
             n = math.sqrt(sum(v * v for v in self.q))
             self.q = tuple(v / n for v in self.q)
         self.t_us += int(round(1e6 / self.rate))
         t = self.t_us & 0xFFFFFFFF
         up = (0.0, 0.0, 0.0) if falling else _to_sensor(self.q, (0.0, 0.0, 1.0))
         mag = _to_sensor(self.q, EARTH_FIELD_NWU_UT)
-        flags = 0x07 | (0x08 if self.n % 3 == 0 else 0) | (0x10 if tap_active else 0)
+        flags = (RAW_ACCEL_OK | RAW_GYRO_OK | RAW_MAG_OK | (RAW_MAG_FRESH if self.n % 3 == 0 else 0)
+                 | (RAW_TAP_ACTIVE if tap_active else 0))
         raw = RawSample(
             t_us=t, flags=flags,
             accel=tuple(_clip16(v * chips.ADXL345_LSB_PER_G) for v in up),
@@ -98,12 +98,12 @@ class ScriptedSphere:
         out = [(self.t_us, self.frame(raw))]
         if self.n % self.orientation_every == 0:
             quat = tuple(_clip16(v * 16384.0) for v in self.q)
-            out.append((self.t_us, self.frame(Orientation(t_us=t, flags=0x01, quat=quat))))
+            out.append((self.t_us, self.frame(Orientation(t_us=t, flags=ORI_MAG_USED, quat=quat))))
         if self.status_every_us and self.t_us >= self._next_status:
             self._next_status += self.status_every_us
             out.append((self.t_us, self.frame(Status(
-                t_us=t, sensors_ok=7, i2c_errors=(0, 0, 0), i2c_recoveries=0, loop_overruns=0, frames_dropped=0,
-                rx_errors=0, calibration_state=0x21, calibration_step=0, cpu_load=420, battery_mv=3900))))
+                t_us=t, sensors_ok=_ALL_SENSORS, i2c_errors=(0, 0, 0), i2c_recoveries=0, loop_overruns=0, frames_dropped=0,
+                rx_errors=0, calibration_state=_CALIBRATION_STATE, calibration_step=0, cpu_load=420, battery_mv=3900))))
         self.n += 1
         return out
 

@@ -24,9 +24,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from sphere import quaternion as quat
+from sphere.chips import STANDARD_GRAVITY_M_S2
 
 DEG = np.pi / 180.0
-G = 9.81
+G = STANDARD_GRAVITY_M_S2
 REST_S = 2.0
 #: the bias at power-on (°/s per axis): what a start-up calibration that was not done leaves
 BIAS0_DPS = np.array([0.35, -0.25, 0.30])

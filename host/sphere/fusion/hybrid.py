@@ -31,6 +31,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from sphere.chips import STANDARD_GRAVITY_M_S2
+
 
 class OrientationKF:
     """Chapter 3's orientation filter for a vector of angles (degrees)."""
@@ -244,7 +246,6 @@ Z_TH = 0.05
 #: worst ratio of the hybrid's RMSE to its targets among those that let no fix more than 50 mm off through
 #: (5 %: one, 50 mm, on 16:100; 1.5 %: three, and the track lost); 2 % also gave the lowest depth RMSE
 CAMERA_Z_TH = 0.02
-STANDARD_GRAVITY = 9.80665
 
 
 def _rot(q) -> np.ndarray:
@@ -385,7 +386,7 @@ class CameraImuTracker:
         self.x = None
         self.P = None
         self.t = None
-        self.g = STANDARD_GRAVITY
+        self.g = STANDARD_GRAVITY_M_S2
         self.max_coast_s = max_coast_s
         self.t_fix = -np.inf  # exposure time of the last fix applied
         self.hist: list = []  # [t, a_earth, x, P, q] after the prediction to t

@@ -44,6 +44,7 @@ import math
 
 import numpy as np
 
+from sphere import quaternion as quat
 from sphere.fusion.common import ecompass
 
 EARTH_FRAME = "NWU"
@@ -71,11 +72,7 @@ def _inclination_only(x, ax, ay, az):
     else:
         rn = math.sqrt(w * w + vx * vx + vy * vy)
         r = (w / rn, vy / rn, -vx / rn, 0.0)
-    r0, r1, r2, r3 = r
-    return (r0 * q0 - r1 * q1 - r2 * q2 - r3 * q3,
-            r0 * q1 + r1 * q0 + r2 * q3 - r3 * q2,
-            r0 * q2 - r1 * q3 + r2 * q0 + r3 * q1,
-            r0 * q3 + r1 * q2 - r2 * q1 + r3 * q0)
+    return quat.mul(r, x)
 
 
 def _inv4(a):

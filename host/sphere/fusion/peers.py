@@ -26,9 +26,11 @@ from __future__ import annotations
 import numpy as np
 
 from sphere import quaternion as quat
+from sphere.chips import STANDARD_GRAVITY_M_S2
+from sphere.errors import SphereError
 
 
-class PeerMissing(ImportError):
+class PeerMissing(SphereError, ImportError):
     """A peer filter's package is not installed."""
 
 
@@ -176,7 +178,7 @@ class FusionPeer(_Peer):
 
     def update(self, gyr_rad_s, acc_m_s2, mag_uT, dt_s):
         g = np.degrees(np.asarray(gyr_rad_s, dtype=float))
-        a = np.asarray(acc_m_s2, dtype=float) / 9.80665
+        a = np.asarray(acc_m_s2, dtype=float) / STANDARD_GRAVITY_M_S2
         if mag_uT is None:
             self._f.update_no_magnetometer(g, a)
         else:

@@ -11,6 +11,7 @@ import time
 from pathlib import Path
 from typing import BinaryIO, Iterator
 
+from sphere.errors import SphereError
 from sphere.protocol.decoder import DecoderStats
 from sphere.protocol.stream import DecodedPacket, PacketStream  # noqa: F401  (DecodedPacket: re-exported)
 
@@ -18,7 +19,7 @@ SIDECAR_SUFFIX = ".rx.csv"
 READ_CHUNK = 64 * 1024
 
 
-class CaptureError(Exception):
+class CaptureError(SphereError):
     """A capture that cannot be used, with what to do about it."""
 
 

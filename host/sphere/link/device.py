@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import time
 
+from sphere.errors import LinkLost
 from sphere.protocol import GetHello, Hello, PacketStream, Reply, encode_frame
 
 #: Commands that may be sent again when no REPLY came (the reply may be what was lost): doing them twice
@@ -25,10 +26,6 @@ IDEMPOTENT = frozenset({
     "LOAD_CALIBRATION", "RESET_CALIBRATION", "IDENTIFY", "GET_STATUS",
 })
 DEFAULT_RETRIES = 2
-
-
-class LinkLost(Exception):
-    """The port went away (unplugged, closed, out of range); the message says which port and what to do."""
 
 
 def _port_errors():

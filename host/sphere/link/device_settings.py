@@ -16,14 +16,16 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-from sphere.protocol.packets import BOARD_PROFILES, SetBoard, SetFilter, SetFreeFall, SetStream, SetTap
+from sphere.errors import SphereError
+from sphere.protocol.packets import (BOARD_PROFILES, STREAM_ORIENTATION, STREAM_RAW, STREAM_STATUS, SetBoard, SetFilter,
+                                     SetFreeFall, SetStream, SetTap)
 
 IMU_RATE_HZ = 200
 #: Rates the firmware accepts: divisors of the 200 Hz sample clock (spec §5, SET_STREAM).
 RATES_HZ = tuple(r for r in range(1, IMU_RATE_HZ + 1) if IMU_RATE_HZ % r == 0)
 
 
-class SettingError(ValueError):
+class SettingError(SphereError, ValueError):
     """A key or value that cannot be sent; the message says what is allowed."""
 
 
@@ -183,7 +185,8 @@ def current_from_hello(hello) -> dict[str, int]:
     if hello is None:
         return {}
     mode = hello.stream_mode
-    out = {"stream.raw": mode & 1, "stream.orientation": mode >> 1 & 1, "stream.status": mode >> 2 & 1,
+    out = {"stream.raw": int(bool(mode & STREAM_RAW)), "stream.orientation": int(bool(mode & STREAM_ORIENTATION)),
+           "stream.status": int(bool(mode & STREAM_STATUS)),
            "stream.raw_rate_hz": hello.raw_rate_hz, "stream.orientation_rate_hz": hello.orientation_rate_hz}
     if getattr(hello, "protocol_version", 1) >= 2:
         out["board"] = hello.board_profile

@@ -13,6 +13,8 @@ import os
 
 import serial
 
+from sphere.errors import SphereError
+
 DEFAULT_BAUD = 115200
 MAX_BAUD = 4_000_000  # well above anything the sphere's UART or an SPP module does
 #: termios ``c_cflag`` bit CMSPAR (Linux asm-generic/termbits.h, 010000000000; Python's termios lacks it).
@@ -21,7 +23,7 @@ MAX_BAUD = 4_000_000  # well above anything the sphere's UART or an SPP module d
 CMSPAR = 0o10000000000
 
 
-class PortError(Exception):
+class PortError(SphereError):
     """The port could not be opened or was lost; the message says what to do."""
 
 

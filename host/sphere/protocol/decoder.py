@@ -50,12 +50,14 @@ class FrameDecoder:
     does not depend on how the stream is cut into calls.
     """
 
-    __slots__ = ("direction", "stats", "_types", "_buf", "_discarding", "_last_seq", "_recent", "_recent_set")
+    __slots__ = ("direction", "stats", "duplicate_window", "_types", "_buf", "_discarding", "_last_seq", "_recent",
+                 "_recent_set")
 
-    def __init__(self, direction: str = "device"):
+    def __init__(self, direction: str = "device", duplicate_window: int = DUPLICATE_WINDOW):
         if direction not in ("device", "host"):
             raise ValueError("direction is 'device' or 'host'")
         self.direction = direction
+        self.duplicate_window = duplicate_window  # 0: every frame is returned, a repeat too (what a soak checks)
         self.stats = DecoderStats()
         self._types = {
             t: (cls, frozenset(body_sizes(cls))) for t, cls in BY_TYPE.items() if cls.DIRECTION == direction
@@ -64,7 +66,7 @@ class FrameDecoder:
         self._discarding = False  # inside an oversize chunk: drop bytes up to the next delimiter
         self._last_seq: int | None = None
         # (seq << 16 | crc) of the last DUPLICATE_WINDOW frames, oldest first; -1: no frame yet (no key is < 0)
-        self._recent: deque = deque((-1,) * DUPLICATE_WINDOW)
+        self._recent: deque = deque((-1,) * duplicate_window)
         self._recent_set: set = set()  # the same, for the lookup
 
     def restart(self) -> None:
@@ -76,7 +78,7 @@ class FrameDecoder:
         self._forget_recent()
 
     def _forget_recent(self) -> None:
-        self._recent = deque((-1,) * DUPLICATE_WINDOW)
+        self._recent = deque((-1,) * self.duplicate_window)
         self._recent_set.clear()
 
     def feed(self, data: bytes) -> list[Packet]:

@@ -7,6 +7,8 @@ import struct
 
 from cobs import cobs
 
+from sphere.errors import SphereError
+
 MAX_PAYLOAD = 64
 #: Longest COBS encoding of a payload, before its delimiter.
 MAX_ENCODED = MAX_PAYLOAD + (MAX_PAYLOAD + 253) // 254
@@ -27,7 +29,7 @@ _HEADER = struct.Struct("<BB")
 _CRC = struct.Struct("<H")
 
 
-class FrameTooLong(ValueError):
+class FrameTooLong(SphereError, ValueError):
     pass
 
 

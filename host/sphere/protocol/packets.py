@@ -40,22 +40,43 @@ class Result(enum.IntEnum):
 EVENT_NAMES = {1: "single_tap", 2: "double_tap", 3: "free_fall"}
 CALIBRATION_STEPS = {0: "none", 1: "gyro_bias", 2: "accel", 3: "mag"}
 
-RAW_FLAGS = ("accel_ok", "gyro_ok", "mag_ok", "mag_fresh", "tap_active", "accel_stale", "gyro_stale", "mag_stale")
-ORIENTATION_FLAGS = ("mag_used", "accel_rejected", "mag_rejected", "converging", "gyro_missing", "prev_mag_used",
-                     "prev_accel_rejected", "prev_mag_rejected")
-RESET_CAUSE_BITS = ("power_on", "external", "brown_out", "watchdog")
+# -- the bits of the packets' bit fields, by name (protocol/spec.md §4; firmware/src/core/packets.h names them the
+# same: tests/host/test_protocol_bits.py checks both). Use the names, never the masks.
+#: HELLO ``sensors_found`` and STATUS ``sensors_ok`` (spec §4.1; bit 2 is the magnetometer, HMC5883L or QMC5883L)
+SENSOR_ADXL345, SENSOR_ITG3200, SENSOR_HMC5883L = 0x01, 0x02, 0x04
+#: RAW_SAMPLE ``flags`` (spec §4.2): a sensor present and valid, a new magnetometer conversion, a tap in progress,
+#: and (version 2) a value held from the last good read after a failed one
+RAW_ACCEL_OK, RAW_GYRO_OK, RAW_MAG_OK, RAW_MAG_FRESH, RAW_TAP_ACTIVE = 0x01, 0x02, 0x04, 0x08, 0x10
+RAW_ACCEL_STALE, RAW_GYRO_STALE, RAW_MAG_STALE = 0x20, 0x40, 0x80
+#: ORIENTATION ``flags`` (spec §4.3); the PREV_ bits are bits 0-2 of the update one period before
+ORI_MAG_USED, ORI_ACCEL_REJECTED, ORI_MAG_REJECTED, ORI_CONVERGING, ORI_GYRO_MISSING = 0x01, 0x02, 0x04, 0x08, 0x10
+ORI_PREV_MAG_USED, ORI_PREV_ACCEL_REJECTED, ORI_PREV_MAG_REJECTED = 0x20, 0x40, 0x80
+ORI_PREV_SHIFT = 5  # ORI_PREV_X == ORI_X << ORI_PREV_SHIFT
+#: HELLO and SET_STREAM ``stream_mode``
+STREAM_RAW, STREAM_ORIENTATION, STREAM_STATUS = 0x01, 0x02, 0x04
+#: HELLO and STATUS ``calibration_state``
+CAL_GYRO_BIAS_VALID, CAL_ACCEL_CALIBRATED, CAL_MAG_CALIBRATED, CAL_FROM_EEPROM = 0x01, 0x02, 0x04, 0x08
+CAL_EEPROM_INVALID, CAL_GYRO_BIAS_ESTIMATED = 0x10, 0x20
+#: HELLO ``reset_cause`` (the ATmega328P's MCUSR: PORF, EXTRF, BORF, WDRF; version 2)
+RESET_POWER_ON, RESET_EXTERNAL, RESET_BROWN_OUT, RESET_WATCHDOG = 0x01, 0x02, 0x04, 0x08
+
+
+def _bit_names(prefix: str) -> tuple[str, ...]:
+    """The lower-case names of this module's one-bit constants ``PREFIX_NAME``, by bit: what ``sphere decode``
+    shows for a bit field."""
+    bits = {v: k[len(prefix):].lower() for k, v in globals().items()
+            if k.startswith(prefix) and type(v) is int and v > 0 and v & (v - 1) == 0}
+    return tuple(bits[1 << i] for i in range(max(bits).bit_length()))
+
+
+SENSOR_BITS = _bit_names("SENSOR_")
+RAW_FLAGS = _bit_names("RAW_")
+ORIENTATION_FLAGS = _bit_names("ORI_")
+STREAM_MODE_BITS = _bit_names("STREAM_")
+CALIBRATION_STATE_BITS = _bit_names("CAL_")
+RESET_CAUSE_BITS = _bit_names("RESET_")
 MAG_CHIPS = {0: "none", 1: "hmc5883l", 2: "qmc5883l"}
 BOARD_PROFILES = {0: "aligned", 1: "sen10724", 2: "gy85"}
-SENSOR_BITS = ("adxl345", "itg3200", "hmc5883l")
-CALIBRATION_STATE_BITS = (
-    "gyro_bias_valid",
-    "accel_calibrated",
-    "mag_calibrated",
-    "from_eeprom",
-    "eeprom_invalid",
-    "gyro_bias_estimated",
-)
-STREAM_MODE_BITS = ("raw", "orientation", "status")
 
 
 def bit_names(value: int, names: tuple[str, ...]) -> list[str]:

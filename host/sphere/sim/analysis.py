@@ -12,8 +12,13 @@ import numpy as np
 
 from sphere.chips import ITG3200_LSB_PER_DPS
 from sphere.protocol.decoder import decode_all
-from sphere.protocol.packets import Event, Hello, Orientation, RawSample, Status
+from sphere.protocol.packets import (ORI_ACCEL_REJECTED, ORI_CONVERGING, ORI_MAG_REJECTED, ORI_MAG_USED, ORI_PREV_SHIFT,
+                                     RAW_ACCEL_OK, RAW_ACCEL_STALE, RAW_GYRO_OK, RAW_GYRO_STALE, RAW_MAG_OK,
+                                     RAW_TAP_ACTIVE, Event, Hello, Orientation, RawSample, Status)
 from sphere.protocol.timebase import WRAP_US, TimeUnwrapper
+
+_ORI_NOW = ORI_MAG_USED | ORI_ACCEL_REJECTED | ORI_MAG_REJECTED  # this update's inputs
+_ORI_PREV = _ORI_NOW << ORI_PREV_SHIFT  # the same bits of the update one period before
 
 
 @dataclass
@@ -120,15 +125,15 @@ def _moved_at(raw: list, idx) -> int | None:
         return all(-h <= int(a) - int(b) <= h for a, b in zip(v, ref))
 
     first = raw[idx[0]]
-    mag_ref = first.mag if first.flags & 0x04 else (0, 0, 0)
+    mag_ref = first.mag if first.flags & RAW_MAG_OK else (0, 0, 0)
     n = len(idx)
     sums, counts = [[0, 0, 0], [0, 0, 0]], [0, 0]
     for j, i in enumerate(idx):
         p = raw[i]
         if not (near(p.gyro, first.gyro, half[0]) and near(p.accel, first.accel, half[1])
-                and (not p.flags & 0x04 or near(p.mag, mag_ref, half[2]))):
+                and (not p.flags & RAW_MAG_OK or near(p.mag, mag_ref, half[2]))):
             return j
-        if p.flags & 0x04:
+        if p.flags & RAW_MAG_OK:
             h = int(j >= n // 2)
             counts[h] += 1
             sums[h] = [s + int(v) for s, v in zip(sums[h], p.mag)]
@@ -185,7 +190,8 @@ def firmware_bias_schedule(raw: list) -> list[tuple[int, list[int]]]:
     out = [] if k is None else [(k, found)]
     start, bias = (k + 1, list(found)) if k is not None else (found, None)
     n = TRACK_SAMPLES
-    usable = [i for i in range(start, len(raw)) if raw[i].flags & 0x02 and not raw[i].flags & 0x60]
+    usable = [i for i in range(start, len(raw)) if raw[i].flags & RAW_GYRO_OK
+              and not raw[i].flags & (RAW_ACCEL_STALE | RAW_GYRO_STALE)]
     j = 0
     while j + n <= len(usable):
         window = usable[j:j + n]
@@ -240,8 +246,8 @@ def host_madgwick(raw: list, imu_rate_hz: float, beta: float, bias_s: float = 0.
     elif bias_s > 0:
         first = t < t[0] + bias_s
         gyr = gyr - gyr[first].mean(axis=0)
-    acc_valid = (rflags & 0x01).astype(bool) & ~(rflags & 0x10).astype(bool)
-    mag_valid = (rflags & 0x04).astype(bool)
+    acc_valid = (rflags & RAW_ACCEL_OK).astype(bool) & ~(rflags & RAW_TAP_ACTIVE).astype(bool)
+    mag_valid = (rflags & RAW_MAG_OK).astype(bool)
     betas = np.full(len(raw), float(beta))
     if orientation:
         uo = TimeUnwrapper()
@@ -250,17 +256,17 @@ def host_madgwick(raw: list, imu_rate_hz: float, beta: float, bias_s: float = 0.
         idx = np.searchsorted(t_o, t_us, side="right") - 1
         has = idx >= 0
         f = np.where(has, of[np.clip(idx, 0, None)], 0)
-        if (of & 0xE0).any():
+        if (of & _ORI_PREV).any():
             # protocol v2: a raw sample without its own ORIENTATION is the update the next packet calls
             # "previous" (flags bits 5-7), when that packet is the next raw sample's
             nxt = np.clip(idx + 1, 0, len(t_o) - 1)
             own = has & (t_o[np.clip(idx, 0, None)] == t_us)
             t_next_raw = np.append(t_us[1:], -1)
             use = ~own & (idx + 1 < len(t_o)) & (t_o[nxt] == t_next_raw)
-            f = np.where(use, (f & ~0x07) | ((of[nxt] >> 5) & 0x07), f)
-        acc_valid &= ~((f & 0x02).astype(bool) & has)
-        mag_valid &= ~(((f & 0x04).astype(bool) | ~(f & 0x01).astype(bool)) & has)
-        betas = np.where(has & (f & 0x08).astype(bool), startup_beta, betas)
+            f = np.where(use, (f & ~_ORI_NOW) | ((of[nxt] & _ORI_PREV) >> ORI_PREV_SHIFT), f)
+        acc_valid &= ~((f & ORI_ACCEL_REJECTED).astype(bool) & has)
+        mag_valid &= ~(((f & ORI_MAG_REJECTED).astype(bool) | ~(f & ORI_MAG_USED).astype(bool)) & has)
+        betas = np.where(has & (f & ORI_CONVERGING).astype(bool), startup_beta, betas)
     # following the firmware, start where it starts (identity, converging at the start-up gain);
     # on its own, from the e-compass of the first sample as `sphere eval` does
     q = (1.0, 0.0, 0.0, 0.0) if orientation else ecompass(*acc[0], *mag[0], frame="NWU")
@@ -278,7 +284,7 @@ def host_madgwick(raw: list, imu_rate_hz: float, beta: float, bias_s: float = 0.
     if orientation:
         # what the firmware sends: the state GYRO_DELAY_S ahead at the update's rate (0 without a gyro),
         # q + ½ q ⊗ [0, ω]·τ normalised (MargFilter::predictQ14)
-        w = np.where((rflags & 0x02).astype(bool)[:, None], gyr, 0.0) * (0.5 * GYRO_DELAY_S)
+        w = np.where((rflags & RAW_GYRO_OK).astype(bool)[:, None], gyr, 0.0) * (0.5 * GYRO_DELAY_S)
         p0, p1, p2, p3 = out.T
         wx, wy, wz = w.T
         pred = np.stack([p0 - p1 * wx - p2 * wy - p3 * wz, p1 + p0 * wx + p2 * wz - p3 * wy,

@@ -18,6 +18,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from sphere import paths
+from sphere.errors import SphereError
 from sphere.paths import repo_path
 
 # Installed (not a checkout), the board is built from the package's sources in the user's cache (sphere.paths).
@@ -31,7 +32,7 @@ BOARD_SOURCES = ("sphere_board.c", "sensors.c", "sensors.h", "mcu.c", "mcu.h", "
                  "bootloaders/optiboot8_atmega328.hex")
 
 
-class BoardUnavailable(RuntimeError):
+class BoardUnavailable(SphereError, RuntimeError):
     """The simulator or the firmware image cannot be had; the message says which command makes it."""
 
 

@@ -12,14 +12,15 @@ from __future__ import annotations
 import bisect
 import json
 import math
-import struct
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from sphere.protocol.framing import MIN_PAYLOAD, crc16
-from sphere.protocol.packets import BY_TYPE, Hello, Orientation, RawSample, Status
+from sphere import quaternion as quat
+from sphere.protocol.decoder import FrameDecoder
+from sphere.protocol.packets import (ORI_CONVERGING, RAW_ACCEL_OK, RAW_ACCEL_STALE, RAW_GYRO_OK, RAW_GYRO_STALE,
+                                     RAW_MAG_FRESH, RAW_MAG_OK, RAW_MAG_STALE, Hello, Orientation, RawSample, Status)
 
 #: Limits of the invariants: stale frames and CRC errors outside injected line faults must be 0; a sensor
 #: must give fresh data within these times of a fault's end (a reset needs the firmware to start again);
@@ -29,10 +30,12 @@ LIMITS = {"recovery_ms": 100.0, "recovery_after_reset_ms": 1000.0, "orientation_
 #: Fault kinds of the schedule (all by default); see :func:`schedule`.
 FAULT_KINDS = ("nack", "stall", "glitch", "brownout", "reset_mid_read", "sda_held", "host_stall")
 
-CHIP_BITS = {"adxl345": 0x01, "itg3200": 0x02, "hmc5883l": 0x04, "qmc5883l": 0x04}
-MAG_FRESH = 0x08
-#: RAW_SAMPLE flags of protocol v2: the value is held from the last good read (0 in v1 streams)
-STALE_BITS = {0x01: 0x20, 0x02: 0x40, 0x04: 0x80}
+#: a chip's RAW_SAMPLE flags: fresh data needs all of ``need`` set and ``stale`` (protocol v2: the value is held
+#: from the last good read; 0 in v1 streams) clear
+CHIP_FLAGS = {"adxl345": {"need": RAW_ACCEL_OK, "stale": RAW_ACCEL_STALE},
+              "itg3200": {"need": RAW_GYRO_OK, "stale": RAW_GYRO_STALE},
+              "hmc5883l": {"need": RAW_MAG_OK | RAW_MAG_FRESH, "stale": RAW_MAG_STALE},
+              "qmc5883l": {"need": RAW_MAG_OK | RAW_MAG_FRESH, "stale": RAW_MAG_STALE}}
 LEAD_IN_S = 3.0  # still at power-up: the firmware's gyro bias window
 RESET_KINDS = ("brownout", "reset_mid_read")
 LINE_WINDOW_S = 0.05  # a reset cuts the frame on the wire; a host stall drops bytes up to its end
@@ -49,35 +52,26 @@ class Frame:
 
 def read_frames(capture: bytes, times: bytes) -> list[Frame]:
     """Every delimited chunk of the capture as a frame, placed in simulated time by the board's
-    --capture-times records (one per delimiter, in order)."""
+    --capture-times records (one per delimiter, in order). Decoded by the protocol's FrameDecoder one chunk at
+    a time, repeats kept (a repeated frame is what the stale-frame check looks for)."""
     rec = np.frombuffer(times, dtype=[("off", "<u8"), ("t", "<f8")])
-    from cobs import cobs
-
+    decoder = FrameDecoder(duplicate_window=0)
+    stats = decoder.stats
     out = []
     start = 0
     for i, t in enumerate(rec["t"]):
-        end = int(rec["off"][i]) - 1  # the delimiter's index
+        end = int(rec["off"][i])  # one past the delimiter
         chunk = capture[start:end]
-        start = end + 1
-        if not chunk:
+        start = end
+        if len(chunk) < 2:
             continue
-        try:
-            payload = cobs.decode(chunk)
-        except cobs.DecodeError:
+        bad = stats.oversize + stats.framing_errors + stats.crc_errors
+        packets = decoder.feed(chunk)
+        if stats.oversize + stats.framing_errors + stats.crc_errors != bad:
             out.append(Frame(float(t), False))
             continue
-        if len(payload) < MIN_PAYLOAD or crc16(payload[:-2]) != (payload[-2] | payload[-1] << 8):
-            out.append(Frame(float(t), False))
-            continue
-        type_, seq, body = payload[0], payload[1], payload[2:-2]
-        cls = BY_TYPE.get(type_)
-        pkt = None
-        if cls is not None and cls.DIRECTION == "device":
-            try:
-                pkt = cls.unpack_body(body, seq)
-            except (struct.error, ValueError):
-                pkt = None
-        out.append(Frame(float(t), True, pkt, type_, seq))
+        pkt = packets[0] if packets else None  # None: a good frame of a type or length this host does not know
+        out.append(Frame(float(t), True, pkt, pkt.TYPE if pkt else None, pkt.seq if pkt else None))
     return out
 
 
@@ -116,6 +110,8 @@ def stream_checks(frames: list[Frame], line_windows, resets_t=()) -> dict:
                 crc.add(f.t_s, detail="a frame with a bad CRC or COBS code outside injected line faults")
             continue
         p = f.packet
+        if p is None:
+            continue
         if isinstance(p, Hello) and f.seq == 0:
             hellos += 1
             last_seq, last_t = None, {}
@@ -187,14 +183,13 @@ def recovery(frames: list[Frame], ends: list[dict], host_stalls=()) -> tuple[Inv
         overtaken = None if resetting else next(
             (k for t, k in restarts if e["t_start"] <= t <= e["t_end"] + LIMITS["recovery_ms"] / 1e3), None)
         for chip in e["chips"]:
-            bit = CHIP_BITS[chip]
-            need = bit | (MAG_FRESH if bit == 0x04 else 0)
+            need, stale = CHIP_FLAGS[chip]["need"], CHIP_FLAGS[chip]["stale"]
             # while the host was not reading, the sensor's fresh samples may have been lost on the way:
             # count from the end of that stall
             t0 = max([e["t_end"]] + [b for a, b in host_stalls if a <= e["t_end"] <= b])
             i0 = np.searchsorted(raw_t, t0)
             f = raw_flags[i0:]
-            ok = np.nonzero(((f & need) == need) & ((f & STALE_BITS[bit]) == 0))[0]
+            ok = np.nonzero(((f & need) == need) & ((f & stale) == 0))[0]
             ms = (raw_t[i0 + ok[0]] - t0) * 1e3 if len(ok) else math.inf
             row = {"kind": e["kind"], "chip": chip, "t_end": round(e["t_end"], 4), "recovery_ms": round(ms, 1)}
             if overtaken:
@@ -206,10 +201,6 @@ def recovery(frames: list[Frame], ends: list[dict], host_stalls=()) -> tuple[Inv
                 worst.add(e["t_end"], 0, f"{chip} after {e['kind']} at {e['t_end']:.3f} s: {ms:.1f} ms")
             worst.count = max(worst.count, ms)
     return worst, rows
-
-
-#: ORIENTATION flags bit 3: the firmware's start-up convergence (after power-up, a reset or SET_BOARD)
-CONVERGING = 0x08
 
 
 def _quats(frames):
@@ -235,17 +226,6 @@ def _at(t: float, tt: np.ndarray, qq: np.ndarray, gap_s: float = 0.03, near_s: f
     q = -q if float(np.dot(p, q)) < 0 else q
     r = (1 - u) * p + u * q
     return r / np.linalg.norm(r)
-
-
-def _qmul(p, q) -> np.ndarray:
-    w1, x1, y1, z1 = p
-    w2, x2, y2, z2 = q
-    return np.array([w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2, w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
-                     w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2, w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2])
-
-
-def _conj(q) -> np.ndarray:
-    return np.asarray(q, float) * np.array([1.0, -1.0, -1.0, -1.0])
 
 
 def _angle_deg(p, q) -> float:
@@ -307,7 +287,7 @@ def orientation_excess(frames: list[Frame], ref: list[Frame], ends: list[dict], 
             continue
         row = {"kind": e["kind"], "chips": e["chips"], "t": round(t, 4)}
         t0 = e.get("t_start", e["t_end"])
-        conv = [bool(np.any(f[(tt >= t0 - 0.1) & (tt <= t + 0.1)] & CONVERGING)) for tt, f in ((ta, fa), (tb, fb))]
+        conv = [bool(np.any(f[(tt >= t0 - 0.1) & (tt <= t + 0.1)] & ORI_CONVERGING)) for tt, f in ((ta, fa), (tb, fb))]
         if any(conv):
             rows.append({**row, "excess_deg": None, "skipped": "converging ("
                          + " and ".join(n for n, c in zip(("device", "reference"), conv) if c) + ")"})
@@ -319,7 +299,7 @@ def orientation_excess(frames: list[Frame], ref: list[Frame], ends: list[dict], 
         if ba is not None and bb is not None:
             row["before_deg"] = round(_angle_deg(ba, bb), 2)
             if pa is not None and pb is not None:  # how far the fault moved the device against the reference
-                moved = _angle_deg(_qmul(_qmul(pa, _conj(pb)), _qmul(bb, _conj(ba))), np.array([1.0, 0, 0, 0]))
+                moved = _angle_deg(quat.mul(quat.mul(pa, quat.conj(pb)), quat.mul(bb, quat.conj(ba))), (1.0, 0.0, 0.0, 0.0))
                 row["moved_deg"] = round(moved, 2)
                 row["diff_deg"] = round(deg, 2)
                 deg = min(deg, moved)
@@ -341,7 +321,7 @@ def start_ups(frames: list[Frame], resets_t) -> list[dict]:
     starts = [0.0] + sorted(resets_t)
     for k, r in enumerate(starts):
         nxt = starts[k + 1] if k + 1 < len(starts) else math.inf
-        sel = np.flatnonzero((t > r) & (t < nxt) & ((flags & CONVERGING) == 0))
+        sel = np.flatnonzero((t > r) & (t < nxt) & ((flags & ORI_CONVERGING) == 0))
         out.append({"t": round(r, 4), "seconds": round(float(t[sel[0]] - r), 3) if len(sel) else None})
     return out
 

@@ -182,11 +182,7 @@ def _integrate(gyr_rad_s: np.ndarray, rate_hz: float, q0=(1.0, 0.0, 0.0, 0.0)) -
     k = 1
     while k < n:  # prefix[i] ← prefix[i-k] ⊗ prefix[i]: after the pass, each holds the product of 2k terms
         a, b = prefix[:-k].T, prefix[k:].T
-        prefix[k:] = np.column_stack([  # quat.multiply written on columns: no per-pass moveaxis/stack copies
-            a[0] * b[0] - a[1] * b[1] - a[2] * b[2] - a[3] * b[3],
-            a[0] * b[1] + a[1] * b[0] + a[2] * b[3] - a[3] * b[2],
-            a[0] * b[2] - a[1] * b[3] + a[2] * b[0] + a[3] * b[1],
-            a[0] * b[3] + a[1] * b[2] - a[2] * b[1] + a[3] * b[0]])
+        prefix[k:] = np.column_stack(quat.mul(a, b))  # on the columns: no per-pass moveaxis/stack copies
         k *= 2
     q[:] = quat.normalize(prefix)
     return q

@@ -13,18 +13,8 @@ from __future__ import annotations
 
 import math
 
+from sphere import quaternion
 from sphere.smoothing.registry import POSITION, make_filter
-
-
-def _qmul(p, q):
-    p0, p1, p2, p3 = p
-    q0, q1, q2, q3 = q
-    return (p0 * q0 - p1 * q1 - p2 * q2 - p3 * q3, p0 * q1 + p1 * q0 + p2 * q3 - p3 * q2,
-            p0 * q2 - p1 * q3 + p2 * q0 + p3 * q1, p0 * q3 + p1 * q2 - p2 * q1 + p3 * q0)
-
-
-def _conj(q):
-    return (q[0], -q[1], -q[2], -q[3])
 
 
 def log_deg(q):
@@ -79,11 +69,11 @@ class PoseFilter:
     def update(self, quat, dt_s: float, position=None):
         q = tuple(float(v) for v in quat)
         if self._q is not None:
-            step = log_deg(_qmul(q, _conj(self._q)))  # earth-frame turn since the last sample
+            step = log_deg(quaternion.mul(q, quaternion.conj(self._q)))  # earth-frame turn since the last sample
             self._r = [a + b for a, b in zip(self._r, step)]
         self._q = q
         smooth = self._orientation.update(self._r, dt_s)
-        out = _qmul(exp_deg([float(a) - b for a, b in zip(smooth, self._r)]), q)
+        out = quaternion.mul(exp_deg([float(a) - b for a, b in zip(smooth, self._r)]), q)
         if out[0] < 0:
             out = tuple(-v for v in out)
         pos = None

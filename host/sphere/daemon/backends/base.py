@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+from sphere.errors import SphereError
+
 BUTTONS = ("left", "right", "middle")
 
 
-class BackendUnavailable(Exception):
+class BackendUnavailable(SphereError):
     """This backend cannot start here; the message says why and what to do."""
 
 

@@ -7,9 +7,10 @@ import math
 import time
 
 from sphere import quaternion as quat
+from sphere.errors import SphereError
 
 
-class OutputUnavailable(Exception):
+class OutputUnavailable(SphereError):
     """This output cannot start here; the message says why and what to do."""
 
 

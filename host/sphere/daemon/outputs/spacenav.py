@@ -67,9 +67,10 @@ import struct
 import threading
 import time
 
+from sphere import quaternion
 from sphere.daemon.outputs.base import Output, OutputUnavailable
 from sphere.settings import Param, positive
-from sphere.smoothing.pose import _conj, _qmul, log_deg  # the per-sample tuple forms (no numpy)
+from sphere.smoothing.pose import log_deg
 
 # -- the protocol (libspnav src/proto.h) --
 UEV_MOTION, UEV_PRESS, UEV_RELEASE = 0, 1, 2
@@ -322,7 +323,7 @@ class SpnavMotion:
     def _puck(self, t_us):
         self._last_t = t_us
         q = self.quat
-        d = log_deg(_qmul(_conj(self.ref), q))  # the turn from the centre, reference frame
+        d = log_deg(quaternion.mul(quaternion.conj(self.ref), q))  # the turn from the centre, reference frame
         v = (math.radians(d[0]), math.radians(d[1]), math.radians(d[2]))
         angle = math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
         if angle <= self.dead:
@@ -343,7 +344,7 @@ class SpnavMotion:
         if w[0] * w[0] + w[1] * w[1] + w[2] * w[2] < self.still_rad * self.still_rad:
             return self._stop(t_us)
         ref = self.ref
-        rel = _qmul(_conj(ref), self.quat)  # body → reference frame
+        rel = quaternion.mul(quaternion.conj(ref), self.quat)  # body → reference frame
         k = dt * 1000.0 * self.direct_scale  # rad/s → mrad turned in this sample
         wr = _qrot(rel, (w[0] * k, w[1] * k, w[2] * k))
         acc = self._acc

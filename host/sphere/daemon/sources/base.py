@@ -24,18 +24,15 @@ import logging
 import time
 from typing import Iterator
 
+from sphere.errors import LinkLost, SphereError
 from sphere.protocol import PROTOCOL_VERSION, DecodedPacket, Hello, PacketStream
 from sphere.protocol.packets import SUPPORTED_VERSIONS
 
 log = logging.getLogger("sphere.daemon.source")
 
 
-class SourceError(Exception):
+class SourceError(SphereError):
     """A source that cannot go on; the message says what to do. The daemon stops with it."""
-
-
-class LinkLost(Exception):
-    """The device went away (unplugged, out of range); the message says how it was noticed."""
 
 
 class SourceEnded(Exception):
