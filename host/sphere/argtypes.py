@@ -7,6 +7,8 @@ import argparse
 import math
 import os
 
+from sphere.link.port import check_baud
+
 
 def seconds(text: str, max_s: float = math.inf) -> float:
     """A finite number of seconds greater than 0 (and at most ``max_s``)."""
@@ -70,8 +72,6 @@ def at_least_one(text: str) -> int:
 
 def baud(text: str) -> int:
     """A serial baud rate (50 … 4,000,000)."""
-    from sphere.link.port import check_baud
-
     try:
         v = int(text)
     except ValueError:

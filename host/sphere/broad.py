@@ -11,6 +11,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from scipy.io import loadmat
 
 from sphere import quaternion as quat
 from sphere.errors import SphereError
@@ -81,8 +82,6 @@ def find_trial(name: str, directory: Path | str | None = None) -> Path:
 
 
 def load_trial(path: Path | str) -> Trial:
-    from scipy.io import loadmat  # imported here: the protocol side of the package never needs scipy
-
     path = Path(path)
     try:
         d = loadmat(str(path))

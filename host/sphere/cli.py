@@ -7,13 +7,14 @@ Modules are found by name, so adding a subcommand never means editing this file.
 from __future__ import annotations
 
 import argparse
-import errno
+import ast
 import importlib
-import os
 import pkgutil
 import sys
+from pathlib import Path
 
 from sphere import __version__, commands
+from sphere.errors import output_failed
 
 
 class _BrokenCommand:
@@ -32,35 +33,38 @@ class _BrokenCommand:
         return 1
 
 
-def _command_modules():
-    for info in sorted(pkgutil.iter_modules(commands.__path__), key=lambda i: i.name):
-        if info.name.startswith("_"):
-            continue
-        name = info.name.replace("_", "-")
-        try:
-            yield name, importlib.import_module(f"sphere.commands.{info.name}")
-        except Exception as e:  # one broken subcommand must not take the others down
-            yield name, _BrokenCommand(name, e)
+def _command_names() -> dict[str, str]:
+    """Subcommand name → module name, for every module of :mod:`sphere.commands`."""
+    return {info.name.replace("_", "-"): info.name
+            for info in sorted(pkgutil.iter_modules(commands.__path__), key=lambda i: i.name)
+            if not info.name.startswith("_")}
 
 
-#: errors of a write that failed because of where the output goes (a full disk, /dev/full, a dead terminal)
-OUTPUT_ERRNOS = (errno.ENOSPC, errno.EIO, errno.EFBIG, errno.EDQUOT, errno.EROFS)
-
-
-def output_failed(prog: str, e: BaseException) -> int | None:
-    """For an OSError of :data:`OUTPUT_ERRNOS`: one line on stderr and the exit status 1 (stdout is pointed at
-    /dev/null, so that Python's final flush does not fail again); None for any other error."""
-    if not isinstance(e, OSError) or e.errno not in OUTPUT_ERRNOS:
-        return None
+def _load(name: str, module_name: str):
     try:
-        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
-    except (OSError, ValueError, AttributeError):
+        return importlib.import_module(f"sphere.commands.{module_name}")
+    except Exception as e:  # one broken subcommand must not take the others down
+        return _BrokenCommand(name, e)
+
+
+def _help_of(module_name: str) -> str | None:
+    """A subcommand's ``HELP`` read from its source, without importing it (the listing of ``sphere --help``
+    then loads no subcommand's dependencies); None when it is not a plain string there."""
+    try:
+        source = Path(commands.__path__[0], f"{module_name}.py").read_text(encoding="utf-8")
+        for node in ast.parse(source).body:
+            if (isinstance(node, ast.Assign) and [getattr(t, "id", None) for t in node.targets] == ["HELP"]
+                    and isinstance(node.value, ast.Constant) and isinstance(node.value.value, str)):
+                return node.value.value
+    except (OSError, SyntaxError, UnicodeDecodeError):
         pass
-    print(f"{prog}: cannot write the output: {e.strerror}; make room (or write it somewhere else)", file=sys.stderr)
-    return 1
+    return None
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The parser of every subcommand; only ``command``'s module is imported and given its arguments (the
+    others are listed with their ``HELP``), so a subcommand starts without loading the others. With no
+    ``command`` every module is loaded."""
     parser = argparse.ArgumentParser(
         prog="sphere",
         description="Tools for the MARG sphere: decode and record its serial stream, evaluate fusion "
@@ -68,7 +72,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--version", action="version", version=f"sphere {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
-    for name, module in _command_modules():
+    for name, module_name in _command_names().items():
+        help_text = _help_of(module_name) if command is not None and name != command else None
+        if help_text is not None:
+            sub.add_parser(name, help=help_text, description=help_text)
+            continue
+        module = _load(name, module_name)
         p = sub.add_parser(name, help=module.HELP, description=getattr(module, "DESCRIPTION", module.HELP))
         try:
             module.add_arguments(p)
@@ -80,8 +89,14 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _command_in(argv: list[str]) -> str:
+    """The subcommand ``argv`` names (its first word that is not an option), or "" for none."""
+    return next((a for a in argv if not a.startswith("-")), "")
+
+
 def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
+    argv = sys.argv[1:] if argv is None else list(argv)
+    parser = build_parser(_command_in(argv))
     args = parser.parse_args(argv)
     if not getattr(args, "_run", None):
         parser.print_help(sys.stderr)

@@ -20,6 +20,8 @@ from pathlib import Path
 
 from tqdm import tqdm
 
+from sphere.protocol import FrameDecoder, TimeUnwrapper
+
 
 def enabled() -> bool:
     force = os.environ.get("SPHERE_PROGRESS")
@@ -43,7 +45,6 @@ def follow_capture(path, seconds: float, desc: str = "", poll_s: float = 0.25):
     if not enabled() or path is None:
         yield
         return
-    from sphere.protocol import FrameDecoder, TimeUnwrapper
 
     done = threading.Event()
 

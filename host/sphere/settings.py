@@ -24,8 +24,10 @@ import importlib
 import itertools
 import math
 
+from sphere.errors import SphereError
 
-class ParamError(ValueError):
+
+class ParamError(SphereError, ValueError):
     """A value a parameter does not take; the message is the reason (``must be between 1 and 5 Hz``)."""
 
 
@@ -204,7 +206,7 @@ def load(spec: str):
     return getattr(importlib.import_module(module), attr)
 
 
-class UnknownComponent(ValueError):
+class UnknownComponent(SphereError, ValueError):
     """A name no registry line has; the message lists the names there are."""
 
 

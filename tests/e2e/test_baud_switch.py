@@ -5,11 +5,9 @@ again at the restarted sphere's HELLO."""
 from __future__ import annotations
 
 import subprocess
-import sys
 import threading
 import time
 
-import pytest
 
 
 def test_sphere_mouse_switches_the_virtual_board_to_1m_and_follows_a_reset_back(tmp_path):

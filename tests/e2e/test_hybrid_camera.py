@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import json
 
-import numpy as np
 import pytest
 
 cv2 = pytest.importorskip("cv2", reason="opencv-python-headless (the camera extra) is part of the setup")

@@ -25,7 +25,7 @@ PX_PER_DEG = 1920 / 40.0  # the issue's scale: 40° per 1920 px (--set output.sc
 
 def hold_capture(path, script, seed=3, params=None):
     """A replayable capture of synthetic:hold with this script (HELLO, then RAW_SAMPLE at 200 Hz)."""
-    from sphere.bench.pointer import raw_packets
+    from sphere.sim.trace import raw_packets
     from sphere.sim.hold import hold_script
 
     h = hold_script(sum(step[1] for step in script), seed, params, script=script)
@@ -151,7 +151,7 @@ def test_stream_pose_jitter_from_the_websocket(tmp_path):
     from sphere.smoothing.pose import log_deg
 
     capture = tmp_path / "held.bin"
-    h = hold_capture(capture, [("rest", 4.5, "", 0.0, ""), ("held", 4.0, "", 0.0, "")])
+    hold_capture(capture, [("rest", 4.5, "", 0.0, ""), ("held", 4.0, "", 0.0, "")])
     proc = subprocess.Popen(
         [sys.executable, "-m", "sphere.mouse", "--replay", str(capture), "--speed", "1", "--backend", "log",
          "--stream-port", "0", "--config", os.devnull], stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True)

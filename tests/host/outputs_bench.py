@@ -680,7 +680,7 @@ def main(argv=None) -> int:
                "cost_pct": output_costs()}
     _print_spacenav(res["spacenav"])
     h = res["spacenav_hostile"]
-    print(f"hostile clients (random bytes, 1,000 connects, one that never reads) during a replay, pointer mode:")
+    print("hostile clients (random bytes, 1,000 connects, one that never reads) during a replay, pointer mode:")
     for label, target, value in (
             ("exit status", "0", h["hostile"]["rc"]),
             ("pointer moves, calm / hostile", "equal", f"{h['calm']['moves']} / {h['hostile']['moves']}"),

@@ -16,6 +16,8 @@ import pytest
 
 from sphere.daemon.scripted_sphere import script_bytes
 
+pytestmark = pytest.mark.slow  # a command per case, many in subprocesses (./scripts/test --quick leaves it out)
+
 REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 

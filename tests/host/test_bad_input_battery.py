@@ -28,6 +28,8 @@ import pytest
 
 from sphere.daemon.scripted_sphere import script_bytes
 
+pytestmark = pytest.mark.slow  # a command per case, many in subprocesses (./scripts/test --quick leaves it out)
+
 GOOD = script_bytes([("still", 0.3), ("turn", (0, 0, 1), 10.0, 0.3)])
 GARBAGE = bytes((i * 167 + 13) % 256 for i in range(4000))  # no frame delimiter pattern, no valid CRC
 UTF16 = b"\xff\xfe[\x00p\x00o\x00i\x00n\x00t\x00e\x00r\x00]\x00"

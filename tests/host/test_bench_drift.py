@@ -8,6 +8,7 @@ from sphere.bench import drift as D
 from sphere.sim import hold as H
 
 
+@pytest.mark.slow
 def test_warm_up_bias_starts_at_its_value_and_ramps_linearly_then_stays():
     script = H.long_hold_script(400.0, 3)
     h = H.hold_script(400.0, 3, H.WARM_UP, script=script)

@@ -83,6 +83,7 @@ def test_hold_trace_is_what_its_parameters_say():
             assert lo <= abs(p.rate_dps) <= hi
 
 
+@pytest.mark.slow
 def test_bench_pointer_command(tmp_path):
     from sphere.broad import BroadMissing
 
@@ -113,6 +114,7 @@ def test_bench_pointer_bad_filter_name_is_one_line():
     assert r.returncode == 2 and "unknown filter kalmann" in r.stderr and "Traceback" not in r.stderr
 
 
+@pytest.mark.slow
 def test_bench_pointer_pose_mode(tmp_path):
     """The 3-D stream's pose filter (the daemon's PoseFilter) on synthetic:hold: the issue's targets."""
     out = tmp_path / "pose.json"

@@ -120,6 +120,7 @@ def _synthetic_session(rng, rate=100.0):
     return np.vstack(acc), np.vstack(gyr), np.vstack(mag), dict(offset=offset, gbias=gbias, hard=hard)
 
 
+@pytest.mark.slow
 def test_calibrate_command_from_a_capture_file(tmp_path, capsys):
     import json
 
@@ -264,6 +265,7 @@ def test_field_coverage_and_the_turn_step():
     assert st.done and st.reason == "time" and st.coverage.bins_hit == 0
 
 
+@pytest.mark.slow
 def test_the_virtual_spheres_script_through_the_guided_steps():
     """synthetic:calibration in chip units (no board), fed to the steps as the samples would arrive:
     each step ends where the script says, the axis check passes (an aligned board), and the fits recover

@@ -51,6 +51,7 @@ def test_there_are_48_signed_permutations_24_of_them_rotations():
     assert all(np.isclose(abs(np.linalg.det(m)), 1) and np.allclose(m @ m.T, np.eye(3)) for m in allp)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("which", ["gyro", "mag", "both"])
 def test_every_signed_permutation_is_named(turns, which):
     """All 48 gyro maps (the magnetometer aligned), all 24 magnetometer rotations (the gyro aligned), and

@@ -36,6 +36,7 @@ def test_the_script_repeats():
     assert all(t1 - t0 >= session.STILL_S + 0.5 for n, t0, t1 in timeline[:22] if n[0] in "+-s")
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("join_s", [0.5, 7.0, 20.0, 40.0, 60.0])
 def test_every_step_finishes_within_a_round_of_joining(full, join_s):
     step = 0.1

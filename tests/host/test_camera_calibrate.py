@@ -27,6 +27,7 @@ def _views(tmp_path, n=10, texture=None):
         cv2.imwrite(str(tmp_path / f"view{k:02d}.png"), img)
 
 
+@pytest.mark.slow
 def test_calibrate_recovers_the_intrinsics(tmp_path, capsys):
     _views(tmp_path)
     (tmp_path / "not-a-board.png").write_bytes(cv2.imencode(".png", np.full((480, 640), 128, np.uint8))[1].tobytes())
@@ -59,6 +60,7 @@ def test_calibrate_says_what_is_wrong(tmp_path, capsys):
     assert e.value.code == 2 and "squares across" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_calibrate_with_a_charuco_board(tmp_path, capsys):
     from sphere.camera.intrinsics import charuco_board
 

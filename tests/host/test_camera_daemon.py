@@ -37,6 +37,7 @@ def test_bad_camera_settings_are_one_clear_line(tmp_path, daemon_source):
         daemon_source.CameraPosition.from_settings(cfg["camera"])
 
 
+@pytest.mark.slow
 def test_a_video_source_gives_positions(tmp_path, daemon_source):
     from sphere.camera import render
     from sphere.camera.model import Camera
@@ -62,6 +63,7 @@ def test_a_video_source_gives_positions(tmp_path, daemon_source):
     assert np.abs(err[:2]).max() < 0.003 and abs(err[2]) < 0.015
 
 
+@pytest.mark.slow
 def test_sphere_mouse_streams_the_ball_position_from_a_video(tmp_path):
     """sphere-mouse --replay CAPTURE --camera VIDEO: the 3-D stream's messages carry the ball's position (the
     daemon's whole path: config, the camera thread, the fusion per RAW_SAMPLE, the pose filter, the WebSocket)."""

@@ -24,6 +24,7 @@ def video(tmp_path_factory):
     return out, truth
 
 
+@pytest.mark.slow
 def test_track_a_video_file(video, capsys):
     path, truth = video
     assert main(["camera", "track", str(path)]) == 0

@@ -78,6 +78,7 @@ def test_a_hand_hides_the_ball_and_it_can_leave_the_frame():
     assert out.shape == (480, 640, 3)
 
 
+@pytest.mark.slow
 def test_chessboard_images_are_found_by_opencv():
     R = cv2.Rodrigues(np.array([0.3, -0.4, 0.1]))[0]
     img = render.render_board(CAM, R, np.array([-0.1, -0.07, 0.5]), 9, 6, 0.025)

@@ -15,6 +15,8 @@ import pytest
 
 from sphere.bench import daemon as bench
 
+pytestmark = pytest.mark.slow  # runs the benchmark (./scripts/test --quick leaves it out)
+
 ROOT = Path(__file__).resolve().parents[2]
 
 

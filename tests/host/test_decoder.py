@@ -5,6 +5,8 @@ import random
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+import pytest
+
 from sphere.protocol import FrameDecoder, encode_frame
 from sphere.protocol.decoder import decode_all
 from sphere.protocol.framing import MAX_ENCODED, encode_payload
@@ -104,6 +106,7 @@ corruption = st.one_of(
 )
 
 
+@pytest.mark.slow
 @settings(max_examples=300, suppress_health_check=[HealthCheck.too_slow])
 @given(st.lists(st.tuples(packets, st.lists(corruption, max_size=2)), min_size=1, max_size=25))
 def test_every_untouched_frame_is_decoded_and_nothing_raises(items):

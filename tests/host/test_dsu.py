@@ -16,6 +16,7 @@ from sphere.daemon.outputs.fanout import attach
 from sphere.daemon.outputs import dsu
 
 
+@pytest.mark.slow
 def test_a_replayed_turn_reaches_a_dsu_client(tmp_path):
     f = dsu_figures(run_dsu_turn(tmp_path))
     assert f["daemon_rc"] == 0
@@ -28,6 +29,7 @@ def test_a_replayed_turn_reaches_a_dsu_client(tmp_path):
     assert f["server_ignored"] == 2, f  # the foreign datagram and the truncated request
 
 
+@pytest.mark.slow
 def test_hostile_datagrams_change_nothing(tmp_path):
     h = run_dsu_hostile(tmp_path, 10000)
     assert h["calm"]["rc"] == 0 and h["flood"]["rc"] == 0 and not h["flood"]["traceback"], h

@@ -2,8 +2,6 @@
 on a pseudo-terminal (tests/host/stk500_model.py, from AVR061); the bytes the model received are compared
 with the image's Intel HEX records, then the command reads the HELLO (the spec's golden vector)."""
 
-import io
-import os
 import shutil
 import stat
 import subprocess
@@ -12,7 +10,6 @@ import pytest
 
 from sphere.link import bootloader
 from sphere.cli import main
-from sphere.commands import flash
 from sphere.paths import firmware_image
 from sphere.protocol.vectors import load_vectors
 
@@ -50,6 +47,7 @@ def board(request):
         b.close()
 
 
+@pytest.mark.slow
 @needs_avrdude
 @pytest.mark.parametrize("baud", [115200, 57600])
 def test_flash_detects_the_bootloader_writes_the_image_and_reads_the_hello(baud, board, hex_image, capsys):

@@ -3,7 +3,7 @@
 from hypothesis import given
 from hypothesis import strategies as st
 
-from sphere.protocol import MAX_FRAME, MAX_PAYLOAD, crc16, encode_frame
+from sphere.protocol import MAX_FRAME, MAX_PAYLOAD, crc16
 from sphere.protocol.framing import FrameTooLong, encode_payload
 from sphere.protocol.packets import RawSample, SetCalibration, CalibrationBlock
 

@@ -180,6 +180,7 @@ def _run(name, t, trial):
     return _err(registry.make_for_trial(name, t.gyr_rad_s, t.acc_m_s2, t.mag_uT, t.dt_s, **held_out(name, trial)), t)
 
 
+@pytest.mark.slow
 def test_kf_beats_madgwick_on_a_disturbed_slice():
     """While a magnet rides on the sensor (trial 32), the KF's robust measurement update beats Madgwick, each
     with the parameters chosen with trial 32 left out; host/docs/fusion.md has all twelve."""

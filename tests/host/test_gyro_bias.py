@@ -83,7 +83,8 @@ def test_implausible_bias_is_refused():
 def test_steady_turn_at_start_up_then_still_pointer_stops_within_5_s():
     """Issue 14's target through the daemon (SphereMouse.handle, memory backend): a steady 20 °/s turn during
     start-up with the compass silent, then put down: the pointer speed is < 5 px/s within 5 s."""
-    from sphere.bench.pointer import daemon, raw_packets
+    from sphere.bench.pointer import daemon
+    from sphere.sim.trace import raw_packets
 
     d = daemon()
     motion = T.rotation(3.0, rate_dps=20.0, still_s=0.0)

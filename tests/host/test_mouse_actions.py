@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from sphere.link.capture import DecodedPacket
-from sphere.daemon.actions import EventActions, MotionHistory
+from sphere.daemon.actions import MotionHistory
 from sphere.daemon.app import SphereMouse
 from sphere.daemon.backends.memory import RecordingBackend
 from sphere.daemon.config import Config

@@ -15,6 +15,7 @@ import threading
 import time
 import tty
 
+
 import pytest
 
 from sphere.daemon.app import SphereMouse
@@ -108,6 +109,7 @@ class StreamingSphere:
                     pass
 
 
+@pytest.mark.slow
 def test_a_port_held_by_another_program_is_never_touched(tmp_path):
     printer = Printer(tmp_path / "ttyUSB0")
     host = subprocess.Popen([sys.executable, "-c", HOST_PROGRAM, printer.slave_name, str(SECONDS + 1.0)],

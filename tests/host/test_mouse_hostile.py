@@ -3,7 +3,6 @@ a gyroscope that stops answering, signals while the pointer moves, a port held b
 
 from __future__ import annotations
 
-import asyncio
 import os
 import socket
 import threading
@@ -189,6 +188,7 @@ def _flood(port, attempts=2000, hold=200) -> list:
     return held
 
 
+@pytest.mark.slow
 def test_connection_flood_is_refused_and_the_server_keeps_serving(server):
     """2,000 connection attempts, many held open: beyond max_clients they are refused at once; afterwards a
     client still connects, and the log has a few lines, not a traceback per connection."""
@@ -339,6 +339,7 @@ def test_udev_rules_set_the_sphere_ftdi_latency_timer_only():
     assert "ATTRS{serial}" in rules[0]  # this sphere's adapter, not every FTDI chip
 
 
+@pytest.mark.slow
 def test_a_connection_flood_does_not_cost_the_sphere(tmp_path):
     """The daemon with its 3-D server and a sphere on a serial port: 2,000 connection attempts (200 held open)
     while the sphere is unplugged and plugged in again; the port reopens and the pointer moves on (1,100 held

@@ -5,6 +5,7 @@ Found in the source itself, so a copy written anew anywhere fails here."""
 from __future__ import annotations
 
 import ast
+import functools
 from collections import Counter
 from pathlib import Path
 
@@ -16,11 +17,10 @@ PACKAGE = Path(sphere.__file__).resolve().parent
 WRITTEN_OUT = {"fusion/sphere_filter.py": 5}
 
 
-def sources():
-    for path in sorted(PACKAGE.rglob("*.py")):
-        rel = path.relative_to(PACKAGE).as_posix()
-        if not rel.startswith("data/"):
-            yield rel, ast.parse(path.read_text(), rel)
+@functools.cache
+def sources() -> tuple:
+    return tuple((path.relative_to(PACKAGE).as_posix(), ast.parse(path.read_text(), str(path)))
+                 for path in sorted(PACKAGE.rglob("*.py")) if not path.relative_to(PACKAGE).as_posix().startswith("data/"))
 
 
 def _product(n) -> bool:

@@ -16,6 +16,8 @@ import pytest
 
 from sphere.paths import REPO_ROOT, broad_dir
 
+pytestmark = pytest.mark.slow  # builds and installs the wheel (./scripts/test --quick leaves it out)
+
 README = (REPO_ROOT / "README.md").read_text()
 
 

@@ -12,6 +12,8 @@ import threading
 import time
 import tty
 
+import pytest
+
 from sphere.daemon.scripted_sphere import hello_packet
 from sphere.protocol import Echo, FrameDecoder, RawSample, Reply, encode_frame
 
@@ -73,6 +75,7 @@ class AgedSphere:
                     return
 
 
+@pytest.mark.slow
 def test_sphere_monitor_shows_the_age_of_samples():
     dev = AgedSphere(8.0)
     r = subprocess.run([sys.executable, "-m", "sphere.cli", "monitor", "--port", dev.path, "--seconds", "6"],

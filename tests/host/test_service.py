@@ -5,6 +5,7 @@ import os
 import subprocess
 import sys
 from pathlib import Path
+import pytest
 
 
 def service(tmp_path, *args):
@@ -13,6 +14,7 @@ def service(tmp_path, *args):
                           env=env, timeout=60)
 
 
+@pytest.mark.slow
 def test_install_writes_a_unit_for_this_installation(tmp_path):
     r = service(tmp_path, "install")
     assert r.returncode == 0, r.stderr

@@ -32,6 +32,7 @@ def simple_example(tmp_path_factory):
     return compile_simple(tmp_path_factory.mktemp("spnav"))
 
 
+@pytest.mark.slow
 @needs_libspnav
 @pytest.mark.parametrize("protocol", [1, 0])
 def test_a_replayed_turn_reaches_libspnav_clients(tmp_path, simple_example, protocol):

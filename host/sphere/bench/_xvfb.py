@@ -9,8 +9,10 @@ import shutil
 import subprocess
 import time
 
+from sphere.errors import SphereError
 
-class XvfbUnavailable(Exception):
+
+class XvfbUnavailable(SphereError):
     """Xvfb is not installed or did not start; the message says what to do."""
 
 

@@ -16,6 +16,7 @@ skipped, and stale frames (a RAW_SAMPLE whose device time is not after the one b
 
 from __future__ import annotations
 
+import argparse
 import json
 import subprocess
 import sys
@@ -24,6 +25,12 @@ import time
 from pathlib import Path
 
 from sphere import argtypes
+from sphere.link.device import DeviceLink
+from sphere.link.port import open_port, request_low_latency
+from sphere.protocol import Echo, PacketStream, SetBaud
+from sphere.protocol.packets import DEFAULT_BAUD
+from sphere.sim import trace as T
+from sphere.sim.board import BoardUnavailable, board_command, firmware_elf, start_pty_board
 
 HELP = "SET_BAUD on the virtual board: switches and fall-backs, lost and stale frames counted"
 RATES = (250000, 500000, 1000000)
@@ -39,8 +46,6 @@ def add_arguments(p) -> None:
 
 
 def _rate(text: str) -> int:
-    import argparse
-
     b = argtypes.baud(text)
     if b not in RATES:
         raise argparse.ArgumentTypeError(f"baud {b}: SET_BAUD takes {', '.join(map(str, RATES))} (exact on 16 MHz)")
@@ -64,13 +69,6 @@ class Counter:
 
 
 def run(args) -> int:
-    from sphere.link.device import DeviceLink
-    from sphere.link.port import open_port, request_low_latency
-    from sphere.protocol import Echo, PacketStream, SetBaud
-    from sphere.protocol.packets import DEFAULT_BAUD
-    from sphere.sim import trace as T
-    from sphere.sim.board import BoardUnavailable, board_command, firmware_elf, start_pty_board
-
     seconds = 20 + args.rounds * 2.0
     try:
         elf = firmware_elf()

@@ -10,10 +10,18 @@ inflate them; the wall-clock figures are printed beside them.
 
 from __future__ import annotations
 
+import os
 import sys
 import time
 
 import numpy as np
+
+from sphere import broad
+from sphere.camera import trials
+from sphere.camera.detect import BallDetector
+from sphere.camera.evaluation import NOMINAL_CAMERA_LATENCY_S
+from sphere.camera.live import hint_from
+from sphere.fusion.hybrid import CameraImuTracker
 
 HELP = "ms per frame of detection + fusion at 640x480 on one core (also `sphere camera bench`)"
 
@@ -26,8 +34,6 @@ def add_arguments(p) -> None:
 
 
 def run(args) -> int:
-    from sphere import broad
-
     try:
         import cv2  # noqa: F401  (optional: the camera extra)
     except ImportError:
@@ -53,13 +59,7 @@ def run(args) -> int:
 
 
 def measure(trial: str = "10", start_s: float = 40.0, seconds: float = 5.0, distance_m: float = 1.0) -> dict:
-    import cv2
-
-    from sphere.camera import trials
-    from sphere.camera.detect import BallDetector
-    from sphere.camera.evaluation import NOMINAL_CAMERA_LATENCY_S
-    from sphere.camera.live import hint_from
-    from sphere.fusion.hybrid import CameraImuTracker
+    import cv2  # optional dependency: the camera extra (OpenCV)
 
     cv2.setNumThreads(1)
     rt = trials.rendered_trial(trial, start_s, seconds, distance_m=distance_m, jpeg_quality=85)  # as MJPG sends them
@@ -105,8 +105,6 @@ def measure(trial: str = "10", start_s: float = 40.0, seconds: float = 5.0, dist
 
 def _load():
     try:
-        import os
-
         return os.getloadavg()[0]
     except (OSError, AttributeError):
         return None

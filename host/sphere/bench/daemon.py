@@ -33,11 +33,13 @@ from __future__ import annotations
 import argparse
 import glob
 import json
+import multiprocessing as mp
 import os
-import statistics
 import select
+import statistics
 import subprocess
 import sys
+import tempfile
 import threading
 import time
 import tty
@@ -50,6 +52,10 @@ try:
     from sphere.errors import SphereError
 except ImportError:  # --against a revision from before sphere.errors
     SphereError = Exception
+from sphere.daemon.app import SphereMouse
+from sphere.daemon.backends.memory import RecordingBackend
+from sphere.daemon.config import Config, parse_set
+from sphere.daemon.sources import SerialSource
 from sphere.protocol import FrameDecoder
 
 
@@ -59,8 +65,6 @@ class PtySphere:
     ``time.perf_counter_ns`` is CLOCK_MONOTONIC on Linux, the same clock in both processes."""
 
     def __init__(self, rate_hz: float, seconds: float, orientation: bool = False):
-        import multiprocessing as mp
-
         ctx = mp.get_context("fork")
         self.master, slave = os.openpty()
         tty.setraw(slave)
@@ -132,10 +136,6 @@ def percentile(sorted_values, p):
 
 
 def latency(seconds: float, rate: float, orientation: bool, settings: dict | None = None):
-    from sphere.daemon.app import SphereMouse
-    from sphere.daemon.backends.memory import RecordingBackend
-    from sphere.daemon.sources import SerialSource
-
     dev = PtySphere(rate, seconds, orientation)
     source = SerialSource(dev.path, hello_timeout_s=0.1, link_timeout_s=5.0)
     cfg = _config(settings)
@@ -250,11 +250,8 @@ def work_per_frame_us(frames: int = 12000, passes: int = 3, settings: dict | Non
     """CPU µs per frame of the daemon's own work, in this process with no pty and no other thread: decoding and
     ``SphereMouse.handle`` (deferred work included) over ``frames`` frames of the same steady turn, best of
     ``passes``. Far steadier than a process's CPU share, which the pty's wake-ups dominate."""
-    from sphere.daemon.app import SphereMouse
-    from sphere.daemon.backends.memory import RecordingBackend
-
     try:
-        from sphere.protocol import PacketStream
+        from sphere.protocol import PacketStream  # --against: an older revision may lack it (see below)
 
         def stream():
             return PacketStream().feed
@@ -295,8 +292,6 @@ def work_per_frame_us(frames: int = 12000, passes: int = 3, settings: dict | Non
 
 def _settings(set_items) -> dict:
     """``--set`` items as a config override (checked against the daemon's config: a bad one is an error)."""
-    from sphere.daemon.config import Config, parse_set
-
     settings = parse_set(list(set_items)) if set_items else {}
     if settings:
         Config().with_overrides(settings, "--set")
@@ -305,8 +300,6 @@ def _settings(set_items) -> dict:
 
 def _config(settings: dict | None):
     """The daemon's default config with the 3-D stream (a separate server) off, and ``settings`` over it."""
-    from sphere.daemon.config import Config
-
     cfg = Config().with_overrides({"stream": {"enabled": False}}, "bench")
     return cfg.with_overrides(settings, "--set") if settings else cfg
 
@@ -385,8 +378,6 @@ DEFAULT_SIDE = "default"
 
 
 def against(args) -> int:
-    import tempfile
-
     here = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))  # .../host
     with tempfile.TemporaryDirectory(prefix="sphere-bench-") as tmp:
         # "default": this tree without the --set settings (what a setting, say an output switched on, costs)

@@ -49,6 +49,16 @@ from pathlib import Path
 import numpy as np
 
 from sphere import argtypes
+from sphere.bench._xvfb import Xvfb as _Server
+from sphere.bench._xvfb import XvfbUnavailable
+from sphere.bench.pointer import Recording, _low_pass, daemon, ideal_path, turn_figures
+from sphere.daemon.config import Config, ConfigError, parse_set
+from sphere.daemon.motion import up_from_quat
+from sphere.daemon.pointer import PointerMapper, PointerSettings
+from sphere.protocol import PacketStream, RawSample
+from sphere.sim import hold as H
+from sphere.sim import trace as T
+from sphere.sim.board import firmware_elf, run_board
 
 HELP = "pointer drift and overshoot through the real firmware: start-up turns, stops per band, a 10-minute hold"
 
@@ -93,8 +103,6 @@ class Scenario:
 
 
 def scenario(name: str, seed: int) -> Scenario:
-    from sphere.sim import hold as H
-
     if name.startswith("startup"):
         rate = STARTUP_RATE_DPS * (1 if seed % 2 else -1)
         script = H.startup_turn_script(rate, STARTUP_TURN_S, STARTUP_STILL_S)
@@ -115,9 +123,6 @@ def scenario(name: str, seed: int) -> Scenario:
 
 def firmware_capture(sc: Scenario, keep: Path | None = None) -> bytes:
     """The real firmware's UART bytes for this motion on the virtual board (reused from ``keep`` if there)."""
-    from sphere.sim import trace as T
-    from sphere.sim.board import firmware_elf, run_board
-
     cached = keep / f"{sc.name}-{sc.seed}.bin" if keep else None
     if cached is not None and cached.exists():
         return cached.read_bytes()
@@ -140,9 +145,6 @@ def firmware_capture(sc: Scenario, keep: Path | None = None) -> bytes:
 def daemon_path(capture: bytes, cfg=None) -> np.ndarray:
     """(t_s device time, x, y, x exact, y exact) after every RAW_SAMPLE: SphereMouse.handle on the memory backend
     (exact = with the mapper's sub-pixel remainder)."""
-    from sphere.bench.pointer import daemon
-    from sphere.protocol import PacketStream, RawSample
-
     d = daemon(cfg)
     out = []
     for dp in PacketStream().feed(capture):
@@ -160,8 +162,6 @@ class Xvfb:
     SIZE = (8192, 8192)
 
     def __enter__(self):
-        from sphere.bench._xvfb import Xvfb as _Server, XvfbUnavailable
-
         try:
             self.server = _Server(*self.SIZE, depth=8)
         except XvfbUnavailable as e:
@@ -180,7 +180,7 @@ class PointerSampler:
     whole instead of stopping at the edge."""
 
     def __init__(self, display_name: str, start=(4096, 4096), margin: int = 200):
-        from Xlib import display
+        from Xlib import display  # optional dependency: the daemon extra (python-xlib)
 
         self.d = display.Display(display_name)
         self.root = self.d.screen().root
@@ -301,8 +301,6 @@ def on_grid(path: np.ndarray, seconds: float, cols=(1, 2)) -> np.ndarray:
 
 
 def _recording(sc: Scenario, n: int):
-    from sphere.bench.pointer import Recording, _low_pass, ideal_path
-
     h = sc.hold
     r = Recording(f"{sc.name}:{sc.seed}", "hold", [], phases=h.phases)
     r.ideal_px = ideal_path(h.quat_enu, h.motion.rate_hz, n)
@@ -332,10 +330,6 @@ def reference_pointer(sc: Scenario, n: int, cfg=None) -> np.ndarray:
     """(n, 2) the pointer the daemon's own mapper (smoothing, tightening, scale) gives for the sphere's true
     rates — no bias, no noise, the true vertical: what a perfect bias estimate would show. The pointer minus
     this is what the host adds (its bias, the sensors' noise), without the hand's own slow motion."""
-    from sphere.daemon.config import Config
-    from sphere.daemon.motion import up_from_quat
-    from sphere.daemon.pointer import PointerMapper, PointerSettings
-
     cfg = cfg or Config()
     h = sc.hold
     k = int(round(h.motion.rate_hz / RATE_HZ))
@@ -361,8 +355,6 @@ def stops_figures(sc: Scenario, xy: np.ndarray, exact: np.ndarray, cfg=None) -> 
     follow) and ``host_drift_px_s`` relative to the reference pointer (what the host adds); ``overshoot_px``
     (turns of 10 °/s and more) past the settled end point in the 0.5 s after the stop. On a turntable
     (``stops-clean``) the three are the pointer's own."""
-    from sphere.bench.pointer import turn_figures
-
     rec = _recording(sc, len(xy))
     clean = sc.name == "stops-clean"
     rec.kind = "clean" if clean else "hold"
@@ -439,8 +431,6 @@ def summary(results: dict) -> dict:
 
 def _config(settings):
     """The daemon's default config with ``--set`` items over it (a bad one raises ConfigError: one line)."""
-    from sphere.daemon.config import Config, parse_set
-
     return Config().with_overrides(parse_set(list(settings)), "--set") if settings else Config()
 
 
@@ -462,8 +452,6 @@ def ratios(summary_f: dict) -> dict:
 
 
 def run(args) -> int:
-    from sphere.daemon.config import ConfigError
-
     try:
         seeds = [int(s) for s in str(args.seeds).split(",") if s.strip()]
     except ValueError:

@@ -16,13 +16,24 @@ hybrid-eval; the issue's target is ≤ 1.3.
 
 from __future__ import annotations
 
+import asyncio
 import json
+import os
+import re
+import shutil
+import subprocess
 import sys
 import tempfile
 from pathlib import Path
 from types import SimpleNamespace
 
+import numpy as np
+
 from sphere import argtypes
+from sphere.camera import evaluation as ev
+from sphere.camera import trials
+from sphere.camera.trials import SESSION_IMU_LATENCY_S
+from sphere.commands.hybrid_eval import DEFAULT_TRIALS, _parse, refused
 
 HELP = "sphere-mouse --replay of rendered sessions (position from the WebSocket) vs sphere hybrid-eval, as ratios"
 
@@ -31,8 +42,6 @@ FIELDS = ("rmse_lateral_m", "rmse_depth_m", "jitter_lateral_m", "jitter_depth_m"
 
 
 def add_arguments(p) -> None:
-    from sphere.commands.hybrid_eval import DEFAULT_TRIALS
-
     p.add_argument("--trials", default=DEFAULT_TRIALS, help=f"trial:start_s stretches (default {DEFAULT_TRIALS}, hybrid-eval's)")
     p.add_argument("--seconds", type=argtypes.seconds, default=12.0, help="length of each stretch (default 12, at least 9)")
     p.add_argument("--speed", type=argtypes.non_negative, default=0.0,
@@ -44,11 +53,6 @@ def add_arguments(p) -> None:
 
 def replay(session, speed: float, home, extra_args=()) -> list[dict]:
     """Every ``orientation`` message of `sphere-mouse --replay SESSION` on its WebSocket, until it ends."""
-    import asyncio
-    import os
-    import re
-    import subprocess
-
     from websockets.asyncio.client import connect
 
     proc = subprocess.Popen([sys.executable, "-m", "sphere.mouse", "--replay", str(session), "--speed", f"{speed:g}",
@@ -86,11 +90,6 @@ def replay(session, speed: float, home, extra_args=()) -> list[dict]:
 
 def score_messages(messages, rt, lead_s: float, hybrid_eval_run):
     """hybrid-eval's figures for the daemon's positions (the messages' device times mapped to the stretch)."""
-    import numpy as np
-
-    from sphere.camera import evaluation as ev
-    from sphere.camera.trials import SESSION_IMU_LATENCY_S
-
     rows = [(m["t_us"] * 1e-6 - 1.0 - lead_s + SESSION_IMU_LATENCY_S, m["position"], m.get("camera") or {})
             for m in messages if m.get("t_us") is not None]
     rows = [r for r in rows if 0.0 <= r[0] <= rt.duration_s]
@@ -109,16 +108,10 @@ def score_messages(messages, rt, lead_s: float, hybrid_eval_run):
 
 
 def run(args) -> int:
-    from sphere.commands.hybrid_eval import _parse, refused
-
     stretches = _parse(args.trials)
     code = refused("sphere bench hybrid-replay", args.seconds, [n for n, _ in stretches])
     if code is not None:
         return code
-    import numpy as np
-
-    from sphere.camera import evaluation as ev
-    from sphere.camera import trials
 
     occl = trials.eval_occlusions()
     tmp = tempfile.TemporaryDirectory(prefix="sphere-hybrid-replay-")
@@ -139,8 +132,6 @@ def run(args) -> int:
             evf = ev.method_figures(r, rt, r.est["hybrid"])
             session = folder / f"{rt.name}-{start:g}"
             if session.exists():
-                import shutil
-
                 shutil.rmtree(session)
             bases = trials.write_session(rt, session)
             messages = replay(session, args.speed, folder)

@@ -31,9 +31,10 @@ simulated time) is how late it was, left out of ``total`` and printed so that a 
 
 from __future__ import annotations
 
+import argparse
 import json
 import os
-import statistics
+import re
 import subprocess
 import sys
 import tempfile
@@ -45,7 +46,12 @@ from pathlib import Path
 import numpy as np
 
 from sphere import argtypes
+from sphere.bench._xvfb import PointerReader, Xvfb, XvfbUnavailable
+from sphere.protocol import FrameDecoder, RawSample
 from sphere.protocol.packets import FAST_BAUDS
+from sphere.sim import onsets as O
+from sphere.sim import trace as T
+from sphere.sim.board import board_command, firmware_elf, start_pty_board
 
 HELP = ("motion onset -> X pointer move through the virtual board: each USB adapter model and baud, "
         "sphere-mouse --backend x11 on Xvfb, latency per stage (percentiles)")
@@ -73,8 +79,6 @@ def add_arguments(p) -> None:
 
 
 def _adapter_list(text: str) -> list[str]:
-    import argparse
-
     names = [n.strip() for n in text.split(",") if n.strip()]
     bad = [n for n in names if n not in ADAPTERS]
     if bad or not names:
@@ -84,8 +88,6 @@ def _adapter_list(text: str) -> list[str]:
 
 
 def _baud_list(text: str) -> list[int]:
-    import argparse
-
     bauds = [argtypes.baud(b.strip()) for b in text.split(",") if b.strip()]
     if not bauds:
         raise argparse.ArgumentTypeError(f"no baud rate in {text!r}: e.g. 115200 or 115200,1000000")
@@ -136,8 +138,6 @@ class Frame:
 
 def frames_of(capture: bytes, log: HostLog) -> list[Frame]:
     """Every frame the host received, in order, with its times at the UART and at the pty."""
-    from sphere.protocol import FrameDecoder, RawSample
-
     chunks = capture.split(b"\x00")[:-1]  # one per delimiter (the text after the last one is unfinished)
     decoder = FrameDecoder("device")
     out, u = [], 0
@@ -219,7 +219,6 @@ class PointerRecorder(threading.Thread):
 
     def __init__(self, display: str):
         super().__init__(daemon=True)
-        from sphere.bench._xvfb import PointerReader
 
         self.reader = PointerReader(display)
         self.stop = threading.Event()
@@ -246,8 +245,6 @@ class PointerRecorder(threading.Thread):
 
 
 def run_row(name: str, baud: int, trace: Path, onsets_s, seconds: float, display: str, tmp: Path, elf) -> dict:
-    from sphere.sim.board import board_command, start_pty_board
-
     adapter, low_latency = ADAPTERS[name]
     log_path, cap_path = tmp / f"{name}-{baud}.log", tmp / f"{name}-{baud}.cap"
     board, pty = start_pty_board(board_command(elf, trace, seconds, capture=cap_path, pty=True, adapter=adapter,
@@ -321,10 +318,6 @@ def true_ages(frames: list[Frame], log: HostLog, from_ns: int, to_ns: int) -> li
 def monitor_check(trace: Path, seconds: float, tmp: Path, elf) -> dict:
     """`sphere monitor` on the FTDI board (low latency, 115200): its last view's sample age against the truth of the
     board's log over the same last 2 s."""
-    import re
-
-    from sphere.sim.board import board_command, start_pty_board
-
     log_path, cap_path = tmp / "monitor.log", tmp / "monitor.cap"
     board, pty = start_pty_board(board_command(elf, trace, seconds, capture=cap_path, pty=True, adapter="ftdi",
                                                host_log=log_path))
@@ -353,11 +346,6 @@ def monitor_check(trace: Path, seconds: float, tmp: Path, elf) -> dict:
 
 
 def run(args) -> int:
-    from sphere.bench._xvfb import Xvfb, XvfbUnavailable
-    from sphere.sim import onsets as O
-    from sphere.sim import trace as T
-    from sphere.sim.board import firmware_elf
-
     onsets_s = O.onset_times(args.seconds, args.seed)
     if not len(onsets_s):
         print(f"sphere bench latency: --seconds {args.seconds:g} leaves no onset (the first comes at "

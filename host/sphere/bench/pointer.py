@@ -50,7 +50,18 @@ import numpy as np
 
 from sphere import argtypes
 from sphere import quaternion as quat
-from sphere.protocol.packets import RAW_ACCEL_OK, RAW_GYRO_OK, RAW_MAG_FRESH, RAW_MAG_OK
+from sphere.broad import BroadMissing, load_trial, trial_paths
+from sphere.daemon.app import SphereMouse
+from sphere.daemon.backends.memory import RecordingBackend
+from sphere.daemon.config import Config
+from sphere.daemon.pointer import PointerMapper, PointerSettings
+from sphere.progress import bar
+from sphere.sim import trace as T
+from sphere.sim.hold import hold_script, with_params
+from sphere.sim.trace import raw_packets
+from sphere.smoothing.pose import PoseFilter, log_deg
+from sphere.smoothing.registry import DEFAULT, FILTERS, grid
+from sphere.smoothing.registry import DEFAULT as default
 
 HELP = "pointer tremor, jitter, lag per band, overshoot and drift for every smoothing filter, through the daemon's path"
 
@@ -94,26 +105,6 @@ class Recording:
     poses: list = field(default_factory=list)  # [(t_us, quat)] the host filter's pose as the daemon publishes it
 
 
-def raw_packets(motion, rate_hz: float = RATE_HZ):
-    """(t_us, RawSample) at the gyro's rate from a motion, through the chip models' units and rates."""
-    from sphere.protocol import RawSample
-    from sphere.sim import trace as T
-
-    ct = T.to_chips(motion)
-    n = min(len(ct.accel_lsb), len(ct.gyro_lsb))
-    last_mag = -1
-    out = []
-    for i in range(n):
-        t = i / ct.gyro_rate_hz
-        m = min(int(t * ct.mag_rate_hz), len(ct.mag_lsb) - 1)
-        flags = RAW_ACCEL_OK | RAW_GYRO_OK | RAW_MAG_OK | (RAW_MAG_FRESH if m != last_mag else 0)
-        last_mag = m
-        t_us = int(round(1_000_000 + t * 1e6))
-        out.append((t_us, RawSample(t_us=t_us & 0xFFFFFFFF, flags=flags, accel=tuple(int(v) for v in ct.accel_lsb[i]),
-                                    gyro=tuple(int(v) for v in ct.gyro_lsb[i]), mag=tuple(int(v) for v in ct.mag_lsb[m]))))
-    return out
-
-
 class _InputRecorder:
     """Stands in for the daemon's mapper while the motion is played: keeps what it is given."""
 
@@ -130,10 +121,6 @@ class _InputRecorder:
 
 def daemon(cfg=None):
     """A SphereMouse on the memory backend (1920 px wide), as `sphere-mouse` builds it."""
-    from sphere.daemon.app import SphereMouse
-    from sphere.daemon.backends.memory import RecordingBackend
-    from sphere.daemon.config import Config
-
     return SphereMouse(cfg or Config(), None, RecordingBackend((1920, 1080)), log=lambda m: None)
 
 
@@ -149,8 +136,6 @@ def record(name: str, kind: str, motion, **known) -> Recording:
 
 
 def px_per_deg() -> float:
-    from sphere.daemon.pointer import PointerSettings
-
     return 1920.0 / PointerSettings().slow_deg_per_width
 
 
@@ -174,8 +159,6 @@ def _low_pass(x: np.ndarray, corner_hz: float) -> np.ndarray:
 
 
 def hold_recordings(seeds, seconds: float = HOLD_SECONDS) -> list[Recording]:
-    from sphere.sim.hold import hold_script, with_params
-
     out = []
     for seed in seeds:
         for kind, params in (("hold", None), ("clean", with_params(tremor_rms_deg=0.0, wander_rms_deg=0.0))):
@@ -189,9 +172,6 @@ def hold_recordings(seeds, seconds: float = HOLD_SECONDS) -> list[Recording]:
 
 
 def broad_recordings(paths, seconds: float | None, noise_dps: float = ITG3200_NOISE_DPS, seed: int = 7) -> list[Recording]:
-    from sphere.broad import load_trial
-    from sphere.sim import trace as T
-
     out = []
     for path in paths:
         trial = load_trial(path)
@@ -208,8 +188,6 @@ def broad_recordings(paths, seconds: float | None, noise_dps: float = ITG3200_NO
 
 
 def with_breaks_trials(directory=None):
-    from sphere.broad import trial_paths
-
     paths = trial_paths(directory)
     meta = paths[0].parent / "trials.json"
     if meta.exists():
@@ -218,8 +196,6 @@ def with_breaks_trials(directory=None):
     else:
         chosen = [p for p in paths if "with_breaks" in p.stem]
     if not chosen:
-        from sphere.broad import BroadMissing
-
         raise BroadMissing(f"no trial of the with_breaks group in {paths[0].parent}")
     return chosen
 
@@ -230,8 +206,6 @@ def with_breaks_trials(directory=None):
 def pointer_paths(rec: Recording, smoothing: str, params: dict | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The pointer (px, summed integer steps) the daemon's mapper gives for these inputs, and the same plus
     the mapper's sub-pixel remainder (where the pointer is heading between whole pixels)."""
-    from sphere.daemon.pointer import PointerMapper, PointerSettings
-
     mapper = PointerMapper(PointerSettings(smoothing=smoothing, smoothing_params=params), 1920)
     update = mapper.update
     rem = mapper.remainder
@@ -245,10 +219,6 @@ def pointer_paths(rec: Recording, smoothing: str, params: dict | None = None) ->
         out[i] = x, y
         exact[i] = x + rem[0], y + rem[1]
     return out, exact
-
-
-def pointer_path(rec: Recording, smoothing: str, params: dict | None = None) -> np.ndarray:
-    return pointer_paths(rec, smoothing, params)[0]
 
 
 # ---------------------------------------------------------------- figures
@@ -376,10 +346,6 @@ def figures(recs: list[Recording], paths: list[np.ndarray], exact: list[np.ndarr
     return f
 
 
-def meets(f: dict) -> bool:
-    return all(f[k] <= v for k, v in TARGETS.items())
-
-
 def badness(f: dict, targets: dict = TARGETS) -> float:
     return max((max(f[k], 0.0) if k == "fine_minus_fast_ms" else f[k]) / v for k, v in targets.items())
 
@@ -419,8 +385,6 @@ def _row(label: str, f: dict, params: dict) -> str:
 def pose_path(rec: Recording, name: str, params: dict | None = None) -> np.ndarray:
     """The pose the daemon streams (its PoseFilter, as in SphereMouse) as rotation vectors (°, earth frame)
     relative to the first pose, continuous (unwrapped sample to sample)."""
-    from sphere.smoothing.pose import PoseFilter, log_deg
-
     f = PoseFilter(name, **(params or {}))
     out = np.zeros((len(rec.poses), 3))
     r = np.zeros(3)
@@ -472,8 +436,6 @@ POSE_TARGETS = {"still_jitter_deg": 0.05, "held_jitter_deg": 0.1, "lag_slow_ms":
 
 
 def run_pose(args, names) -> int:
-    from sphere.smoothing.registry import DEFAULT as default
-
     recs = hold_recordings(TEST_SEEDS[: args.seeds])
     print(f"3-D stream pose on synthetic:hold seeds {', '.join(map(str, TEST_SEEDS[: args.seeds]))} (each filter's "
           f"defaults; lag against the unfiltered pose); targets: still ≤ {POSE_TARGETS['still_jitter_deg']}°, held ≤ "
@@ -494,9 +456,6 @@ def run_pose(args, names) -> int:
 
 
 def run(args) -> int:
-    from sphere.broad import BroadMissing
-    from sphere.smoothing.registry import DEFAULT, FILTERS, grid
-
     names = args.filters.split(",") if args.filters else list(FILTERS)
     unknown = [f for f in names if f not in FILTERS]
     if unknown:
@@ -517,7 +476,6 @@ def run(args) -> int:
     train = hold_recordings(TRAIN_SEEDS[: args.seeds]) + broad_recordings(trials[:1], args.seconds)
     test = hold_recordings(TEST_SEEDS[: args.seeds]) + broad_recordings(trials[1:], args.seconds)
     results = {}
-    from sphere.progress import bar
 
     work = {name: [None] if args.no_tune else [None] + list(grid(name)) for name in names}
     with bar(total=sum(len(v) + 2 for v in work.values()), desc="bench pointer", unit="run") as runs:

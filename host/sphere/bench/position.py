@@ -20,7 +20,14 @@ import json
 import math
 import sys
 
-from sphere import argtypes
+import numpy as np
+
+from sphere import argtypes, broad
+from sphere.camera import evaluation as ev
+from sphere.camera import trials
+from sphere.commands.hybrid_eval import _parse, refused
+from sphere.smoothing.pose import PoseFilter
+from sphere.smoothing.registry import POSITION, POSITION_DEFAULT
 
 HELP = "position smoothing of the 3-D stream: RMSE, jitter, lag per filter, cross-validated on rendered trials"
 
@@ -46,16 +53,11 @@ def add_arguments(p) -> None:
 
 
 def _stretches(text: str):
-    from sphere.commands.hybrid_eval import _parse
-
     return _parse(text)
 
 
 def render_runs(stretches, seconds: float, seed: int):
     """[(name, Run, RenderedTrial)] of the hybrid tracker on each rendered stretch (hybrid-eval's scene)."""
-    from sphere.camera import evaluation as ev
-    from sphere.camera import trials
-
     occl = trials.eval_occlusions()
     out = []
     for name, start in stretches:
@@ -66,10 +68,6 @@ def render_runs(stretches, seconds: float, seed: int):
 
 def smoothed(run, name: str, params: dict):
     """The hybrid's output through the daemon's PoseFilter with position filter ``name``."""
-    import numpy as np
-
-    from sphere.smoothing.pose import PoseFilter
-
     f = PoseFilter("none", (name, params))
     est = run.est["hybrid"]
     out = np.full_like(est, np.nan)
@@ -86,8 +84,6 @@ def smoothed(run, name: str, params: dict):
 def score(figs: list) -> tuple[float, dict]:
     """(worst ratio to the targets, mean figures) over [(figures, targets, the unfiltered figures)] of the
     stretches."""
-    import numpy as np
-
     mean, ratios = {}, []
     for k in TARGETS:
         have = [(f[k], t[k]) for f, t, _ in figs if f.get(k) is not None]
@@ -102,21 +98,15 @@ def score(figs: list) -> tuple[float, dict]:
 
 
 def evaluate(runs, name: str, params: dict):
-    from sphere.camera import evaluation as ev
-
     return score([(ev.method_figures(r, rt, smoothed(r, name, params)), targets(rt.name),
                    ev.method_figures(r, rt, r.est["hybrid"])) for _, r, rt in runs])
 
 
 def run(args) -> int:
-    from sphere.commands.hybrid_eval import refused
-
     code = refused("sphere bench position", args.seconds,
                    [n for n, _ in _stretches(args.train) + _stretches(args.test)])
     if code is not None:
         return code
-    from sphere import broad
-    from sphere.smoothing.registry import POSITION, POSITION_DEFAULT
 
     try:
         train = render_runs(_stretches(args.train), args.seconds, TRAIN_SEED)

@@ -18,25 +18,21 @@ import argparse
 import numpy as np
 
 from sphere import argtypes
+from sphere.fusion import registry
+from sphere.fusion.stress import KINDS, SECONDS, score, trace
 
 HELP = "stress traces (magnets, fast turns then rest, shaking): the daemon's filters as ratios to VQF"
 
 
 def _kinds():
-    from sphere.fusion.stress import KINDS
-
     return KINDS
 
 
 def _filters():
-    from sphere.fusion import registry
-
     return registry.FILTERS
 
 
 def add_arguments(p) -> None:
-    from sphere.fusion.stress import KINDS
-
     p.add_argument("--seeds", type=argtypes.at_least_one, default=30, help="seeds per kind (default 30)")
     p.add_argument("--first", type=lambda t: argtypes.count(t, 0), default=1000, help="first seed (default 1000)")
     p.add_argument("--kinds", type=argtypes.names_of(_kinds, "stress kind"), default=list(KINDS),
@@ -49,8 +45,6 @@ def add_arguments(p) -> None:
 
 def scores(kinds, seeds, filters, mag: bool = True) -> dict:
     """{kind: {filter: [errors per seed]}}: each filter as the registry builds it on each (kind, seed) trace."""
-    from sphere.fusion.stress import score, trace
-
     out = {}
     for kind in kinds:
         out[kind] = {f: [] for f in filters}
@@ -62,8 +56,6 @@ def scores(kinds, seeds, filters, mag: bool = True) -> dict:
 
 
 def format_scores(res: dict, seeds, ref: str = "vqf", metric: str = "total") -> str:
-    from sphere.fusion.stress import SECONDS
-
     filters = list(next(iter(res.values())))
     lines = [f"stress traces: {len(seeds)} seeds ({seeds[0]}-{seeds[-1]}) per kind, {SECONDS:g} s each; mean total "
              f"RMSE (°) over the seeds (heading / inclination); ratio = mean {metric} / {ref}'s, worst = the largest "

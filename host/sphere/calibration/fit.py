@@ -20,6 +20,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.optimize import least_squares
 
 from sphere import chips
 
@@ -99,8 +100,6 @@ def gyro_bias(gyro_lsb, max_std_lsb: float = 30.0) -> GyroBias:
 def accel_six_position(pose_means_lsb) -> AccelCalibration:
     """Offset and gain per axis from the mean accelerometer reading of each still pose (≥ 6 poses,
     each axis once pointing up and once down)."""
-    from scipy.optimize import least_squares
-
     m = np.asarray(pose_means_lsb, float)
     if m.ndim != 2 or m.shape[1] != 3 or len(m) < 6:
         raise ValueError("accel_six_position needs the means of at least 6 still poses, shape (≥6, 3)")
@@ -242,10 +241,10 @@ def from_capture(accel_lsb, gyro_lsb, mag_lsb, rate_hz: float) -> Calibration:
 
 def plot_mag_cloud(mag_lsb, cal: MagCalibration, path) -> None:
     """PNG of the magnetometer cloud before and after calibration (three projections each)."""
-    import matplotlib
+    import matplotlib  # optional dependency: the plot extra
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # optional dependency: the plot extra
 
     raw = np.asarray(mag_lsb, float)
     cor = cal.apply(raw)

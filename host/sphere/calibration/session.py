@@ -26,6 +26,7 @@ import numpy as np
 
 from sphere import chips
 from sphere.calibration import fit as calibration
+from sphere.protocol import PacketStream
 from sphere.protocol.packets import RAW_ACCEL_OK, RAW_GYRO_OK, RAW_MAG_FRESH, RAW_MAG_OK
 
 STILL_S = 3.0  # gyro bias: still this long (device seconds)
@@ -120,8 +121,6 @@ class SeriesBuilder:
 def series_from_packets(packets) -> Series:
     """A :class:`Series` from decoded packets (RAW_SAMPLE or DecodedPacket; others are skipped), as
     :class:`SeriesBuilder` keeps them. Device time is unwrapped (``DecodedPacket.t_us`` already is)."""
-    from sphere.protocol import PacketStream
-
     stream = PacketStream()  # times for bare packets, unwrapped as every reader of the link does
     out = SeriesBuilder()
     for dp in packets:

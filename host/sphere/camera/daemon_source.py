@@ -21,10 +21,11 @@ from __future__ import annotations
 
 import time
 
+from sphere.errors import SphereError
 from sphere.settings import Param
 
 
-class CameraUnavailable(Exception):
+class CameraUnavailable(SphereError):
     """The camera named in [camera] cannot be used; the message says why and what to do."""
 
 

@@ -109,7 +109,7 @@ class BallDetector:
 
     # -- candidates --------------------------------------------------------------------------------------
     def _candidates(self, bgr, x0, y0, scale):
-        import cv2
+        import cv2  # optional dependency: the camera extra (OpenCV)
 
         along, across, bright = hue_projection(bgr, self.hue_deg)
         mask = ((along > 0.45 * bright) & (np.abs(across) < 0.35 * along) & (bright > 30)).astype(np.uint8)
@@ -151,7 +151,7 @@ class BallDetector:
         is where it crosses ½. Where the background is dark or of the ball's own colour the unmixing is
         ill-posed; there the hue projection's crossing halfway between the levels 2-6 px either side is
         used instead."""
-        import cv2
+        import cv2  # optional dependency: the camera extra (OpenCV)
 
         dirs = self._dirs_by_n[n_rays or self.n_rays]
         nr = len(dirs)
@@ -249,7 +249,7 @@ class BallDetector:
         tracker's position at the frame's exposure time, projected): the outline is measured from there
         first, then looked for by colour in a window around it; without a hint (or when nothing is found
         there) the whole frame is searched."""
-        import cv2
+        import cv2  # optional dependency: the camera extra (OpenCV)
 
         H, W = bgr.shape[:2]
         if hint is not None:  # tracking: rays straight from where the ball should be
@@ -368,7 +368,7 @@ def blob_position(bgr: np.ndarray, camera: Camera, hue_deg: float = 120.0, radiu
     the one nearest the last), its centroid as the direction and its apparent size as the distance
     (D = f·R/r with r = √(area/π)). No sub-pixel outline, no perspective: what the hybrid is compared with.
     Returns the centre (camera frame, m) or None."""
-    import cv2
+    import cv2  # optional dependency: the camera extra (OpenCV)
 
     H, W = bgr.shape[:2]
     x0, y0, x1, y1 = 0, 0, W, H

@@ -15,8 +15,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from sphere import quaternion as quat
 from sphere.camera.detect import BallDetector, blob_position
 from sphere.camera.live import hint_from
+from sphere.camera.marker import MarkerDetector
 from sphere.camera.trials import RenderedTrial
 from sphere.chips import STANDARD_GRAVITY_M_S2
 from sphere.fusion.hybrid import CameraImuTracker, _rot
@@ -49,8 +51,6 @@ def run(rt: RenderedTrial, hue_deg: float = 120.0) -> Run:
     det = BallDetector(cam, hue_deg=hue_deg, radius_m=rt.scene.radius_m)
     mdet = None
     if rt.scene.marker is not None:
-        from sphere.camera.marker import MarkerDetector
-
         mdet = MarkerDetector(cam, rt.scene.marker, rt.scene.radius_m)
     markers = 0
     n_imu = len(rt.t)
@@ -165,8 +165,6 @@ def _orientation_errors(rt: RenderedTrial, R_host, R_hyb, markers: int) -> dict:
 def _true_alignment(rt: RenderedTrial):
     """Earth (the host filter's ENU) → camera, from the scene and the filter's heading offset against BROAD's
     reference (only to score the estimate; the tracker never sees it)."""
-    from sphere import quaternion as quat
-
     ok = np.all(np.isfinite(rt.trial.opt_quat), axis=1)
     if not ok.any():
         return None

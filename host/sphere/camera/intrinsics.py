@@ -44,7 +44,7 @@ def board_points(cols: int, rows: int, square_m: float) -> np.ndarray:
 
 def find_corners(gray: np.ndarray, cols: int, rows: int):
     """The inner corners (N, 2) to sub-pixel accuracy, or None when the board is not in the image."""
-    import cv2
+    import cv2  # optional dependency: the camera extra (OpenCV)
 
     pattern = (cols - 1, rows - 1)
     ok, corners = cv2.findChessboardCorners(gray, pattern, cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE)
@@ -60,7 +60,7 @@ MIN_CHARUCO_CORNERS = 8
 
 
 def charuco_board(cols: int, rows: int, square_m: float, marker_m: float):
-    import cv2
+    import cv2  # optional dependency: the camera extra (OpenCV)
 
     return cv2.aruco.CharucoBoard((cols, rows), square_m, marker_m,
                                   cv2.aruco.getPredefinedDictionary(CHARUCO_DICTIONARY))
@@ -78,7 +78,7 @@ def _charuco_points(detector, board, gray):
 def calibrate(views, cols: int, rows: int, square_m: float, charuco_marker_m: float | None = None) -> Result:
     """``views``: (name, grey uint8 image) pairs, all of one size. With ``charuco_marker_m`` the board is a
     ChArUco board with markers that size."""
-    import cv2
+    import cv2  # optional dependency: the camera extra (OpenCV)
 
     board = detector = None
     if charuco_marker_m is not None:
@@ -122,7 +122,7 @@ def calibrate(views, cols: int, rows: int, square_m: float, charuco_marker_m: fl
 
 def read_views(paths, every: int = 10):
     """(name, grey image) from image files, folders of them, or videos (every n-th frame)."""
-    import cv2
+    import cv2  # optional dependency: the camera extra (OpenCV)
 
     files = []
     for p in map(Path, paths):

@@ -120,7 +120,7 @@ class CameraSource:
         return self._detector.found if self._detector is not None else 0
 
     def _open(self):
-        import cv2
+        import cv2  # optional dependency: the camera extra (OpenCV)
 
         src = int(self.spec) if str(self.spec).isdigit() else str(self.spec)
         cap = cv2.VideoCapture(src)

@@ -41,7 +41,7 @@ class MarkerSpec:
 
     def bitmap(self) -> np.ndarray:
         """8×8 cells: the 6×6 marker in a one-cell white quiet zone (0 black, 1 white)."""
-        import cv2
+        import cv2  # optional dependency: the camera extra (OpenCV)
 
         m = cv2.aruco.generateImageMarker(cv2.aruco.getPredefinedDictionary(DICTIONARY), self.id, 6)
         out = np.ones((8, 8), np.float32)
@@ -72,12 +72,6 @@ def texture_lookup(spec: MarkerSpec, bitmap: np.ndarray, n_body: np.ndarray, rad
     return mask, bitmap[vi, ui]
 
 
-def rotation_from_rvec(rvec) -> np.ndarray:
-    import cv2
-
-    return cv2.Rodrigues(np.asarray(rvec, float).reshape(3, 1))[0]
-
-
 @dataclass
 class MarkerPose:
     R_cam_body: np.ndarray  # body → camera rotation
@@ -88,7 +82,7 @@ class MarkerPose:
 
 class MarkerDetector:
     def __init__(self, camera, spec: MarkerSpec = MarkerSpec(), radius_m: float = 0.04):
-        import cv2
+        import cv2  # optional dependency: the camera extra (OpenCV)
 
         self.camera = camera
         self.spec = spec
@@ -103,7 +97,7 @@ class MarkerDetector:
 
     def detect(self, bgr: np.ndarray, center_px, radius_px: float, center_cam=None) -> MarkerPose | None:
         """The marker on the ball whose outline is at (center_px, radius_px); None when it is not seen."""
-        import cv2
+        import cv2  # optional dependency: the camera extra (OpenCV)
 
         H, W = bgr.shape[:2]
         m = radius_px * 1.2 + 4

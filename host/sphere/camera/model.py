@@ -88,7 +88,7 @@ class Camera:
     def rays_interpolated(self, px: np.ndarray) -> np.ndarray:
         """Unit rays of pixels (N, 2) interpolated from :attr:`ray_map` (bilinear, then normalised): one
         OpenCV call instead of the iterative inverse; the rays differ from :meth:`rays` by < 1e-6 rad."""
-        import cv2
+        import cv2  # optional dependency: the camera extra (OpenCV)
 
         px = np.asarray(px, np.float32).reshape(1, -1, 2)
         r = cv2.remap(self.ray_map, px[..., 0], px[..., 1], cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)

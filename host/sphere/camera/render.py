@@ -28,6 +28,7 @@ from functools import lru_cache
 
 import numpy as np
 
+from sphere.camera.marker import texture_lookup
 from sphere.camera.model import Camera
 
 BALL_RADIUS_M = 0.04  # the sphere is 8 cm across
@@ -142,7 +143,7 @@ class Scene:
         np.clip(img, 0, 255, out=img)
         out = img[..., ::-1].astype(np.uint8)  # RGB → BGR (OpenCV's order)
         if self.jpeg_quality:
-            import cv2
+            import cv2  # optional dependency: the camera extra (OpenCV)
 
             ok, buf = cv2.imencode(".jpg", out, [cv2.IMWRITE_JPEG_QUALITY, int(self.jpeg_quality)])
             out = cv2.imdecode(buf, cv2.IMREAD_COLOR)
@@ -195,8 +196,6 @@ class Scene:
         spec = np.clip(nrm @ half.astype(np.float32), 0.0, 1.0) ** 40
         albedo = np.broadcast_to(self._albedo, nrm.shape)
         if R_cb is not None:
-            from sphere.camera.marker import texture_lookup
-
             R_cm = (R_cb @ self.marker.mount).astype(np.float32)  # marker → camera
             on, grey = texture_lookup(self.marker, self._bitmap, nrm @ R_cm, R)
             albedo = np.where(on[..., None], (0.06 + 0.84 * grey)[..., None] * np.ones(3, np.float32), albedo)
@@ -205,7 +204,7 @@ class Scene:
 
     def _hand(self, img, occ: Occlusion, C, t):
         """A skin-coloured hand (palm and four fingers) 10 cm in front of the ball."""
-        import cv2
+        import cv2  # optional dependency: the camera extra (OpenCV)
 
         cam = self.camera
         if C[2] <= 0.2:
@@ -240,7 +239,7 @@ class Scene:
 def _background(w: int, h: int, hue_deg: float, rng) -> np.ndarray:
     """A cluttered desk scene (RGB float32): wall gradient, desk, books and boxes, things of the ball's hue
     at lower saturation, and one object of exactly the ball's colour that is not round."""
-    import cv2
+    import cv2  # optional dependency: the camera extra (OpenCV)
 
     img = np.zeros((h, w, 3), np.float32)
     yy = np.linspace(0, 1, h, dtype=np.float32)[:, None, None]

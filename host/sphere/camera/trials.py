@@ -9,13 +9,20 @@ how the camera stands: it estimates the camera-to-earth rotation itself.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
+from scipy.io import loadmat
 
 from sphere import broad
 from sphere.camera import render
 from sphere.camera.model import Camera
+from sphere.fusion import registry
+from sphere.fusion.hybrid import _rot
+from sphere.link import session
+from sphere.protocol.framing import encode_frame
+from sphere.sim import trace as T
+from sphere.sim.trace import raw_packets
 
 
 @dataclass
@@ -69,8 +76,6 @@ def eval_occlusions() -> list:
 
 def load_positions(path) -> np.ndarray:
     """BROAD's ``opt_pos`` (N, 3), metres (not part of :class:`sphere.broad.Trial`)."""
-    from scipy.io import loadmat
-
     d = loadmat(str(path), variable_names=["opt_pos"])
     if "opt_pos" not in d:
         raise ValueError(f"{path} has no opt_pos (optical positions); it is not a BROAD trial file")
@@ -95,8 +100,6 @@ def rendered_trial(name: str, start_s: float, seconds: float, distance_m: float 
                    marker=None, jpeg_quality: int | None = None) -> RenderedTrial:
     """A slice of a BROAD trial, with the host filter's orientation (run from the trial's start, as the
     device would have been running) and the virtual camera placed beside it."""
-    from sphere.fusion import registry
-
     path = broad.find_trial(name, directory)
     full = broad.load_trial(path)
     total = len(full) / full.rate_hz
@@ -119,7 +122,6 @@ def rendered_trial(name: str, start_s: float, seconds: float, distance_m: float 
     cam_pos, R_wc = placement(pf, distance_m)
     body = None
     if marker is not None:  # the marker turns with the sensor: BROAD's optical orientation, gaps held
-        from sphere.fusion.hybrid import _rot
 
         qo = sl.opt_quat.copy()
         good = np.all(np.isfinite(qo), axis=1)
@@ -133,7 +135,6 @@ def rendered_trial(name: str, start_s: float, seconds: float, distance_m: float 
             return _rot(_q[int(np.clip(round(tt * _rate), 0, len(_q) - 1))])
 
         if marker.face == "auto":  # on the face of the sensor that is turned to the camera most of the time
-            from dataclasses import replace
 
             view = R_wc[:, 2]  # the camera's optical axis in the world
             faces = {f"{sg}{ax}": 0.0 for sg in "+-" for ax in "xyz"}
@@ -161,11 +162,6 @@ def write_session(rt: RenderedTrial, folder, lead_s: float | None = None, direct
 
     Returns the time bases: ``{"slice_t0_host_s": ...}``, the session time of the stretch's t = 0 (stretch
     time = session time − it; the sample's device time t_us = (slice time + lead_s + 1) · 10⁶)."""
-    from sphere.link import session
-    from sphere.protocol.framing import encode_frame
-    from sphere.sim import trace as T
-    from sphere.bench.pointer import raw_packets
-
     full = broad.load_trial(broad.find_trial(rt.name, directory))
     lead = rt.start_s if lead_s is None else min(lead_s, rt.start_s)
     motion = T.from_broad(full, rt.start_s - lead, rt.duration_s + lead)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import argparse
 import json
 import sys
 import time
@@ -9,14 +10,29 @@ from pathlib import Path
 
 import numpy as np
 
-from sphere.argtypes import seconds
-
 from sphere import chips
+from sphere.argtypes import seconds
+from sphere.calibration import axis_check
+from sphere.calibration import session as session
 from sphere.calibration.axis_check import TURN_DEG
-from sphere.calibration.session import COVERAGE_BINS, COVERAGE_TARGET, FACE_S, STILL_S, TURN_MIN_S, TURN_S
+from sphere.calibration.fit import plot_mag_cloud
+from sphere.calibration.session import (
+    COVERAGE_BINS,
+    COVERAGE_TARGET,
+    FACE_S,
+    STILL_S,
+    TURN_MIN_S,
+    TURN_S,
+    SeriesBuilder,
+)
 from sphere.calibration.session import FACES as _FACES
-from sphere.calibration.session import SeriesBuilder
-from sphere.errors import SphereError
+from sphere.daemon.sources import version_problem
+from sphere.errors import LinkLost, SphereError
+from sphere.link.capture import CaptureError, CaptureFile, CaptureWriter
+from sphere.link.device import DeviceLink
+from sphere.link.port import PortError, open_port
+from sphere.protocol import CalibrationBlock, GetCalibration, GetHello, SaveCalibration, SetCalibration
+from sphere.protocol.packets import CALIBRATION_STATE_BITS, bit_names
 
 FACES = tuple(f[0] for f in _FACES)
 DEFAULT_TIMEOUT_S = 120.0
@@ -52,8 +68,6 @@ still and face detection, and the axis check when the capture turns about every 
 
 
 def add_arguments(p) -> None:
-    import argparse
-
     p.formatter_class = argparse.RawDescriptionHelpFormatter  # keep the step list as written
     src = p.add_mutually_exclusive_group(required=True)
     src.add_argument("--port", help="the sphere's serial port: guided calibration, result sent and saved")
@@ -136,8 +150,6 @@ def _finish(args, cal, mag, base=None) -> dict:
                                               indent=2))
         print(f"wrote {args.json}", file=sys.stderr)
     if args.plot and cal.mag is not None:
-        from sphere.calibration.fit import plot_mag_cloud
-
         plot_mag_cloud(mag, cal.mag, args.plot)
         print(f"wrote {args.plot}", file=sys.stderr)
     return block
@@ -150,9 +162,6 @@ def run(args) -> int:
 
 
 def _run_capture(args) -> int:
-    from sphere.calibration import session as session
-    from sphere.link.capture import CaptureError, CaptureFile
-
     try:
         cap = CaptureFile(args.capture)
         s = session.series_from_packets(cap.packets())
@@ -175,8 +184,6 @@ def _run_capture(args) -> int:
 
 def _capture_axis_check(s, cap) -> None:
     """The axis check on a whole capture (said, never fatal: nothing is sent offline)."""
-    from sphere.calibration import axis_check
-
     hellos = [p for p in (getattr(d, "packet", d) for d in cap.packets()) if p.NAME == "HELLO"]
     profile = axis_check.profile_name(hellos[-1].board_profile if hellos else None)  # the newest: in use
     f = axis_check.fit(s)
@@ -193,8 +200,6 @@ class _Link:
     RAW_SAMPLE values kept as they arrive (device time unwrapped by its PacketStream), for the steps to judge."""
 
     def __init__(self, port, writer=None):
-        from sphere.link.device import DeviceLink
-
         self.values = SeriesBuilder()
         self.last_raw_wall = time.monotonic()
         self.device = DeviceLink(port, on_bytes=writer.write if writer else None, on_packet=self._packet)
@@ -284,8 +289,6 @@ def _follow(link, timeout_s: float, poll, on_timeout):
 
 
 def _step_gyro(link, progress, timeout_s):
-    from sphere.calibration import session as session
-
     def poll(s):
         span = session.trailing_still(s)
         still = span.seconds if span else 0.0
@@ -311,8 +314,6 @@ def _step_gyro(link, progress, timeout_s):
 
 def _step_axes(link, progress, timeout_s, bias, port):
     """Step 2/4: the sphere turned about each of its axes; the three sensors must agree (sphere.calibration.axis_check)."""
-    from sphere.calibration import axis_check
-
     state = {"fit": None, "wall": 0.0}
 
     def poll(s):
@@ -356,8 +357,6 @@ def _step_axes(link, progress, timeout_s, bias, port):
 
 
 def _step_faces(link, progress, timeout_s):
-    from sphere.calibration import session as session
-
     state = {"seen": {}}
 
     def line(now):
@@ -396,8 +395,6 @@ def _step_faces(link, progress, timeout_s):
 
 
 def _step_turn(link, progress, timeout_s):
-    from sphere.calibration import session as session
-
     need = int(round(COVERAGE_TARGET * COVERAGE_BINS))
 
     def poll(s):
@@ -425,10 +422,6 @@ def _step_turn(link, progress, timeout_s):
 
 
 def _run_port(args) -> int:
-    from sphere.link.capture import CaptureError
-    from sphere.errors import LinkLost
-    from sphere.link.port import PortError, open_port
-
     try:
         port = open_port(args.port, args.baud)
     except PortError as e:
@@ -436,8 +429,6 @@ def _run_port(args) -> int:
         return 2
     writer = None
     if args.save_capture:
-        from sphere.link.capture import CaptureWriter
-
         try:
             writer = CaptureWriter(args.save_capture)
         except CaptureError as e:
@@ -467,10 +458,6 @@ def _run_port(args) -> int:
 
 def _session(args, link) -> int:
     """The guided steps on an open link (``_run_port`` opens and closes it)."""
-    from sphere.calibration import session as session
-    from sphere.protocol import CalibrationBlock, GetCalibration, GetHello, SaveCalibration, SetCalibration
-    from sphere.protocol.packets import CALIBRATION_STATE_BITS, bit_names
-
     progress = _Progress()
 
     def wait(msg):
@@ -485,8 +472,6 @@ def _session(args, link) -> int:
         link.command(GetHello())
         link.pump(0.3)
     if link.hello is not None:
-        from sphere.daemon.sources import version_problem
-
         problem = version_problem(link.hello)
         if problem:
             print(f"sphere calibrate: {problem}", file=sys.stderr)

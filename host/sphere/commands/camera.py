@@ -2,10 +2,17 @@
 
 from __future__ import annotations
 
+import csv
 import os
 import sys
+import time
 
+from sphere import broad
 from sphere.bench import camera as camera_bench
+from sphere.camera import trials
+from sphere.camera.intrinsics import CalibrationError, calibrate, read_views
+from sphere.camera.live import CameraError, CameraSource
+from sphere.camera.model import Camera, CameraFileError
 
 HELP = "camera tools: intrinsics from chessboard images (calibrate); the virtual webcam (render); the ball in a webcam or video (track); timing (bench)"
 DESCRIPTION = """\
@@ -54,7 +61,7 @@ def run(args) -> int:
         print("sphere camera: say what to do: calibrate, render, track or bench (see sphere camera --help)", file=sys.stderr)
         return 2
     try:
-        import cv2  # noqa: F401
+        import cv2  # noqa: F401  (optional dependency: the camera extra (OpenCV))
     except ImportError:
         print("sphere camera: OpenCV is missing; install the camera extra: pip install -e '.[camera]'",
               file=sys.stderr)
@@ -69,11 +76,6 @@ def run(args) -> int:
 
 
 def _track(args) -> int:
-    import time
-
-    from sphere.camera.live import CameraError, CameraSource
-    from sphere.camera.model import Camera, CameraFileError
-
     try:
         cam = Camera.load(args.camera_file) if args.camera_file else None
         src = CameraSource(args.source, cam, hue_deg=args.hue).start()
@@ -102,8 +104,6 @@ def _track(args) -> int:
 
 
 def _calibrate(args) -> int:
-    from sphere.camera.intrinsics import CalibrationError, calibrate, read_views
-
     cols, rows = _board(args.board)
     if not args.square_mm > 0:
         print("sphere camera: --square-mm must be positive", file=sys.stderr)
@@ -135,12 +135,7 @@ def _calibrate(args) -> int:
 
 
 def _render(args) -> int:
-    import csv
-
-    import cv2
-
-    from sphere import broad
-    from sphere.camera import trials
+    import cv2  # optional dependency: the camera extra (OpenCV)
 
     try:
         rt = trials.rendered_trial(args.trial, args.start, args.seconds, distance_m=args.distance)

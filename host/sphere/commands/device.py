@@ -7,7 +7,22 @@ import argparse
 import sys
 
 from sphere import argtypes
+from sphere.daemon.sources import version_problem
 from sphere.errors import SphereError
+from sphere.link.device import DeviceLink
+from sphere.link.device_settings import (
+    SETTINGS,
+    SettingError,
+    current_from_hello,
+    current_from_settings,
+    parse_assignment,
+    plan_settings,
+    settings_state_text,
+    show,
+)
+from sphere.link.port import PortError, open_port
+from sphere.protocol import Identify, Reboot
+from sphere.protocol.packets import REBOOT_MAGIC, ClearSettings, GetSettings, Result, SaveSettings
 
 HELP = "read, change and save the sphere's settings (tap, free fall, stream, filter, board), identify, reboot"
 DESCRIPTION = """\
@@ -36,8 +51,6 @@ def add_arguments(p) -> None:
 
 
 def _keys() -> str:
-    from sphere.link.device_settings import SETTINGS, show
-
     lines = []
     for key, s in SETTINGS.items():
         default = f" (firmware default {show(key, s.default_lsb)})" if s.default_lsb is not None and key != "board" else ""
@@ -55,9 +68,6 @@ class _Failed(SphereError):
 
 
 def _open(args):
-    from sphere.link.device import DeviceLink
-    from sphere.link.port import PortError, open_port
-
     if not args.port:
         raise _Failed("name the sphere's port with --port (e.g. --port /dev/ttyUSB0)")
     try:
@@ -70,7 +80,6 @@ def _open(args):
         ser.close()
         raise _Failed(f"no HELLO from {args.port} within 3 s: is it the sphere (its firmware flashed: `sphere flash`), "
                       "at 115200 baud?", 1)
-    from sphere.daemon.sources import version_problem
 
     problem = version_problem(hello)
     if problem:
@@ -82,9 +91,6 @@ def _open(args):
 def _read_settings(link, hello, timeout_s: float) -> tuple[dict, int] | None:
     """Every setting the sphere reports with GET_SETTINGS (key → LSB) and settings_state; None for firmware
     older than protocol 3, which has no such command."""
-    from sphere.link.device_settings import current_from_settings
-    from sphere.protocol.packets import GetSettings
-
     if hello.protocol_version < 3:
         return None
     reply = link.command(GetSettings(), timeout_s)
@@ -99,8 +105,6 @@ def _read_settings(link, hello, timeout_s: float) -> tuple[dict, int] | None:
 
 
 def _describe(hello, settings) -> list[str]:
-    from sphere.link.device_settings import SETTINGS, current_from_hello, settings_state_text, show
-
     j = hello.to_json()
     out = [f"firmware {j['firmware_version']} (protocol {hello.protocol_version}); sensors found: "
            f"{', '.join(j['sensors_found']) or 'none'}; IMU {hello.imu_rate_hz} Hz, magnetometer {hello.mag_rate_hz} Hz; "
@@ -121,8 +125,6 @@ def _reply_problem(packet, reply) -> str | None:
     if reply is None:
         return f"{packet.NAME}: no REPLY (is the sphere still there?)"
     if not reply.ok:
-        from sphere.protocol.packets import Result
-
         try:
             name = Result(reply.result).name.lower()
         except ValueError:
@@ -147,8 +149,6 @@ def run(args) -> int:
 
 
 def _run(args) -> int:
-    from sphere.link.device_settings import SettingError, plan_settings, show
-
     if args.action == "keys":
         print(_keys())
         return 0
@@ -164,8 +164,6 @@ def _run(args) -> int:
         if not 1 <= seconds <= 60:
             raise _Failed(f"identify {seconds}: seconds must be 1 … 60")
     if args.action == "set":
-        from sphere.link.device_settings import parse_assignment
-
         try:  # checked before the port is opened: a typo touches nothing
             for item in args.items:
                 parse_assignment(item)
@@ -177,8 +175,6 @@ def _run(args) -> int:
             print("\n".join(_describe(hello, _read_settings(link, hello, args.timeout))))
             return 0
         if args.action in ("save", "clear"):
-            from sphere.protocol.packets import ClearSettings, SaveSettings
-
             if hello.protocol_version < 3:
                 raise _Failed(f"this firmware (protocol {hello.protocol_version}) cannot {args.action} its settings: "
                               "flash the current one (`sphere flash`)", 1)
@@ -188,15 +184,10 @@ def _run(args) -> int:
                   "cleared: the sphere starts with its defaults at the next power-up")
             return 0
         if args.action == "identify":
-            from sphere.protocol import Identify
-
             _ask(link, Identify(seconds), args.timeout)
             print(f"the sphere's LED blinks for {seconds} s")
             return 0
         if args.action == "reboot":
-            from sphere.protocol import Reboot
-            from sphere.protocol.packets import REBOOT_MAGIC
-
             _ask(link, Reboot(REBOOT_MAGIC), args.timeout)
             again = link.hello(timeout_s=5.0)
             print("rebooted" + (f"; firmware {again.to_json()['firmware_version']} is back" if again else

@@ -3,15 +3,22 @@
 from __future__ import annotations
 
 import argparse
+import hashlib
+import inspect
 import json
 import math
+import multiprocessing
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
-from sphere import argtypes
+from sphere import argtypes, broad, quaternion
+from sphere import quaternion as quat
+from sphere.fusion import common, crossval, peers, registry
+from sphere.paths import broad_dir
+from sphere.progress import bar
 
 HELP = "evaluate orientation filters on BROAD trials (total/heading/inclination RMSE, µs per sample)"
 DESCRIPTION = """\
@@ -52,9 +59,6 @@ def run_filter(name: str, trial, keep_errors: bool = False, diagnostics: bool = 
 
     ``params`` replace the registry's defaults (``--cv`` grid points). ``diagnostics`` keeps the filter's
     per-sample diagnostics (rest, bias, magnetic disturbance) where it has them."""
-    from sphere import broad
-    from sphere.fusion import peers, registry
-
     f = registry.make_for_trial(name, trial.gyr_rad_s, trial.acc_m_s2, trial.mag_uT, trial.dt_s, **params)
     diag = None
     t0 = time.perf_counter()
@@ -81,8 +85,6 @@ def run_filter(name: str, trial, keep_errors: bool = False, diagnostics: bool = 
 
 def heading_offset_deg(q_enu: np.ndarray, trial) -> float:
     """Circular mean of the signed heading error over the samples that count (a constant offset shows here)."""
-    from sphere import quaternion as quat
-
     use = trial.movement & np.all(np.isfinite(trial.opt_quat), axis=1)
     e = quat.multiply(quat.normalize(q_enu[use]), quat.conjugate(quat.normalize(trial.opt_quat[use])))
     e = e * np.sign(e[:, :1] + 1e-300)
@@ -92,8 +94,6 @@ def heading_offset_deg(q_enu: np.ndarray, trial) -> float:
 
 def _trial_job(args):
     path, names, seconds, keep = args
-    from sphere import broad
-    from sphere.fusion import peers
 
     trial = broad.load_trial(path)
     if seconds:
@@ -109,8 +109,6 @@ def _trial_job(args):
 
 def _trial_progress(total: int):
     """A tqdm bar over the trials on a terminal (sphere.progress); elsewhere one line per finished trial."""
-    from sphere.progress import bar
-
     trials = bar(total=total, desc="eval", unit="trial")
 
     def done(name: str) -> None:
@@ -129,8 +127,6 @@ def evaluate(paths, names, seconds=None, jobs=1, keep_errors=False, progress=Non
     jobs_list = [(p, list(names), seconds, keep_errors) for p in paths]
     results = {}
     if jobs > 1 and len(paths) > 1:
-        import multiprocessing
-
         with multiprocessing.get_context("spawn").Pool(min(jobs, len(paths))) as pool:
             for tname, res, _ in pool.imap(_trial_job, jobs_list):
                 results[tname] = res
@@ -330,12 +326,6 @@ CV_NOTE = ("leave-one-trial-out: for each trial, every free parameter is chosen 
 def _code_version(name: str) -> str:
     """A digest of the code whose output --cache keeps for filter ``name``: its module, its registry entry (defaults
     and grid), the shared helpers and the metric (so a change to one filter leaves the others' results valid)."""
-    import hashlib
-    import inspect
-
-    from sphere import broad, quaternion
-    from sphere.fusion import common, registry
-
     spec = registry.FILTERS[name]
     own = Path(inspect.getfile(type(spec.factory(0.005, (1.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0), **spec.defaults))
                                if name in registry.OURS else registry.peers.PEERS[name]))
@@ -349,10 +339,6 @@ def _code_version(name: str) -> str:
 def _cv_job(args):
     """Every (filter, grid point) on one trial; results from the cache where present."""
     path, tasks, seconds, cache, versions = args
-    import hashlib
-
-    from sphere import broad
-    from sphere.fusion import peers
 
     trial = None
     out = []
@@ -381,15 +367,11 @@ def _cv_job(args):
 
 def cross_validate(paths, names, seconds=None, jobs=1, cache=None, progress=None) -> dict:
     """The score matrix of every filter's grid on every trial (computed once), then leave-one-trial-out."""
-    from sphere.fusion import crossval, registry
-
     tasks = [(n, p) for n in names for p in registry.FILTERS[n].grid_points()]
     versions = {n: _code_version(n) for n in names}
     jobs_list = [(str(p), tasks, seconds, cache, versions) for p in paths]
     rows = {}
     if jobs > 1 and len(paths) > 1:
-        import multiprocessing
-
         with multiprocessing.get_context("spawn").Pool(min(jobs, len(paths))) as pool:
             for tname, res in pool.imap(_cv_job, jobs_list):
                 rows[tname] = res
@@ -486,10 +468,6 @@ def format_cv(doc: dict) -> str:
 
 
 def run(args) -> int:
-    from sphere import broad
-    from sphere.fusion import registry
-    from sphere.paths import broad_dir
-
     directory = Path(args.trials) if args.trials else broad_dir()
     try:
         paths = broad.trial_paths(directory)

@@ -9,7 +9,13 @@ import sys
 import time
 from pathlib import Path
 
+from sphere import paths
+from sphere.daemon.sources.serial import DEFAULT_USB_IDS, candidate_ports
 from sphere.errors import SphereError
+from sphere.link import bootloader
+from sphere.link.port import DEFAULT_BAUD, PortError, open_port
+from sphere.protocol import FrameDecoder, GetHello, encode_frame
+from sphere.sim.board import BoardUnavailable, firmware_elf
 
 HELP = "write the firmware to the Nano (finds the image and the bootloader's baud rate, runs avrdude)"
 DESCRIPTION = (
@@ -42,8 +48,6 @@ def add_arguments(p) -> None:
 
 
 def find_image(given: str | None) -> Path:
-    from sphere import paths
-
     if given:
         image = Path(given)
         if image.is_dir():
@@ -62,8 +66,6 @@ def find_image(given: str | None) -> Path:
         return image
     image = paths.firmware_image(".hex")
     if not image.exists() and paths.in_checkout():
-        from sphere.sim.board import BoardUnavailable, firmware_elf
-
         try:
             firmware_elf(build=True)  # the same `make -C firmware` writes the .hex beside the .elf
         except BoardUnavailable as e:
@@ -76,11 +78,6 @@ def find_image(given: str | None) -> Path:
 def find_port(given: str | None) -> str:
     if given:
         return given
-    try:
-        from sphere.daemon.sources.serial import DEFAULT_USB_IDS, candidate_ports
-    except ImportError:  # pragma: no cover - the daemon's sources are part of the package
-        raise FlashError("name the Nano's port with --port") from None
-
     found = [path for path, _ in candidate_ports(["/dev/sphere"], DEFAULT_USB_IDS)]
     if len(found) == 1:
         return found[0]
@@ -92,9 +89,6 @@ def find_port(given: str | None) -> str:
 
 def wait_for_hello(port: str, timeout_s: float = HELLO_TIMEOUT_S):
     """Open the port at the firmware's rate and wait for a HELLO (asking with GET_HELLO after 1.5 s)."""
-    from sphere.protocol import FrameDecoder, GetHello, encode_frame
-    from sphere.link.port import DEFAULT_BAUD, PortError, open_port
-
     try:
         ser = open_port(port, DEFAULT_BAUD, timeout_s=0.1)
     except PortError as e:
@@ -118,10 +112,7 @@ def wait_for_hello(port: str, timeout_s: float = HELLO_TIMEOUT_S):
 
 
 def flash(args, out=None) -> int:
-    from sphere.link import bootloader
-
     out = out or sys.stdout
-    from sphere.link.port import PortError, open_port
 
     image = find_image(args.image)
     avrdude = shutil.which(args.avrdude)

@@ -7,7 +7,12 @@ import json
 import sys
 from pathlib import Path
 
-from sphere import argtypes
+import numpy as np
+
+from sphere import argtypes, broad
+from sphere.camera import evaluation as ev
+from sphere.camera import trials
+from sphere.camera.marker import MarkerSpec
 
 HELP = "hybrid camera + IMU tracker vs camera-only and IMU-only on rendered BROAD trials"
 DESCRIPTION = """\
@@ -72,7 +77,6 @@ def refused(prog: str, seconds: float, names=()) -> int | None:
     if seconds < 9.0:
         print(f"{prog}: --seconds must be at least 9 (the 1 s loss is at 7-8 s)", file=sys.stderr)
         return 2
-    from sphere import broad
 
     try:
         for name in names:
@@ -90,11 +94,6 @@ def run(args) -> int:
     code = refused("sphere hybrid-eval", args.seconds)
     if code is not None:
         return code
-    import numpy as np
-
-    from sphere import broad
-    from sphere.camera import evaluation as ev
-    from sphere.camera import trials
 
     occl = trials.eval_occlusions()
     doc = {"settings": {"seconds": args.seconds, "distance_m": args.distance, "hue_deg": args.hue,
@@ -108,8 +107,6 @@ def run(args) -> int:
         try:
             marker = None
             if args.marker:
-                from sphere.camera.marker import MarkerSpec
-
                 marker = MarkerSpec(face="auto")
             rt = trials.rendered_trial(name, start, args.seconds, distance_m=args.distance, occlusions=occl,
                                        hue_deg=args.hue, marker=marker, jpeg_quality=args.jpeg or None)
@@ -188,8 +185,6 @@ def _print_trial(name, t):
 
 
 def _means(trials_doc):
-    import numpy as np
-
     out = {}
     methods = next(iter(trials_doc.values()))["methods"].keys()
     for m in methods:
@@ -247,7 +242,6 @@ def _plots(folder: Path, runs, doc) -> None:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    import numpy as np
 
     folder.mkdir(parents=True, exist_ok=True)
     colours = {"blob": "tab:purple", "camera": "tab:red", "camera-kf": "tab:orange", "imu": "tab:gray",

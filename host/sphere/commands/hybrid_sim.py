@@ -7,6 +7,7 @@ import sys
 from pathlib import Path
 
 from sphere import argtypes
+from sphere.fusion import hybrid
 
 HELP = "reproduce chapter 3's hybrid CV + sensor-fusion simulation and its Tables 2-3"
 DESCRIPTION = """\
@@ -54,8 +55,6 @@ def _fmt(tab, ours, theirs, unit):
 
 
 def run(args) -> int:
-    from sphere.fusion import hybrid
-
     seed = hybrid.SEED if args.seed is None else args.seed
     r = hybrid.simulate(seed=seed)
     o, p = hybrid.table(r.orientation), hybrid.table(r.position)
@@ -74,10 +73,10 @@ def run(args) -> int:
                                               indent=2))
         print(f"wrote {args.json}", file=sys.stderr)
     if args.plot:
-        import matplotlib
+        import matplotlib  # optional dependency: the plot extra
 
         matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
+        import matplotlib.pyplot as plt  # optional dependency: the plot extra
 
         fig, ax = plt.subplots(2, 1, figsize=(10, 7), sharex=True)
         for name, style in (("GT", "k-"), ("SF", "c-"), ("CV", "r."), ("KF", "b-")):  # CV: frames only

@@ -5,7 +5,15 @@ from __future__ import annotations
 import sys
 import time
 
+import numpy as np
+
 from sphere import argtypes
+from sphere.errors import LinkLost
+from sphere.link.clock import DeviceClock
+from sphere.link.device import DeviceLink
+from sphere.link.monitor import LinkMonitor
+from sphere.link.port import PortError, open_port
+from sphere.protocol import Echo, GetHello, Hello, RawSample, Reply
 
 #: how often the monitor asks the device's clock with ECHO (spec §5.4; version-3 firmware)
 ECHO_EVERY_S = 0.5
@@ -36,11 +44,11 @@ class _Plot:
     """Four panels of the last ten seconds, redrawn from the monitor's history."""
 
     def __init__(self, out_path=None):
-        import matplotlib
+        import matplotlib  # optional dependency: the plot extra
 
         if out_path and not sys.stdout.isatty():
             matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
+        import matplotlib.pyplot as plt  # optional dependency: the plot extra
 
         self.plt = plt
         self.out_path = out_path
@@ -51,8 +59,6 @@ class _Plot:
             plt.show(block=False)
 
     def update(self, mon) -> None:
-        import numpy as np
-
         raw = np.array(mon.raw_history) if mon.raw_history else np.zeros((0, 10))
         quat = np.array(mon.quat_history) if mon.quat_history else np.zeros((0, 5))
         t_end = max(raw[-1, 0] if len(raw) else 0.0, quat[-1, 0] if len(quat) else 0.0)
@@ -80,13 +86,6 @@ class _Plot:
 
 
 def run(args) -> int:
-    from sphere.errors import LinkLost
-    from sphere.link.device import DeviceLink
-    from sphere.link.monitor import LinkMonitor
-    from sphere.link.clock import DeviceClock
-    from sphere.protocol import Echo, GetHello, Hello, RawSample, Reply
-    from sphere.link.port import PortError, open_port
-
     try:
         ser = open_port(args.port, args.baud, timeout_s=0.05, low_latency=True)
     except PortError as e:  # the port named is not there or not usable: a usage error

@@ -19,7 +19,9 @@ import shutil
 import sys
 from pathlib import Path
 
-from sphere.paths import DATA_DIR
+from sphere.daemon.config import ConfigError, load
+from sphere.daemon.outputs.spacenav import SYSTEM_SOCKET, default_socket_path, socket_owner
+from sphere.paths import DATA_DIR, config_file
 
 HELP = "write the systemd user unit for sphere-mouse with this installation's paths"
 UNIT_NAME = "sphere-mouse.service"
@@ -61,9 +63,6 @@ SPNAV_RULE_NAME = "sphere-mouse-spnav.conf"
 
 def spnav_socket() -> str:
     """The socket sphere-mouse's [outputs.spacenav] serves when started by the user unit."""
-    from sphere.daemon.config import ConfigError, load
-    from sphere.daemon.outputs.spacenav import default_socket_path
-
     try:
         configured = load()["outputs.spacenav"].socket
     except ConfigError:
@@ -74,9 +73,6 @@ def spnav_socket() -> str:
 
 
 def write_spnav_rule() -> int:
-    from sphere.daemon.outputs.spacenav import SYSTEM_SOCKET, socket_owner
-    from sphere.paths import config_file
-
     target = spnav_socket()
     rule = (f"# sphere-mouse: libspnav's default socket ({SYSTEM_SOCKET}, the one Blender checks) leads to the\n"
             f"# sphere's 3-D mouse ([outputs.spacenav]). 'L' leaves an existing {SYSTEM_SOCKET} (spacenavd's) alone.\n"

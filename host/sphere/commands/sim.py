@@ -3,6 +3,7 @@ motion, and report its timing, its stream and (with --accuracy) its orientation 
 
 from __future__ import annotations
 
+import argparse
 import json
 import math
 import shutil
@@ -11,8 +12,16 @@ import tempfile
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
+import numpy as np
+
 from sphere import argtypes
 from sphere.argtypes import out_file, seconds_up_to
+from sphere.broad import find_trial, load_trial, trial_paths
+from sphere.progress import bar, follow_capture
+from sphere.sim import trace as T
+from sphere.sim.analysis import accuracy, accuracy_table, summarise
+from sphere.sim.board import BoardUnavailable, board_path, firmware_elf, run_board, testfw_elf
+from sphere.sim.soak import FAULT_KINDS, run_soak
 
 HELP = "run the firmware on the simulated board (simavr) fed by a BROAD trial or a synthetic motion"
 DESCRIPTION = (
@@ -38,8 +47,6 @@ CHIPS = ("adxl345", "itg3200", "hmc5883l", "qmc5883l")
 
 def _span(text: str) -> str:
     """T0:T1 in seconds (T1 may be inf), checked here so a typo is one clear line, not a board error."""
-    import argparse
-
     a, sep, b = text.partition(":")
     try:
         t0, t1 = float(a), float(b)
@@ -53,8 +60,6 @@ def _span(text: str) -> str:
 
 def _nack(text: str) -> str:
     """CHIP:T0:T1."""
-    import argparse
-
     chip, sep, span = text.partition(":")
     if chip not in CHIPS or not sep:
         raise argparse.ArgumentTypeError(f"{text!r}: give CHIP:T0:T1 with CHIP one of {', '.join(CHIPS)}, "
@@ -65,8 +70,6 @@ def _nack(text: str) -> str:
 
 def _send_file(text: str) -> str:
     """A file of lines 'SECONDS HEX HEX ...' (checked before the board starts)."""
-    import argparse
-
     path = argtypes.in_file(text)
     try:
         with open(path, encoding="utf-8") as f:
@@ -87,8 +90,6 @@ MAX_SECONDS = 86400.0  # a simulated day: longer runs are a typo (1e9 s would ne
 
 
 def _chip_ppm(text: str) -> str:
-    import argparse
-
     chip, sep, ppm = text.partition(":")
     try:
         float(ppm)
@@ -181,8 +182,6 @@ def add_arguments(p) -> None:
 
 def prepare(source: str, seconds: float | None, start_s, hold_s: float, out: Path, full: bool = False):
     """Write the board's trace for SOURCE; returns (trace path, played seconds, BROAD trial slice or None)."""
-    from sphere.sim import trace as T
-
     if source.endswith(".bin") and Path(source).exists():
         ct = T.ChipTrace.read(source)
         return Path(source), seconds or ct.seconds, None
@@ -192,9 +191,6 @@ def prepare(source: str, seconds: float | None, start_s, hold_s: float, out: Pat
         m = T.hold_first(T.synthetic(spec, max(secs - hold_s, 0.5)), hold_s)
         T.to_chips(m).write(out)
         return out, secs, None
-    from sphere.broad import find_trial, load_trial
-
-    import numpy as np
 
     trial = load_trial(find_trial(source))
     total = len(trial) / trial.rate_hz
@@ -224,16 +220,12 @@ def board_options(args) -> dict:
 
 
 def _one(args, source: str, elf, tmp: Path, index: int, multi: bool):
-    from sphere.sim.analysis import accuracy, summarise
-    from sphere.sim.board import run_board
-
     seconds = args.seconds if args.seconds is not None else (60.0 if args.accuracy else None)
     start = args.start if args.start is not None else ("auto" if args.accuracy else 0.0)
     trace, secs, trial = prepare(source, seconds, start, args.hold, tmp / f"trace{index}.bin", args.full)
     capture = args.capture if (args.capture and not multi) else tmp / f"capture{index}.bin"
     # the board writes its figures to a file of ours; --stats is written here, from what this run adds
     stats_out = args.stats if (args.stats and not multi) else None
-    from sphere.progress import follow_capture
 
     with follow_capture(None if (multi or args.pty) else capture, secs, desc=f"sim {source}"):
         run = run_board(elf, trace, secs, capture, interactive=args.pty, pty=args.pty, realtime=args.realtime,
@@ -291,8 +283,6 @@ def _print_figures(source: str, stats: dict, out=None) -> None:
 
 
 def _soak(args, elf) -> int:
-    from sphere.sim.soak import FAULT_KINDS, run_soak
-
     kinds = FAULT_KINDS
     if args.soak_faults:
         kinds = tuple(k.strip() for k in args.soak_faults.split(",") if k.strip())
@@ -322,15 +312,11 @@ def _soak(args, elf) -> int:
 
 
 def run(args) -> int:
-    from sphere.sim.analysis import accuracy_table
-    from sphere.sim.board import BoardUnavailable, firmware_elf, testfw_elf
-
     if not args.trace and args.soak is None:
         print("sphere sim: give --trace SOURCE (or --soak SECONDS)", file=sys.stderr)
         return 2
     sources = list(args.trace)
     if "all" in sources:
-        from sphere.broad import trial_paths
         sources = [str(p) for p in trial_paths()]
     if len(sources) > 1 and not args.accuracy:
         print("sphere sim: several --trace only with --accuracy", file=sys.stderr)
@@ -350,7 +336,6 @@ def run(args) -> int:
                     return 2
         else:
             elf = firmware_elf(build=not args.no_build)
-        from sphere.sim.board import board_path
         board_path(build=not args.no_build)
     except BoardUnavailable as e:
         print(f"sphere sim: {e}", file=sys.stderr)
@@ -366,8 +351,6 @@ def run(args) -> int:
         elf = snapshot
         try:
             if multi:
-                from sphere.progress import bar
-
                 with ThreadPoolExecutor(max(1, args.jobs)) as ex:
                     runs = ex.map(lambda ia: _one(args, ia[1], elf, tmp, ia[0], True), enumerate(sources))
                     results = list(bar(runs, total=len(sources), desc="sim", unit="trace"))

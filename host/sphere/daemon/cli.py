@@ -176,7 +176,7 @@ def main(argv=None) -> int:
         print("sphere-mouse: interrupted", file=sys.stderr)
         return 130
     except OSError as e:  # --print-config or --udev-rule into a full disk
-        from sphere.cli import output_failed
+        from sphere.errors import output_failed
 
         code = output_failed("sphere-mouse", e)
         if code is None:

@@ -18,7 +18,6 @@ when a :class:`Config` is first made.
 from __future__ import annotations
 
 import difflib
-import os
 import sys
 from pathlib import Path
 

@@ -56,12 +56,6 @@ def ecompass(ax, ay, az, mx, my, mz, frame: str = "NWU") -> tuple:
     return quat_from_matrix(rows)
 
 
-def ecompass_batch(acc, mag, frame: str = "NWU") -> np.ndarray:
-    acc = np.asarray(acc, dtype=float)
-    mag = np.asarray(mag, dtype=float)
-    return np.array([ecompass(*a, *m, frame=frame) for a, m in zip(acc.tolist(), mag.tolist())])
-
-
 def batch_inputs(gyr, acc, mag, acc_valid=None, mag_valid=None):
     """(N, 3) arrays as the per-sample lists an ``update_batch`` loop walks: gyro, accelerometer,
     magnetometer (``None`` per sample when ``mag`` is None) and the two validity flags (all True when

@@ -27,6 +27,7 @@ import sys
 import numpy as np
 
 from sphere import broad
+from sphere.chips import STANDARD_GRAVITY_M_S2
 from sphere.fusion import peers, registry
 from sphere.fusion.sphere_filter import PARTS
 
@@ -111,7 +112,7 @@ def diagnose_trial(trial, parts: bool = True) -> dict:
         row = {"s": k, "sphere_total": _rms(es[0][a:b][u]), "sphere_heading": _rms(es[1][a:b][u]),
                "sphere_incl": _rms(es[2][a:b][u]), "rejected": float(dist[a:b].mean()),
                "gyr_dps": float(np.degrees(np.linalg.norm(trial.gyr_rad_s[a:b], axis=1).mean())),
-               "acc_dev_m_s2": float(np.abs(np.linalg.norm(trial.acc_m_s2[a:b], axis=1) - 9.81).mean())}
+               "acc_dev_m_s2": float(np.abs(np.linalg.norm(trial.acc_m_s2[a:b], axis=1) - STANDARD_GRAVITY_M_S2).mean())}
         if vq is not None:
             row.update(vqf_total=_rms(ev[0][a:b][u]), vqf_heading=_rms(ev[1][a:b][u]), vqf_incl=_rms(ev[2][a:b][u]))
         sec.append(row)

@@ -23,11 +23,15 @@ the adapter therefore passes −acc (with +acc its output is off by ~20–180°)
 
 from __future__ import annotations
 
+import importlib
+from importlib.metadata import PackageNotFoundError, version
+
 import numpy as np
 
 from sphere import quaternion as quat
 from sphere.chips import STANDARD_GRAVITY_M_S2
 from sphere.errors import SphereError
+from sphere.fusion.common import ecompass
 
 
 class PeerMissing(SphereError, ImportError):
@@ -35,8 +39,6 @@ class PeerMissing(SphereError, ImportError):
 
 
 def _need(module: str, package: str):
-    import importlib
-
     try:
         return importlib.import_module(module)
     except ImportError:
@@ -138,10 +140,8 @@ class VqfPeer(_Peer):
 
 def _version(dist: str) -> str:
     try:
-        from importlib.metadata import version
-
         return version(dist)
-    except Exception:
+    except PackageNotFoundError:
         return "?"
 
 
@@ -285,15 +285,13 @@ class AhrsEkfPeer(AhrsMadgwickPeer):
 
 def _ahrs_initial_q(acc, mag_nT):
     """ahrs's EKF batch start: ``ecompass(acc, mag, frame="NED")``, or ``acc2q(acc)`` without a field."""
-    from ahrs.common.orientation import acc2q, ecompass
+    from ahrs.common.orientation import acc2q, ecompass  # optional dependency: the peers extra
 
     q = ecompass(acc, mag_nT, frame="NED", representation="quaternion") if mag_nT is not None else acc2q(acc)
     return np.asarray(q, float) / np.linalg.norm(q)
 
 
 def _first_q(acc, mag, frame):
-    from sphere.fusion.common import ecompass
-
     if frame == "NED":
         qn = np.array(ecompass(*acc, *(mag if mag is not None else (0.0, 0.0, 0.0)), frame="NWU"))
         # NWU → NED: rotate 180° about north (x)

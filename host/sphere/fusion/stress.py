@@ -45,8 +45,17 @@ import numpy as np
 
 from sphere import broad
 from sphere import quaternion as quat
-from sphere.fusion.bias_scenarios import (ACC_NOISE_M_S2, DEG, G, GYRO_NOISE_DPS, MAG_NOISE_UT, _smooth_gate, earth_field,
-                                     integrate_rate)
+from sphere.fusion import peers, registry
+from sphere.fusion.bias_scenarios import (
+    ACC_NOISE_M_S2,
+    DEG,
+    GYRO_NOISE_DPS,
+    MAG_NOISE_UT,
+    G,
+    _smooth_gate,
+    earth_field,
+    integrate_rate,
+)
 
 KINDS = ("magnet_parked", "magnet_pass", "magnet_attached", "fast_rest", "fast_combined")
 RATE_HZ = 200.0
@@ -192,8 +201,6 @@ def score(tr: StressTrace, name: str, mag: bool = True, **params) -> dict:
     """Filter ``name`` (the registry's, ``params`` replacing its defaults) on one trace: BROAD's RMSEs (°).
     ``mag=False`` runs it without the magnetometer (as the daemon does by default, ``[orientation] use_mag``): its
     heading then only integrates the gyro, and the inclination is the figure that counts."""
-    from sphere.fusion import peers, registry
-
     m = tr.mag_uT if mag else None
     f = registry.make_for_trial(name, tr.gyr_rad_s, tr.acc_m_s2, m, tr.dt_s, **params)
     q = peers.to_enu(f.update_batch(tr.gyr_rad_s, tr.acc_m_s2, m, tr.dt_s), f.earth_frame)

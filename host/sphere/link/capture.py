@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import BinaryIO, Iterator
 
 from sphere.errors import SphereError
+from sphere.paths import resolve_capture
 from sphere.protocol.decoder import DecoderStats
 from sphere.protocol.stream import DecodedPacket, PacketStream  # noqa: F401  (DecodedPacket: re-exported)
 
@@ -32,8 +33,6 @@ class CaptureFile:
     """A capture on disk, read as packets."""
 
     def __init__(self, path: Path | str):
-        from sphere.paths import resolve_capture
-
         try:
             self.path = resolve_capture(path)  # a path, or example:NAME for a capture shipped with the package
         except FileNotFoundError as e:

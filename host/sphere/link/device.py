@@ -15,6 +15,8 @@ from __future__ import annotations
 
 import time
 
+import serial
+
 from sphere.errors import LinkLost
 from sphere.protocol import GetHello, Hello, PacketStream, Reply, encode_frame
 
@@ -29,12 +31,7 @@ DEFAULT_RETRIES = 2
 
 
 def _port_errors():
-    try:
-        import serial
-
-        return (OSError, serial.SerialException)
-    except ImportError:  # pragma: no cover
-        return (OSError,)
+    return (OSError, serial.SerialException)
 
 
 class DeviceLink:

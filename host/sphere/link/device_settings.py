@@ -13,12 +13,25 @@ adxl345.cpp DEFAULT_TAP and DEFAULT_FREE_FALL, marg_filter.h DEFAULT_BETA_MILLI)
 
 from __future__ import annotations
 
+import difflib
 import math
 from dataclasses import dataclass, field
 
 from sphere.errors import SphereError
-from sphere.protocol.packets import (BOARD_PROFILES, STREAM_ORIENTATION, STREAM_RAW, STREAM_STATUS, SetBoard, SetFilter,
-                                     SetFreeFall, SetStream, SetTap)
+from sphere.protocol.packets import (
+    BOARD_PROFILES,
+    SETTINGS_EEPROM_INVALID,
+    SETTINGS_NONE_SAVED,
+    SETTINGS_SAVED,
+    STREAM_ORIENTATION,
+    STREAM_RAW,
+    STREAM_STATUS,
+    SetBoard,
+    SetFilter,
+    SetFreeFall,
+    SetStream,
+    SetTap,
+)
 
 IMU_RATE_HZ = 200
 #: Rates the firmware accepts: divisors of the 200 Hz sample clock (spec §5, SET_STREAM).
@@ -117,8 +130,6 @@ def axes_text(bits: int) -> str:
 
 
 def _suggest(key: str) -> str:
-    import difflib
-
     close = difflib.get_close_matches(key, SETTINGS, n=1)
     return f" (did you mean {close[0]}?)" if close else ""
 
@@ -168,8 +179,6 @@ def current_from_settings(packets) -> dict[str, int]:
 
 def settings_state_text(state: int) -> str:
     """What GET_SETTINGS's settings_state means for the user (spec §5.3)."""
-    from sphere.protocol.packets import SETTINGS_EEPROM_INVALID, SETTINGS_NONE_SAVED, SETTINGS_SAVED
-
     if state & SETTINGS_EEPROM_INVALID:
         return ("the settings saved on the sphere were damaged (version or CRC wrong, or a value out of range): "
                 "it uses its defaults; set them again and `sphere device save`")

@@ -10,6 +10,7 @@ bytes from it. Before opening, :func:`holders` looks for other processes that ha
 from __future__ import annotations
 
 import os
+import stat
 
 import serial
 
@@ -41,8 +42,6 @@ def check_baud(baud) -> str | None:
 def port_problem(port: str) -> str | None:
     """Why ``port`` cannot be a serial port although it exists (a folder, a file, /dev/null), or None (also
     for a port that does not exist yet: it may be plugged in)."""
-    import stat
-
     try:
         st = os.stat(port)
     except OSError:
@@ -164,8 +163,8 @@ def holders(path: str, allow_pids=()) -> list[tuple[int, str]]:
 def _set_exclusive(ser) -> None:
     """TIOCEXCL: further opens of this tty fail with EBUSY (except for root) while we hold it."""
     try:
-        import fcntl
-        import termios
+        import fcntl  # POSIX only (the port module also runs on Windows, through pyserial)
+        import termios  # POSIX only (the port module also runs on Windows, through pyserial)
 
         fcntl.ioctl(ser.fileno(), termios.TIOCEXCL)
     except (ImportError, AttributeError, OSError, ValueError):
@@ -194,7 +193,7 @@ def request_low_latency(ser) -> str | None:
         why = str(e)
     if _pty_index(ser.port) is not None:
         try:
-            import termios
+            import termios  # POSIX only (the port module also runs on Windows, through pyserial)
 
             attrs = termios.tcgetattr(ser.fileno())
             attrs[2] |= CMSPAR

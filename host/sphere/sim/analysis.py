@@ -10,11 +10,30 @@ from pathlib import Path
 
 import numpy as np
 
+from sphere import quaternion as quat
+from sphere.broad import error_angles_deg, orientation_error
 from sphere.chips import ITG3200_LSB_PER_DPS
+from sphere.fusion.common import ecompass
+from sphere.fusion.madgwick import madgwick_step
 from sphere.protocol.decoder import decode_all
-from sphere.protocol.packets import (ORI_ACCEL_REJECTED, ORI_CONVERGING, ORI_MAG_REJECTED, ORI_MAG_USED, ORI_PREV_SHIFT,
-                                     RAW_ACCEL_OK, RAW_ACCEL_STALE, RAW_GYRO_OK, RAW_GYRO_STALE, RAW_MAG_OK,
-                                     RAW_TAP_ACTIVE, Event, Hello, Orientation, RawSample, Status)
+from sphere.protocol.packets import (
+    ORI_ACCEL_REJECTED,
+    ORI_CONVERGING,
+    ORI_MAG_REJECTED,
+    ORI_MAG_USED,
+    ORI_PREV_SHIFT,
+    RAW_ACCEL_OK,
+    RAW_ACCEL_STALE,
+    RAW_GYRO_OK,
+    RAW_GYRO_STALE,
+    RAW_MAG_OK,
+    RAW_TAP_ACTIVE,
+    Event,
+    Hello,
+    Orientation,
+    RawSample,
+    Status,
+)
 from sphere.protocol.timebase import WRAP_US, TimeUnwrapper
 
 _ORI_NOW = ORI_MAG_USED | ORI_ACCEL_REJECTED | ORI_MAG_REJECTED  # this update's inputs
@@ -210,7 +229,7 @@ def host_madgwick(raw: list, imu_rate_hz: float, beta: float, bias_s: float = 0.
                   startup_beta: float = STARTUP_BETA):
     """The host's double-precision Madgwick on the RAW_SAMPLE values the firmware read.
 
-    Returns (t_s, q_nwu) or None when sphere.fusion.madgwick is not there. ``bias_s`` > 0: subtract
+    Returns (t_s, q_nwu). ``bias_s`` > 0: subtract
     the mean gyro of the first ``bias_s`` seconds; following the firmware, its power-up estimate exactly
     (:func:`firmware_startup_bias`, from the reading where the firmware starts applying it) and the
     changes its bias tracking made later (:func:`firmware_bias_schedule`).
@@ -224,11 +243,6 @@ def host_madgwick(raw: list, imu_rate_hz: float, beta: float, bias_s: float = 0.
     bits (protocol v2, flags bits 5-7) when that packet belongs to the next raw sample, else those of the
     newest packet before it.
     """
-    try:
-        from sphere.fusion.madgwick import madgwick_step
-        from sphere.fusion.common import ecompass
-    except ImportError:
-        return None
     un = TimeUnwrapper()
     t_us = np.array([un(p.t_us) for p in raw])
     t = t_us * 1e-6
@@ -310,9 +324,6 @@ def accuracy(summary: CaptureSummary, trial, offset_s: float, beta: float, bias_
     ``trial`` is the slice of the BROAD trial that was played; its sample i was played at simulated
     time ``offset_s + i / rate`` (``offset_s`` = the still lead-in held before it).
     """
-    from sphere import quaternion as quat
-    from sphere.broad import orientation_error, error_angles_deg
-
     t_trial = offset_s + np.arange(len(trial)) / trial.rate_hz
     notes = []
     fw = None
@@ -334,7 +345,7 @@ def accuracy(summary: CaptureSummary, trial, offset_s: float, beta: float, bias_
     hm = host_madgwick(summary.raw, imu_rate, beta, bias_s,
                        orientation=summary.orientation if follow_firmware else None) if summary.raw else None
     if hm is None:
-        notes.append("host Madgwick unavailable (sphere.fusion.madgwick missing or no RAW_SAMPLE packets)")
+        notes.append("host Madgwick unavailable (no RAW_SAMPLE packets)")
     else:
         t_h, q_h = hm
         if q_fw_enu is not None:

@@ -72,10 +72,6 @@ class Phase:
     rate_dps: float = 0.0  # signed: yaw positive turns left, pitch positive tips the nose down
     axis: str = ""  # "yaw" or "pitch"
 
-    @property
-    def travel_deg(self) -> float:
-        return abs(self.rate_dps) * (self.end_s - self.start_s)
-
 
 @dataclass
 class HoldTrace:

@@ -12,15 +12,32 @@ from __future__ import annotations
 import bisect
 import json
 import math
+import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from sphere import quaternion as quat
+from sphere.broad import load_trial, trial_paths
+from sphere.protocol import encode_frame, packets
 from sphere.protocol.decoder import FrameDecoder
-from sphere.protocol.packets import (ORI_CONVERGING, RAW_ACCEL_OK, RAW_ACCEL_STALE, RAW_GYRO_OK, RAW_GYRO_STALE,
-                                     RAW_MAG_FRESH, RAW_MAG_OK, RAW_MAG_STALE, Hello, Orientation, RawSample, Status)
+from sphere.protocol.packets import (
+    ORI_CONVERGING,
+    RAW_ACCEL_OK,
+    RAW_ACCEL_STALE,
+    RAW_GYRO_OK,
+    RAW_GYRO_STALE,
+    RAW_MAG_FRESH,
+    RAW_MAG_OK,
+    RAW_MAG_STALE,
+    Hello,
+    Orientation,
+    RawSample,
+    Status,
+)
+from sphere.sim import trace as T
+from sphere.sim.board import run_board
 
 #: Limits of the invariants: stale frames and CRC errors outside injected line faults must be 0; a sensor
 #: must give fresh data within these times of a fault's end (a reset needs the firmware to start again);
@@ -332,9 +349,6 @@ def start_ups(frames: list[Frame], resets_t) -> list[dict]:
 def soak_motion(seconds: float, chunk_s: float = 20.0):
     """BROAD motion for ``seconds``: a still lead-in, then ``chunk_s`` slices of the trials in turn, each
     from 2 s before its first movement."""
-    from sphere.broad import load_trial, trial_paths
-    from sphere.sim import trace as T
-
     paths = trial_paths()
     if not paths:
         raise FileNotFoundError("no BROAD trials found (SPHERE_BROAD_DIR)")
@@ -390,14 +404,11 @@ def board_profile_command(board: str | None, path: Path) -> Path | None:
     """A SET_BOARD command for the firmware at 0.5 s when the board is not the aligned one (as its owner
     would send once; the firmware keeps it in EEPROM), so the firmware maps the chips as they are mounted.
     None when the board is the aligned one or the host's protocol has no SET_BOARD."""
-    from sphere.protocol import packets
-
     if not board or board == "aligned" or not hasattr(packets, "SetBoard"):
         return None
     number = {name: n for n, name in packets.BOARD_PROFILES.items()}.get(board.split("-")[0])
     if number is None:
         return None
-    from sphere.protocol import encode_frame
 
     path.write_text(f"0.5 {encode_frame(packets.SetBoard(board_profile=number), 0).hex(' ')}\n")
     return path
@@ -438,11 +449,6 @@ class SoakResult:
 def run_soak(elf, seconds: float, seed: int, board: str | None = None, kinds=FAULT_KINDS,
              tmp: Path | None = None, build: bool = True, keep: Path | None = None) -> SoakResult:
     """Run the faulty and the fault-free board on the same motion; check the invariants."""
-    import tempfile
-
-    from sphere.sim import trace as T
-    from sphere.sim.board import run_board
-
     with tempfile.TemporaryDirectory(prefix="sphere-soak-") as tmpd:
         tmp = Path(tmpd)
         motion, trials = soak_motion(seconds)

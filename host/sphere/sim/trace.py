@@ -27,6 +27,8 @@ import numpy as np
 
 from sphere import chips
 from sphere import quaternion as quat
+from sphere.protocol import RawSample
+from sphere.protocol.packets import RAW_ACCEL_OK, RAW_GYRO_OK, RAW_MAG_FRESH, RAW_MAG_OK
 from sphere.settings import load
 
 ACCEL_RATE_HZ = 200.0
@@ -413,3 +415,21 @@ def synthetic(spec: str, seconds: float) -> Motion:
         return fn(seconds, arg)
     except ValueError as e:
         raise ValueError(f"synthetic:{spec}: {e}") from None
+
+
+def raw_packets(motion) -> list:
+    """(t_us, RawSample) at the gyro's rate from a motion, through the chip models' units and rates (device time
+    from 1 s), as the firmware would send them."""
+    ct = to_chips(motion)
+    n = min(len(ct.accel_lsb), len(ct.gyro_lsb))
+    last_mag = -1
+    out = []
+    for i in range(n):
+        t = i / ct.gyro_rate_hz
+        m = min(int(t * ct.mag_rate_hz), len(ct.mag_lsb) - 1)
+        flags = RAW_ACCEL_OK | RAW_GYRO_OK | RAW_MAG_OK | (RAW_MAG_FRESH if m != last_mag else 0)
+        last_mag = m
+        t_us = int(round(1_000_000 + t * 1e6))
+        out.append((t_us, RawSample(t_us=t_us & 0xFFFFFFFF, flags=flags, accel=tuple(int(v) for v in ct.accel_lsb[i]),
+                                    gyro=tuple(int(v) for v in ct.gyro_lsb[i]), mag=tuple(int(v) for v in ct.mag_lsb[m]))))
+    return out

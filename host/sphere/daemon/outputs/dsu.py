@@ -46,6 +46,7 @@ import time
 import zlib
 
 from sphere.daemon.outputs.base import Output, OutputUnavailable
+from sphere.errors import SphereError
 from sphere.settings import Param, positive
 
 MAGIC_SERVER, MAGIC_CLIENT = b"DSUS", b"DSUC"
@@ -82,7 +83,7 @@ DSU_PARAMS = {
 }
 
 
-class BadDatagram(ValueError):
+class BadDatagram(SphereError, ValueError):
     """Not a DSU client message; the text is the reason (counted by reason)."""
 
 
