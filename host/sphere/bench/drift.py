@@ -85,6 +85,8 @@ def add_arguments(p) -> None:
     p.add_argument("--speed", type=argtypes.positive, default=2.0, help="replay speed of the X runs (default 2)")
     p.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
                    help="a daemon setting other than its default (as sphere-mouse's --set)")
+    p.add_argument("--tune", action="store_true", help=f"first choose the bias owner's settings (its GRID) on seeds "
+                   f"{','.join(map(str, TRAIN_SEEDS))} (the daemon path), then measure the chosen ones on --seeds")
     p.add_argument("--captures", metavar="DIR", help="keep (and reuse) the firmware's captures in this folder")
     p.add_argument("--json", metavar="OUT", type=argtypes.out_file, help="write the figures as JSON")
 
@@ -137,6 +139,19 @@ def firmware_capture(sc: Scenario, keep: Path | None = None) -> bytes:
         cached.parent.mkdir(parents=True, exist_ok=True)
         cached.write_bytes(data)
     return data
+
+
+def model_capture(sc: Scenario) -> bytes:
+    """The same motion as a capture without the board: the chip models' units at their rates straight into
+    RAW_SAMPLE frames (:func:`sphere.bench.pointer.raw_packets`; no DLPF, no firmware). ``--tune`` uses it for
+    the 10-minute hold (the board would take about 10 CPU minutes per run)."""
+    from sphere.bench.pointer import raw_packets
+    from sphere.daemon.scripted_sphere import hello_packet
+    from sphere.protocol import encode_frame
+
+    frames = [encode_frame(hello_packet(), 0)]
+    frames += [encode_frame(p, (i + 1) & 0xFF) for i, (_, p) in enumerate(raw_packets(sc.hold.motion))]
+    return b"".join(frames)
 
 
 # ---------------------------------------------------------------- the pointer: in the daemon, on X
@@ -434,6 +449,13 @@ def _config(settings):
     return Config().with_overrides(parse_set(list(settings)), "--set") if settings else Config()
 
 
+def grid() -> dict:
+    """What --tune tries (every combination): the bias owner's own GRID, as daemon config keys."""
+    from sphere.daemon.gyro_bias import GyroBias
+
+    return {f"gyro_bias.{k}": v for k, v in GyroBias.GRID.items()}
+
+
 def ratios(summary_f: dict) -> dict:
     """Each figure that has a target, over its target (≤ 1: met)."""
     out = {}
@@ -449,6 +471,42 @@ def ratios(summary_f: dict) -> dict:
         elif k in ("creep_first_px_s", "creep_px_s"):
             out[k] = v / TARGETS[k]
     return {k: v for k, v in out.items() if math.isfinite(v)}
+
+
+def score(summary_f: dict) -> tuple:
+    """The rule --tune picks by: the most targets met, then the least geometric mean of the figures' ratios to
+    their targets (every figure counts, not only the worst: the held stops' drift is the sensor's noise and
+    the same for every setting)."""
+    r = ratios(summary_f)
+    gm = math.exp(sum(math.log(max(v, 1e-3)) for v in r.values()) / len(r)) if r else 0.0
+    return (-sum(v <= 1.0 for v in r.values()), round(gm, 4))
+
+
+def tune(names, keep, base_set) -> tuple[list, list]:
+    """Every GRID combination on the TRAIN seeds through the daemon; returns (chosen --set items, rows)."""
+    import itertools
+
+    captures = {}
+    for n in names:
+        for seed in TRAIN_SEEDS if n != "long" else TRAIN_SEEDS[:1]:  # one 10-minute hold to tune on
+            sc = scenario(n, seed)
+            captures[n, seed] = sc, firmware_capture(sc, keep) if n != "long" else model_capture(sc)
+    rows = []
+    keys = list(grid())
+    for values in itertools.product(*grid().values()):
+        items = list(base_set) + [f"{k}={v:g}" for k, v in zip(keys, values)]
+        cfg = _config(items)
+        res: dict = {}
+        for (n, seed), (sc, cap) in captures.items():
+            ref = daemon_path(cap, cfg)
+            res.setdefault(n, {})[seed] = measure(sc, ref, ref[0, 0], cfg)
+        f = summary({"daemon": res})["daemon"]
+        rows.append((items[len(base_set):], f, score(f)))
+        r = ratios(f)
+        print(f"  TRAIN {' '.join(items[len(base_set):])}: {-score(f)[0]} of {len(r)} targets met, geometric mean "
+              f"ratio {score(f)[1]}; " + ", ".join(f"{k} {v:.2f}" for k, v in r.items() if v > 1.0), file=sys.stderr)
+    best = min(rows, key=lambda r: r[2])
+    return best[0], rows
 
 
 def run(args) -> int:
@@ -471,8 +529,22 @@ def run(args) -> int:
         print(f"sphere bench drift: {e}", file=sys.stderr)
         return 2
     keep = Path(args.captures) if args.captures else None
+    chosen = []
+    if args.tune:
+        try:
+            chosen, _ = tune(names, keep, args.set)
+        except RuntimeError as e:
+            print(f"sphere bench drift: {e}", file=sys.stderr)
+            return 1
+        print(f"chosen on seeds {','.join(map(str, TRAIN_SEEDS))}: {' '.join(chosen)}")
+        args.set = list(args.set) + chosen
+        cfg = _config(args.set)
     results: dict = {"daemon": {}, "x11": {}} if args.x11 else {"daemon": {}}
-    xvfb = Xvfb().__enter__() if args.x11 else None
+    try:
+        server = Xvfb().__enter__() if args.x11 else None
+    except RuntimeError as e:
+        print(f"sphere bench drift: --x11: {e}", file=sys.stderr)
+        return 1
     try:
         for name in names:
             for seed in seeds:
@@ -481,21 +553,21 @@ def run(args) -> int:
                 capture = firmware_capture(sc, keep)
                 ref = daemon_path(capture, cfg)
                 results["daemon"].setdefault(name, {})[seed] = measure(sc, ref, ref[0, 0], cfg)
-                if xvfb is not None:
-                    path = x11_path(capture, xvfb.display, ref, args.speed, args.set)
+                if server is not None:
+                    path = x11_path(capture, server.display, ref, args.speed, args.set)
                     results["x11"].setdefault(name, {})[seed] = measure(sc, path, ref[0, 0], cfg)
                 print(f"  {name}:{seed} done in {time.perf_counter() - t0:.0f} s", file=sys.stderr)
     except RuntimeError as e:
         print(f"sphere bench drift: {e}", file=sys.stderr)
         return 1
     finally:
-        if xvfb is not None:
-            xvfb.__exit__(None, None, None)
+        if server is not None:
+            server.__exit__(None, None, None)
     print_results(results, seeds)
     print_summary(results)
     if args.json:
         with open(args.json, "w") as f:
-            json.dump({"seeds": seeds, "targets": TARGETS, "settings": args.set, "results": results,
+            json.dump({"seeds": seeds, "targets": TARGETS, "settings": args.set, "chosen": chosen, "results": results,
                        "summary": summary(results)}, f, indent=2, default=float)
     return 0
 

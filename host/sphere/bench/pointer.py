@@ -96,7 +96,7 @@ class Recording:
 
     name: str
     kind: str  # "hold", "clean" or "broad"
-    inputs: list  # [(gyro_dps, dt_s, up)] exactly as SphereMouse passed them to PointerMapper.update
+    inputs: list  # [(gyro_dps, dt_s, up)] exactly as SphereMouse passed them to PointerMapper.update (None: hold())
     phases: list = field(default_factory=list)  # sphere.sim.hold.Phase
     ideal_px: np.ndarray | None = None  # (N, 2) the true pointing direction on the screen
     intent_px: np.ndarray | None = None  # (N, 2) the same without tremor and wander
@@ -114,6 +114,9 @@ class _InputRecorder:
     def update(self, gyro_dps, dt_s, up_body=None):
         self.inputs.append((tuple(gyro_dps), dt_s, None if up_body is None else tuple(up_body)))
         return 0, 0
+
+    def hold(self):
+        self.inputs.append(None)  # the daemon's rest hold: no step this sample
 
     def reset(self):
         pass
@@ -208,14 +211,17 @@ def pointer_paths(rec: Recording, smoothing: str, params: dict | None = None) ->
     the mapper's sub-pixel remainder (where the pointer is heading between whole pixels)."""
     mapper = PointerMapper(PointerSettings(smoothing=smoothing, smoothing_params=params), 1920)
     update = mapper.update
-    rem = mapper.remainder
     out = np.empty((len(rec.inputs), 2))
     exact = np.empty((len(rec.inputs), 2))
     x = y = 0
-    for i, (g, dt, up) in enumerate(rec.inputs):
-        dx, dy = update(g, dt, up)
-        x += dx
-        y += dy
+    for i, step in enumerate(rec.inputs):
+        if step is None:
+            mapper.hold()
+        else:
+            dx, dy = update(*step)
+            x += dx
+            y += dy
+        rem = mapper.remainder
         out[i] = x, y
         exact[i] = x + rem[0], y + rem[1]
     return out, exact

@@ -6,7 +6,8 @@ import logging
 
 from sphere.daemon.actions import Action, EventActions
 from sphere.daemon.config import smoothing_params
-from sphere.daemon.motion import G_M_S2, GyroBias, MotionTracker
+from sphere.daemon.gyro_bias import GyroBias, RestHold
+from sphere.daemon.motion import G_M_S2, MotionTracker
 from sphere.daemon.pointer import PointerMapper, PointerSettings, TiltMapper, TiltSettings
 from sphere.protocol.packets import RAW_ACCEL_OK, RAW_GYRO_OK, RAW_GYRO_STALE, RAW_MAG_OK, RAW_TAP_ACTIVE
 from sphere.protocol import Event, Hello, Orientation, RawSample, Status
@@ -71,8 +72,9 @@ class SphereMouse:
         self.tilt = TiltMapper(TiltSettings.from_config(cfg.tilt, cfg.pointer))
         g = cfg.gyro
         self.motion = MotionTracker(cfg.orientation.source, cfg.orientation.use_mag, cfg.orientation.beta,
-                                    GyroBias(g.still_dps, g.still_time_s, g.auto_bias),
-                                    filter_name=cfg.orientation.filter)
+                                    GyroBias(still_dps=g.still_dps, still_time_s=g.still_time_s, enabled=g.auto_bias,
+                                             **cfg["gyro_bias"].as_dict()),
+                                    filter_name=cfg.orientation.filter, rest_hold=RestHold(**cfg["rest_hold"].as_dict()))
         self.motion.defer = True  # handle() runs the deferred work after each sample's move
         self.actions = EventActions(cfg.events, cfg.freeze)
         self.modes = list(cfg.mode.cycle)
@@ -201,7 +203,7 @@ class SphereMouse:
                     self._tilt_step(t, dt)
                 elif self.mode == "pointer" and not self.motion.raw_seen:
                     # orientation-only stream: the rate comes from successive orientations
-                    dx, dy = self.mapper.update(self.motion.gyro_dps, dt, self.motion.up)
+                    dx, dy = self.mapper.update(self.motion.pointer_dps, dt, self.motion.up)
                     if dx or dy:
                         self._move(t, dx, dy)
         elif typ == Event.TYPE:
@@ -226,7 +228,10 @@ class SphereMouse:
         if self.paused or self.actions.frozen(t) or flags & (RAW_TAP_ACTIVE | RAW_GYRO_STALE) or not flags & RAW_GYRO_OK:
             return  # without the gyroscope nothing says how the sphere turns: the pointer holds still
         if self.mode == "pointer":
-            dx, dy = self.mapper.update(self.motion.gyro_dps, dt, self.motion.up)
+            if self.motion.rest_hold.holding:  # lying still (sphere.daemon.gyro_bias.RestHold)
+                self.mapper.hold()
+                return
+            dx, dy = self.mapper.update(self.motion.pointer_dps, dt, self.motion.up)
             if dx or dy:
                 self._move(t, dx, dy)
         elif self.mode == "tilt" and self.motion.uses_host_filter:

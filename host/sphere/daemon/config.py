@@ -50,6 +50,8 @@ MODES = ("pointer", "tilt", "3d")
 PARTS = Registry("part", {
     "camera": "sphere.camera.daemon_source:CameraPosition",  # a webcam or video file giving the ball's position
     "paths": "sphere.daemon.paths_config:PathsSettings",  # [paths] (read by sphere.paths)
+    "gyro_bias": "sphere.daemon.gyro_bias:GyroBias",  # the host's one gyro-bias estimate (its [gyro] keys stay there)
+    "rest_hold": "sphere.daemon.gyro_bias:RestHold",  # the pointer held while the sphere lies still
 }, section="{name}")
 
 #: Every registry whose components have a section of their own: "module:attribute" of a
@@ -62,7 +64,8 @@ REGISTRIES: tuple[str, ...] = (
 )
 
 #: The sections in the order the reference lists them (by their first part; others follow).
-ORDER = ("source", "output", "mode", "pointer", "tilt", "events", "freeze", "gyro", "orientation", "stream",
+ORDER = ("source", "output", "mode", "pointer", "tilt", "events", "freeze", "gyro", "gyro_bias", "rest_hold",
+         "orientation", "stream",
          "device", "status", "outputs", "smoothing", "position_smoothing", "paths", "camera")
 
 #: Keys of earlier releases that live elsewhere now: (section, key) -> what to write instead.

@@ -1,9 +1,9 @@
 """What the sphere is doing now, from its packets: bias-corrected angular rate, the vertical, orientation.
 
-RAW_SAMPLE gyro values are uncalibrated chip units (14.375 LSB per °/s). :class:`GyroBias` re-estimates
-the bias whenever the sphere lies still, as gyro-mouse software does ("continuous calibration").
-Orientation comes from the host's fusion filter run on the raw samples (``sphere.fusion``), or from
-the firmware's ORIENTATION packets (Q14, sensor-to-NWU).
+RAW_SAMPLE gyro values are uncalibrated chip units (14.375 LSB per °/s). The bias comes from the host's one
+owner of it, :class:`sphere.daemon.gyro_bias.GyroBias` (learnt lying still and held in the hand); the
+pointer, the host's fusion filter (``sphere.fusion``, fed the corrected rate) and so the stream all use it.
+Orientation comes from that filter, or from the firmware's ORIENTATION packets (Q14, sensor-to-NWU).
 """
 
 from __future__ import annotations
@@ -12,230 +12,16 @@ import math
 
 from sphere import chips
 from sphere import quaternion
+from sphere.daemon.gyro_bias import GyroBias, RestHold
 from sphere.protocol.packets import RAW_ACCEL_OK, RAW_GYRO_OK, RAW_GYRO_STALE, RAW_MAG_OK, RAW_TAP_ACTIVE
+
+__all__ = ["GyroBias", "MotionTracker", "body_rate_dps", "host_filter", "up_from_quat"]
 
 G_M_S2 = chips.STANDARD_GRAVITY_M_S2
 DEG = math.pi / 180.0
 _GYRO_DPS_PER_LSB = 1.0 / chips.ITG3200_LSB_PER_DPS
 _ACCEL_G_PER_LSB = 1.0 / chips.ADXL345_LSB_PER_G
 _MAG_UT_PER_LSB = 1.0 / chips.HMC5883L_LSB_PER_UT
-MAG_STILL_UT = 0.2  # µT per still window: the compass trend test's floor (HMC5883L noise ≈ 0.2 µT, 1 LSB 0.09 µT)
-
-
-class _Trend:
-    """Running sums for the least-squares slope of a 3-vector against time over one window."""
-
-    __slots__ = ("n", "fresh", "st", "stt", "sx", "stx", "sxx", "last", "t0")
-
-    def __init__(self):
-        self.t0 = None
-        self.n = self.fresh = 0
-        self.st = self.stt = 0.0
-        self.sx = [0.0] * 3
-        self.stx = [0.0] * 3
-        self.sxx = [0.0] * 3
-        self.last = None
-
-    def add(self, t: float, v) -> None:
-        t0 = self.t0
-        if t0 is None:
-            t0 = self.t0 = t
-        t -= t0
-        self.n += 1
-        if v != self.last:
-            self.fresh += 1
-            self.last = v
-        self.st += t
-        self.stt += t * t
-        x0, x1, x2 = v  # written out: this runs twice per sample
-        sx, stx, sxx = self.sx, self.stx, self.sxx
-        sx[0] += x0
-        stx[0] += t * x0
-        sxx[0] += x0 * x0
-        sx[1] += x1
-        stx[1] += t * x1
-        sxx[1] += x1 * x1
-        sx[2] += x2
-        stx[2] += t * x2
-        sxx[2] += x2 * x2
-
-    def moved(self, floor: float, k_sigma: float = 4.0) -> bool:
-        """Whether the vector changed over the window by more than ``k_sigma`` standard errors of the fitted
-        slope (from the window's own scatter about the line; repeated readings count once) and ``floor``."""
-        n = self.n
-        if n < 4:
-            return False
-        stt = self.stt - self.st * self.st / n
-        if stt <= 0:
-            return False
-        span = math.sqrt(12.0 * stt / n)  # the window's length in time
-        n_eff = max(3, min(self.fresh, n))
-        for i in range(3):
-            stx = self.stx[i] - self.st * self.sx[i] / n
-            sxx = self.sxx[i] - self.sx[i] * self.sx[i] / n
-            b = stx / stt
-            var = max(0.0, (sxx - b * stx) / (n - 2))
-            se = math.sqrt(var / stt * n / n_eff)
-            if abs(b) * span > max(k_sigma * se * span, floor):
-                return True
-        return False
-
-
-class GyroBias:
-    """Gyro bias in °/s, learnt from windows of ``still_time_s`` in which the sphere lies still.
-
-    A window counts as still only when all of these hold — a slow steady turn fails at least one:
-
-    - the gyro stays within ±``still_dps`` of its range's middle on every axis (hand tremor fails this);
-    - the accelerometer's magnitude stays near 1 g, and its direction shows no trend: the fitted change over
-      the window is below 4 standard errors of the slope (estimated from the window's own scatter, so the
-      threshold scales with the window and its noise) and below one LSB (3.9 mg ≈ a 0.2 °/s turn about a
-      horizontal axis). A turn about any axis but the vertical tips gravity in the sensor frame;
-    - the magnetometer, when it answers, confirms the same way (a turn about the vertical swings the field's
-      horizontal part: 3 °/s turns 20 µT by 1 µT a second, ~12 standard errors of a 1-s window of HMC5883L
-      noise); ``MAG_STILL_UT`` is its floor per window.
-
-    Then the window's mean must be plausible for the chip (``|bias| ≤ MAX_BIAS_DPS``) and, once a bias is
-    known, close to it: within ``base_dps`` plus ``drift_dps_per_s`` for every second since the last update
-    (a bias moves slowly, with temperature). A window that is not is held back; a second still window in a
-    row that agrees with it replaces the bias if the two together pass the trend tests again (twice the
-    time: 2.8 times as sensitive, so a turn too slow for one window's test is caught) — recovery from a
-    wrong estimate, e.g. one learnt during a steady turn at start-up while the compass was not answering.
-    A window the compass confirmed replaces one it did not confirm at once.
-    """
-
-    MAX_BIAS_DPS = 40.0  # ITG-3200 datasheet (PS-ITG-3200A-00-01.4) §3.1 Sensor Specifications: initial ZRO tolerance ±40 °/s
-    ACCEL_FLOOR_G = 1.0 / 256  # one ADXL345 LSB at full resolution
-    AVERAGE_WINDOWS = 8
-
-    def __init__(self, still_dps: float = 3.0, still_time_s: float = 1.0, enabled: bool = True,
-                 base_dps: float = 0.15, drift_dps_per_s: float = 0.02):
-        self.still_dps = still_dps
-        self.still_time_s = still_time_s
-        self.enabled = enabled
-        self.base_dps = base_dps
-        self.drift_dps_per_s = drift_dps_per_s
-        self.bias = [0.0, 0.0, 0.0]
-        self.updates = 0
-        self.confirmed = False  # the current bias came from a window the compass confirmed
-        self.rejected = 0  # still windows held back as too far from the current bias
-        self._clock = 0.0
-        self._last_update_s = 0.0
-        self._pending = None  # (mean, confirmed) of the last window held back
-        self._long = None  # its accelerometer and compass trends, carried on over the next window
-        self._windows = 0
-        self._queued = None  # a sample left for run_deferred (add(..., defer=True))
-        self._start()
-
-    def _start(self):
-        self._n = 0
-        self._t = 0.0
-        self._sum = [0.0, 0.0, 0.0]
-        self._lo = [math.inf] * 3
-        self._hi = [-math.inf] * 3
-        self._accel_ok = True
-        self._acc = _Trend()
-        self._mag = _Trend()
-
-    def add(self, gyro_dps, accel_g_norm: float, dt_s: float, mag_uT=None, accel_g=None, defer: bool = False) -> None:
-        """One sample. ``defer=True`` leaves it for :meth:`run_deferred` (so the caller can act on the sample
-        first) when it cannot end a window — only a window's end changes the bias — and takes it at once when it
-        may; the next add() takes a sample left behind first. The result is the same bit for bit."""
-        if not self.enabled:
-            return
-        if self._queued is not None:
-            self.run_deferred()
-        if defer and self._t + dt_s < self.still_time_s:  # the same sum as below: this sample ends no window
-            self._queued = (gyro_dps, accel_g_norm, dt_s, mag_uT, accel_g)
-            return
-        clock = self._clock = self._clock + dt_s
-        g0, g1, g2 = gyro_dps  # written out (runs at every sample): the same sums and comparisons as a loop
-        sm, lo, hi = self._sum, self._lo, self._hi
-        sm[0] += g0
-        sm[1] += g1
-        sm[2] += g2
-        if g0 < lo[0]:
-            lo[0] = g0
-        if g0 > hi[0]:
-            hi[0] = g0
-        if g1 < lo[1]:
-            lo[1] = g1
-        if g1 > hi[1]:
-            hi[1] = g1
-        if g2 < lo[2]:
-            lo[2] = g2
-        if g2 > hi[2]:
-            hi[2] = g2
-        if abs(accel_g_norm - 1.0) > 0.15:
-            self._accel_ok = False
-        self._n += 1
-        self._t += dt_s
-        spread = hi[0] - lo[0]  # max() of the three
-        d = hi[1] - lo[1]
-        if d > spread:
-            spread = d
-        d = hi[2] - lo[2]
-        if d > spread:
-            spread = d
-        if spread > 2.0 * self.still_dps or not self._accel_ok:
-            self._start()
-            self._pending = self._long = None
-            return
-        if accel_g is not None and type(accel_g) is not tuple:
-            accel_g = tuple(accel_g)
-        if mag_uT is not None and type(mag_uT) is not tuple:
-            mag_uT = tuple(mag_uT)
-        for acc, mag in ((self._acc, self._mag), self._long) if self._long is not None else ((self._acc, self._mag),):
-            if accel_g is not None:
-                acc.add(clock, accel_g)
-            if mag_uT is not None:
-                mag.add(clock, mag_uT)
-        if self._t >= self.still_time_s:
-            self._end_window()
-
-    def run_deferred(self) -> None:
-        """The sample an ``add(..., defer=True)`` left (nothing if none)."""
-        queued, self._queued = self._queued, None
-        if queued is not None:
-            self.add(*queued)
-
-    def _end_window(self) -> None:
-        mean = [s / self._n for s in self._sum]
-        acc, mag = self._acc, self._mag
-        still = not acc.moved(self.ACCEL_FLOOR_G) and not mag.moved(MAG_STILL_UT)
-        confirmed = mag.n >= 0.5 * self._n
-        self._start()
-        if not still or max(abs(m) for m in mean) > self.MAX_BIAS_DPS:
-            self._pending = self._long = None
-            return
-        if self.updates == 0 or (confirmed and not self.confirmed):
-            self._accept(mean, confirmed, replace=True)
-            return
-        tol = self.base_dps + self.drift_dps_per_s * (self._clock - self._last_update_s)
-        if max(abs(m - b) for m, b in zip(mean, self.bias)) <= tol:
-            self._accept(mean, confirmed, replace=False)
-            return
-        pending, long = self._pending, self._long
-        if (pending is not None and max(abs(m - p) for m, p in zip(mean, pending[0])) <= self.base_dps
-                and not long[0].moved(self.ACCEL_FLOOR_G) and not long[1].moved(MAG_STILL_UT)):
-            self._accept([0.5 * (m + p) for m, p in zip(mean, pending[0])], confirmed and pending[1], replace=True)
-            return
-        self.rejected += 1
-        self._pending = (mean, confirmed)
-        self._long = (acc, mag)  # the trends go on over the next window
-
-    def _accept(self, mean, confirmed: bool, replace: bool) -> None:
-        # agreeing windows are averaged (the last AVERAGE_WINDOWS weigh most: the noise of the mean shrinks,
-        # a drifting bias is still followed); a replacement starts the average again
-        self._windows = 1 if replace else min(self._windows + 1, self.AVERAGE_WINDOWS)
-        k = 1.0 / self._windows
-        self.bias = [b + k * (m - b) for b, m in zip(self.bias, mean)]
-        self.updates += 1
-        self.confirmed = confirmed or (self.confirmed and not replace)
-        self._last_update_s = self._clock
-        self._pending = self._long = None
-
-
 def up_from_quat(q):
     """The earth's up (z) expressed in sensor coordinates, for a sensor-to-earth quaternion (w, x, y, z)."""
     w, x, y, z = q
@@ -310,8 +96,10 @@ class MotionTracker:
     """Feed packets in; read ``gyro_dps`` (bias-corrected, sensor axes), ``up`` and ``quat`` (sensor-to-NWU)."""
 
     def __init__(self, orientation_source: str = "auto", use_mag: bool = False, beta: float = 0.1,
-                 bias: GyroBias | None = None, imu_rate_hz: float = 200.0, filter_name: str = "auto"):
+                 bias: GyroBias | None = None, imu_rate_hz: float = 200.0, filter_name: str = "auto",
+                 rest_hold: RestHold | None = None):
         self.bias = bias or GyroBias()
+        self.rest_hold = rest_hold or RestHold()
         self.orientation_source = orientation_source
         self.use_mag = use_mag
         self.filter = None
@@ -329,6 +117,7 @@ class MotionTracker:
         self.up = None  # earth up in sensor axes
         self.accel_g = None  # the last RAW_SAMPLE's acceleration (g, sensor axes) when the chip answered
         self.gyro_dps = (0.0, 0.0, 0.0)
+        self.pointer_dps = (0.0, 0.0, 0.0)  # gyro_dps for the pointer: zero while the rest hold holds it
         self.default_dt_s = 1.0 / imu_rate_hz
         self._last_raw_t = None
         self._last_ori_t = None
@@ -370,7 +159,7 @@ class MotionTracker:
         if flags & (RAW_GYRO_OK | RAW_GYRO_STALE) != RAW_GYRO_OK:
             # gyro_ok clear (spec §4.2: the chip did not answer, its values are 0) or gyro_stale set (a value held
             # from the last good read): not a rate. Nothing moves, nothing is learnt, the orientation holds.
-            self.gyro_dps = (0.0, 0.0, 0.0)
+            self.gyro_dps = self.pointer_dps = (0.0, 0.0, 0.0)
             return dt
         tap_active = bool(flags & RAW_TAP_ACTIVE)
         accel_ok = bool(flags & RAW_ACCEL_OK) and anorm > 0.0
@@ -382,6 +171,7 @@ class MotionTracker:
             self.bias.add(gyro, anorm, dt, mag, (ax, ay, az), self.defer)
         b = self.bias.bias
         self.gyro_dps = (gyro[0] - b[0], gyro[1] - b[1], gyro[2] - b[2])
+        self.pointer_dps = self.rest_hold(self.gyro_dps, dt, self.bias.still_s, self.bias.still_dps)
         if accel_ok and not tap_active and 0.5 < anorm < 1.5:
             # low-passed accelerometer as the vertical when no orientation is known
             if self._accel_up is None:
@@ -435,6 +225,7 @@ class MotionTracker:
             if not self.raw_seen:
                 # an orientation-only stream (a slow Bluetooth link): the rate from successive orientations
                 self.gyro_dps = body_rate_dps(self.quat, q, dt) if self.quat is not None else (0.0, 0.0, 0.0)
+                self.pointer_dps = self.gyro_dps
             self.quat = q
             self.up = up_from_quat(self.quat)
         return dt

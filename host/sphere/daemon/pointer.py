@@ -101,6 +101,7 @@ class PointerMapper:
         self.screen_width_px = int(screen_width_px)
         self.filter = make_filter(self.settings.smoothing, **(self.settings.smoothing_params or {}))
         self._forward = None
+        self._holding = False
         self.reset()
 
     def reset(self) -> None:
@@ -151,8 +152,19 @@ class PointerMapper:
             vy = -vy
         return vx, vy
 
+    def hold(self) -> None:
+        """A sample during which the pointer stays where it is (the sphere lies still: the daemon's rest hold):
+        no step; the smoothing's history is forgotten once, so the next move starts afresh (no tail of the last
+        move comes after the hold); the sub-pixel remainder stays (it is where the pointer is)."""
+        if not self._holding:
+            remainder = self.remainder
+            self.reset()
+            self.remainder = remainder
+            self._holding = True
+
     def update(self, gyro_dps, dt_s: float, up_body=None) -> tuple[int, int]:
         """One gyro sample (°/s, sensor axes) over ``dt_s`` seconds → whole-pixel steps (dx right, dy down)."""
+        self._holding = False
         vx, vy = self.rate_px_s(gyro_dps, up_body, dt_s)
         return self.emit(vx * dt_s, vy * dt_s)
 
