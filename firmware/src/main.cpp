@@ -1,5 +1,5 @@
 // MARG sphere firmware for the Arduino Nano (ATmega328P, 16 MHz).
-// Sensors: ADXL345 (0x53), ITG-3200 (0x68/0x69), HMC5883L (0x1E) or QMC5883L (0x0D) on I²C at 400 kHz; ADXL345 INT1 on D2.
+// Sensors: ADXL345 (0x53), ITG-3200 (0x68/0x69), HMC5883L (0x1E) or QMC5883L (0x0D) on I²C at 348 kHz; ADXL345 INT1 on D2.
 // Output: framed packets per protocol/spec.md on the UART at 115200 baud (SET_BAUD moves a USB link to 250k-1M
 // baud while the host confirms it, spec §5.4). D13 is high exactly while
 // the MARG update runs. All behaviour lives in src/core/ (SphereDevice); this file only wires the
@@ -16,7 +16,7 @@ static AvrBoard board(twi);
 static sphere::SphereDevice device(twi, board);
 
 void setup() {
-    // MCUSR (the reset cause) was captured and cleared, and the watchdog stopped, in .init3 (avr_board.cpp)
+    // MCUSR (the reset cause) was read and cleared, and the watchdog stopped, in .init3 (avr_board.cpp)
     Serial.begin(115200);
     Serial.write((uint8_t)0);  // at once: ends a frame a reset cut off, so the host drops it now, not 0.25 s later
     board.blink(2);      // power-up: two short blinks
@@ -24,7 +24,7 @@ void setup() {
     twi.clearBus();      // a sensor left holding SDA by a reset mid-read lets go
     device.begin();      // probes the sensors, loads the calibration, sends 0x00 and HELLO
     board.begin();       // sample clock starts now
-    wdt_enable(WDTO_250MS);
+    AvrBoard::startWatchdog();  // interrupt mode: a stalled loop restarts the firmware (avr_board.cpp)
 }
 
 void loop() {

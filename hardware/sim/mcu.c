@@ -10,6 +10,7 @@
 #include "avr_watchdog.h"
 #include "sim_cycle_timers.h"
 #include "sim_interrupts.h"
+#include "sim_io.h"
 #include "sim_time.h"
 
 static avr_io_t *io_by_kind(avr_t *avr, const char *kind)
@@ -322,6 +323,21 @@ void mcu_watchdog_reset(avr_t *avr)
 	}
 }
 
+/* ---------------------------------------------------------------- a program that restarts itself
+ * A program may leave an interrupt handler by a jump to its reset vector instead of RETI (the sphere's firmware
+ * restarts itself so from its watchdog interrupt). The chip keeps no record of running handlers (only SREG's I
+ * bit, which the handler's entry cleared); simavr keeps a stack of them, 64 deep, that only RETI pops. At the
+ * reset vector with that stack not empty, the board empties it, so a program that restarts itself a hundred
+ * times runs on as on the chip. */
+void mcu_at_reset_vector(avr_t *avr)
+{
+	while (avr->interrupts.running_ptr) {
+		avr_int_vector_t *v = avr->interrupts.running[--avr->interrupts.running_ptr];
+		if (v)
+			avr_raise_irq(v->irq + AVR_INT_IRQ_RUNNING, 0);
+	}
+}
+
 /* ---------------------------------------------------------------- a hung main program */
 static avr_run_t hang_run;
 
@@ -344,4 +360,66 @@ void mcu_hang_step(avr_t *avr)
 		return;
 	avr->cycle += next > 0 && next < 64 ? next : (next ? 64 : 1);
 	avr_service_interrupts(avr);
+}
+
+/* ---------------------------------------------------------------- the bus's pins and levels
+ * SDA and SCL are PC4 and PC5. With the TWI on, it drives them low or lets go, and "the internal pull-ups in
+ * the AVR pads can be enabled by setting the PORT bits corresponding to the SCL and SDA pins" ("TWI – Overview
+ * of the TWI Module", "SCL and SDA Pins"); with it off, the port drives them. The sensor boards pull the lines up
+ * to their 3.3 V; the ATmega's pull-up (R_PU 20–50 kΩ, "DC Characteristics") goes to its 5 V. Idle high level
+ * with both: V = (5/R_PU + 3.3/R_ext) / (1/R_PU + 1/R_ext), highest at R_PU = 20 kΩ. The sensors' limit: the
+ * ADXL345's absolute maximum on a digital pin, VDD I/O + 0.3 V = 3.6 V at the boards' 3.3 V. A pin driven high
+ * (output, port bit 1, TWI off) puts 5 V on the line. The TWI's SCL low time: half the period less two CPU
+ * cycles ("2-wire Serial Interface Characteristics", its notes), the period 16 + 2·TWBR·4^TWPS cycles. */
+enum { PINC_ = 0x26, DDRC_ = 0x27, PORTC_ = 0x28, TWBR_ = 0xB8, TWSR_ = 0xB9, TWCR_ = 0xBC };
+enum { SDA_BIT = 1 << 4, SCL_BIT = 1 << 5, TWEN_BIT = 1 << 2 };
+static double bus_r_ext_kohm = 4.7;
+mcu_bus_t mcu_bus = {.scl_low_us_min = 1e9, .limit_v = 3.6};
+
+static void bus_check(avr_t *avr, uint8_t ddr, uint8_t port, uint8_t twcr)
+{
+	int twi = (twcr & TWEN_BIT) != 0;
+	uint8_t pulled = (uint8_t)(port & (twi ? (SDA_BIT | SCL_BIT) : (uint8_t)~ddr) & (SDA_BIT | SCL_BIT));
+	uint8_t driven = (uint8_t)(twi ? 0 : (ddr & port & (SDA_BIT | SCL_BIT)));
+	double t = (double)avr->cycle / avr->frequency;
+	if (pulled) {
+		double rpu = 20.0, rx = bus_r_ext_kohm;
+		double v = (5.0 / rpu + 3.3 / rx) / (1.0 / rpu + 1.0 / rx);
+		if (!mcu_bus.pullup_events++)
+			mcu_bus.first_pullup_s = t;
+		if (v > mcu_bus.idle_high_v_max)
+			mcu_bus.idle_high_v_max = v;
+	}
+	if (driven) {
+		if (!mcu_bus.driven_high_events++)
+			mcu_bus.first_driven_high_s = t;
+		mcu_bus.idle_high_v_max = 5.0;
+	}
+}
+
+static void bus_port_write(avr_t *avr, avr_io_addr_t addr, uint8_t v, void *param)
+{
+	(void)param;
+	uint8_t ddr = addr == DDRC_ ? v : avr->data[DDRC_];
+	uint8_t port = addr == PORTC_ ? v : avr->data[PORTC_];
+	uint8_t twcr = addr == TWCR_ ? v : avr->data[TWCR_];
+	bus_check(avr, ddr, port, twcr);
+	if (addr == TWCR_ && (v & TWEN_BIT)) {
+		uint32_t twbr = avr->data[TWBR_], twps = avr->data[TWSR_] & 3u;
+		double period = 16.0 + 2.0 * twbr * (double)(1u << (2 * twps));
+		double low_us = (period / 2 - 2) / (avr->frequency / 1e6);
+		if (low_us < mcu_bus.scl_low_us_min) {
+			mcu_bus.scl_low_us_min = low_us;
+			mcu_bus.scl_khz = avr->frequency / period / 1e3;
+		}
+	}
+}
+
+void mcu_bus_init(avr_t *avr, double r_ext_kohm)
+{
+	bus_r_ext_kohm = r_ext_kohm;
+	/* after the port's and the TWI's own handlers (simavr shares a register between handlers in order) */
+	avr_register_io_write(avr, DDRC_, bus_port_write, NULL);
+	avr_register_io_write(avr, PORTC_, bus_port_write, NULL);
+	avr_register_io_write(avr, TWCR_, bus_port_write, NULL);
 }

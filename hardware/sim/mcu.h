@@ -34,11 +34,26 @@ void mcu_watchdog_forget_pending(avr_t *avr);
 void mcu_watchdog_reset(avr_t *avr); /* arm simavr's own watchdog-reset path, then call avr_reset */
 extern uint32_t mcu_watchdog_interrupts;  /* watchdog interrupts raised */
 
+/* Call when the program is at its reset vector (pc 0): an interrupt handler it left by a jump there has ended. */
+void mcu_at_reset_vector(avr_t *avr);
+
 /* A hang of the main program (e.g. a loop waiting for a flag that never comes): no instruction outside an
  * interrupt handler runs, while the peripherals, their interrupts and the watchdog go on. mcu_hang_begin
  * takes the stack pointer of the main program (it waits for a moment with interrupts enabled); mcu_hang_step
  * replaces avr_run while the hang lasts. */
 int mcu_hang_begin(avr_t *avr);
 void mcu_hang_step(avr_t *avr);
+
+/* The I2C pins' levels (mcu.c): whether the AVR's own pull-ups (to 5 V) were on beside the sensor boards'
+ * (to 3.3 V through r_ext_kohm), or a line driven high; the highest idle level against the sensors' limit; the
+ * SCL low time the TWI's bit rate gives. */
+typedef struct {
+	uint32_t pullup_events, driven_high_events;
+	double first_pullup_s, first_driven_high_s;
+	double idle_high_v_max, limit_v;
+	double scl_low_us_min, scl_khz;
+} mcu_bus_t;
+extern mcu_bus_t mcu_bus;
+void mcu_bus_init(avr_t *avr, double r_ext_kohm);
 
 #endif

@@ -235,19 +235,103 @@ static void adxl_update_int1(board_t *b)
 	}
 }
 
-static void adxl_store_sample(board_t *b, const long a[3])
+enum { FIFO_BYPASS = 0, FIFO_FIFO = 1, FIFO_STREAM = 2, FIFO_TRIGGER = 3 };
+static int adxl_fifo_mode(chip_t *c) { return c->regs[ADXL_FIFO_CTL] >> 6; }
+
+static void adxl_set_data(chip_t *c, const int16_t v[3])
+{
+	for (int i = 0; i < 3; i++) {
+		c->regs[ADXL_DATAX0 + 2 * i] = (uint8_t)(v[i] & 0xFF);
+		c->regs[ADXL_DATAX0 + 2 * i + 1] = (uint8_t)((uint16_t)v[i] >> 8);
+	}
+}
+
+/* The FIFO's status bits in INT_SOURCE: DATA_READY while a set is waiting, WATERMARK while the FIFO holds at
+ * least FIFO_CTL's samples ("a value of 0 in the samples bits immediately sets the watermark status bit") */
+static void adxl_fifo_status(board_t *b)
+{
+	chip_t *c = &b->chip[CHIP_ADXL345];
+	int samples = c->regs[ADXL_FIFO_CTL] & 0x1F;
+	if (b->adxl_fifo_n > 0) b->adxl_int_source |= INT_DATA_READY;
+	else b->adxl_int_source &= (uint8_t)~INT_DATA_READY;
+	if (b->adxl_fifo_n >= samples) b->adxl_int_source |= INT_WATERMARK;
+	else b->adxl_int_source &= (uint8_t)~INT_WATERMARK;
+}
+
+static void adxl_fifo_drop(board_t *b, int k)
+{
+	if (k <= 0) return;
+	if (k > b->adxl_fifo_n) k = b->adxl_fifo_n;
+	memmove(b->adxl_fifo[0], b->adxl_fifo[k], sizeof(b->adxl_fifo[0]) * (size_t)(b->adxl_fifo_n - k));
+	memmove(b->adxl_fifo_t, b->adxl_fifo_t + k, sizeof(double) * (size_t)(b->adxl_fifo_n - k));
+	b->adxl_fifo_n -= k;
+}
+
+/* A new output sample: into the data registers (bypass), or into the FIFO ("FIFO": FIFO mode collects up to 32
+ * sets and then stops; stream mode keeps the newest 32, the oldest dropped, which is an overrun; trigger mode
+ * streams until the trigger event, then keeps the newest FIFO_CTL samples and collects until full), the data
+ * registers holding the oldest. */
+static void adxl_store_sample(board_t *b, const long a[3], double t_s)
 {
 	chip_t *c = &b->chip[CHIP_ADXL345];
 	uint8_t fmt = c->regs[ADXL_DATA_FORMAT];
 	int range = fmt & 3;
+	int16_t v[3];
 	for (int i = 0; i < 3; i++) {
-		int16_t v;
 		if (fmt & 0x08) /* FULL_RES: 3.9 mg/LSB, 10 to 13 bits */
-			v = clip16(a[i], -(512L << range), (512L << range) - 1);
+			v[i] = clip16(a[i], -(512L << range), (512L << range) - 1);
 		else /* 10 bits, scale 256 >> range LSB/g */
-			v = clip16(a[i] >> range, -512, 511);
-		c->regs[ADXL_DATAX0 + 2 * i] = (uint8_t)(v & 0xFF);
-		c->regs[ADXL_DATAX0 + 2 * i + 1] = (uint8_t)((uint16_t)v >> 8);
+			v[i] = clip16(a[i] >> range, -512, 511);
+	}
+	int mode = adxl_fifo_mode(c);
+	if (mode == FIFO_BYPASS) {
+		if (c->has_sample && c->data_read_sample != c->last_sample && (b->adxl_int_source & INT_DATA_READY))
+			b->adxl_int_source |= INT_OVERRUN;
+		adxl_set_data(c, v);
+		b->adxl_data_t = t_s;
+		b->adxl_int_source |= INT_DATA_READY;
+		return;
+	}
+	int full = b->adxl_fifo_n == 32;
+	if (full && (mode == FIFO_STREAM || (mode == FIFO_TRIGGER && !b->adxl_fifo_trig))) {
+		adxl_fifo_drop(b, 1); /* new data replace the oldest unread */
+		b->adxl_int_source |= INT_OVERRUN;
+		full = 0;
+	}
+	if (!full) {
+		memcpy(b->adxl_fifo[b->adxl_fifo_n], v, sizeof v);
+		b->adxl_fifo_t[b->adxl_fifo_n++] = t_s;
+	}
+	adxl_set_data(c, b->adxl_fifo[0]);
+	adxl_fifo_status(b);
+}
+
+/* trigger mode: an event on the interrupt pin FIFO_CTL's trigger bit names (0 INT1, 1 INT2) */
+static void adxl_fifo_trigger(board_t *b)
+{
+	chip_t *c = &b->chip[CHIP_ADXL345];
+	if (adxl_fifo_mode(c) != FIFO_TRIGGER || b->adxl_fifo_trig)
+		return;
+	uint8_t events = b->adxl_int_source & c->regs[ADXL_INT_ENABLE] & (uint8_t)~(INT_DATA_READY | INT_WATERMARK | INT_OVERRUN);
+	uint8_t on_pin = (c->regs[ADXL_FIFO_CTL] & 0x20) ? c->regs[ADXL_INT_MAP] : (uint8_t)~c->regs[ADXL_INT_MAP];
+	if (events & on_pin) {
+		b->adxl_fifo_trig = 1;
+		adxl_fifo_drop(b, b->adxl_fifo_n - (c->regs[ADXL_FIFO_CTL] & 0x1F));
+		if (b->adxl_fifo_n)
+			adxl_set_data(c, b->adxl_fifo[0]);
+		adxl_fifo_status(b);
+	}
+}
+
+/* the age of the data a read returns (set sampled at t_s), for the stats */
+static void adxl_note_age(board_t *b, double t_s)
+{
+	double age_ms = (board_time_s(b) - t_s) * 1e3;
+	if (age_ms > b->adxl_age_max_ms)
+		b->adxl_age_max_ms = age_ms;
+	if (b->adxl_age_pending && b->adxl_first_ages < 64) {
+		b->adxl_first_age_ms[b->adxl_first_ages++] = age_ms;
+		b->adxl_age_pending = 0;
 	}
 }
 
@@ -338,15 +422,13 @@ static avr_cycle_count_t adxl_tick(avr_t *avr, avr_cycle_count_t when, void *par
 	}
 	double t_s = (double)when / avr->frequency;
 	b->adxl_tick++;
-	if (c->has_sample && c->data_read_sample != c->last_sample && (b->adxl_int_source & INT_DATA_READY))
-		b->adxl_int_source |= INT_OVERRUN;
-	c->last_sample = b->adxl_tick;
-	c->has_sample = 1;
 	long a[3];
 	adxl_accel_fullres(b, t_s, odr, a);
-	adxl_store_sample(b, a);
-	b->adxl_int_source |= INT_DATA_READY;
+	adxl_store_sample(b, a, t_s);
+	c->last_sample = b->adxl_tick;
+	c->has_sample = 1;
 	adxl_engine(b, (uint64_t)(t_s * 1e6), a);
+	adxl_fifo_trigger(b);
 	adxl_update_int1(b);
 	b->adxl_odr_hz = odr;
 	/* the chip's own oscillator: its ODR is off the Nano's crystal by ppm */
@@ -366,8 +448,20 @@ static void adxl_write(chip_t *c, uint8_t reg, uint8_t v)
 		if (reg < 0x1D || reg > 0x39)
 			return; /* reserved */
 	}
+	int old_mode = adxl_fifo_mode(c);
 	c->regs[reg] = v;
-	if (reg == ADXL_INT_ENABLE || reg == ADXL_INT_MAP || reg == ADXL_DATA_FORMAT)
+	if (reg == ADXL_FIFO_CTL) {
+		int mode = adxl_fifo_mode(c);
+		if (mode != old_mode) { /* bypass: "the FIFO is not operational and, therefore, remains empty" */
+			b->adxl_fifo_n = 0;
+			b->adxl_fifo_trig = 0;
+		}
+		if (mode != FIFO_BYPASS)
+			adxl_fifo_status(b);
+		else
+			b->adxl_int_source &= (uint8_t)~INT_WATERMARK;
+	}
+	if (reg == ADXL_INT_ENABLE || reg == ADXL_INT_MAP || reg == ADXL_DATA_FORMAT || reg == ADXL_FIFO_CTL)
 		adxl_update_int1(b);
 }
 
@@ -375,8 +469,21 @@ static uint8_t adxl_read(chip_t *c, uint8_t reg)
 {
 	board_t *b = c->board;
 	if (reg >= ADXL_DATAX0 && reg <= ADXL_DATAZ1) {
-		c->data_read_sample = c->last_sample;
-		b->adxl_int_source &= (uint8_t)~(INT_DATA_READY | INT_OVERRUN);
+		if (adxl_fifo_mode(c) == FIFO_BYPASS) {
+			if (!b->adxl_popped && c->has_sample)
+				adxl_note_age(b, b->adxl_data_t);
+			c->data_read_sample = c->last_sample;
+			b->adxl_int_source &= (uint8_t)~(INT_DATA_READY | INT_OVERRUN);
+		} else if (!b->adxl_popped && b->adxl_fifo_n > 0) {
+			/* the set latched for this read leaves the FIFO; the next oldest moves into the registers */
+			adxl_note_age(b, b->adxl_fifo_t[0]);
+			adxl_fifo_drop(b, 1);
+			if (b->adxl_fifo_n)
+				adxl_set_data(c, b->adxl_fifo[0]);
+			b->adxl_int_source &= (uint8_t)~INT_OVERRUN;
+			adxl_fifo_status(b);
+		}
+		b->adxl_popped = 1;
 		adxl_update_int1(b);
 		return c->latched[reg];
 	}
@@ -389,8 +496,9 @@ static uint8_t adxl_read(chip_t *c, uint8_t reg)
 	}
 	if (reg == ADXL_ACT_TAP_STATUS)
 		return b->adxl_act_tap_status;
-	if (reg == ADXL_FIFO_STATUS)
-		return (b->adxl_int_source & INT_DATA_READY) ? 1 : 0;
+	if (reg == ADXL_FIFO_STATUS) /* FIFO_TRIG, entries */
+		return adxl_fifo_mode(c) == FIFO_BYPASS ? ((b->adxl_int_source & INT_DATA_READY) ? 1 : 0)
+		       : (uint8_t)((b->adxl_fifo_trig ? 0x80 : 0) | b->adxl_fifo_n);
 	if (reg < 0x1D && reg != ADXL_DEVID)
 		return 0;
 	return c->regs[reg];
@@ -401,6 +509,7 @@ static uint8_t adxl_next(chip_t *c, uint8_t reg) { (void)c; return (uint8_t)((re
 static void adxl_address(chip_t *c)
 {
 	memcpy(c->latched, c->regs, sizeof(c->regs)); /* multi-byte reads are coherent */
+	c->board->adxl_popped = 0;
 }
 
 /* ---------------------------------------------------------------- ITG-3200 */
@@ -1057,6 +1166,8 @@ static void adxl_power_on(chip_t *c)
 	c->has_sample = 0;
 	board_t *b = c->board;
 	b->adxl_int_source = 0;
+	b->adxl_fifo_n = 0;
+	b->adxl_fifo_trig = 0;
 	memset(&b->tap, 0, sizeof b->tap);
 }
 
@@ -1103,6 +1214,7 @@ void board_power_cycle(board_t *b)
 
 void board_avr_reset(board_t *b)
 {
+	b->adxl_age_pending = 1; /* the program starts again: its first accelerometer read is noted */
 	/* a slave in the middle of sending a byte keeps driving SDA until the master clocks the byte out */
 	if (b->bus_busy && b->cur_chip >= 0 && b->chip[b->cur_chip].selected == 2) {
 		b->chip[b->cur_chip].holds_sda = 1 + (int)(rng_uniform(&b->itg.rng) * 9); /* clocks still needed: 1..9 */
@@ -1208,6 +1320,7 @@ void board_init(board_t *b, avr_t *avr, trace_t *trace, int verbose, const board
 	}
 
 	chip_setup(&b->chip[CHIP_ADXL345], "adxl345", 0x53, adxl_write, adxl_read, adxl_next, adxl_address);
+	b->adxl_age_pending = 1; /* the program's first accelerometer read after power-up is noted */
 	chip_setup(&b->chip[CHIP_ITG3200], "itg3200", 0x68, itg_write, itg_read, itg_next, itg_address);
 	if (b->variant->mag_kind == MAG_QMC5883L)
 		chip_setup(&b->chip[CHIP_HMC5883L], "qmc5883l", 0x0D, qmc_write, qmc_read, qmc_next, qmc_address);

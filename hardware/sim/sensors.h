@@ -150,6 +150,18 @@ typedef struct board_t {
 	uint64_t adxl_tick;      /* ODR index of the engine's newest sample */
 	double adxl_odr_hz;
 	int adxl_timer_running;
+	/* ADXL345 FIFO ("FIFO", "Register 0x38—FIFO_CTL", "Register 0x39—FIFO_STATUS"): 32 sample sets, oldest
+	 * first; in FIFO, stream and trigger mode the data registers hold the oldest, and reading them takes it out */
+	int16_t adxl_fifo[32][3];
+	double adxl_fifo_t[32];  /* when each was sampled (simulated s) */
+	int adxl_fifo_n;
+	int adxl_fifo_trig;      /* trigger mode: the trigger event came (FIFO_STATUS bit 7) */
+	int adxl_popped;         /* the current transaction has taken a set out */
+	double adxl_data_t;      /* when the set in the data registers (bypass mode) was sampled */
+	/* the age of the data the AVR read: the largest, and the first read after each program start */
+	double adxl_age_max_ms;
+	double adxl_first_age_ms[64];
+	int adxl_first_ages, adxl_age_pending;
 	/* bus bookkeeping */
 	int bus_busy;            /* between a START and a STOP */
 	int cur_chip;            /* chip addressed now, -1 none */

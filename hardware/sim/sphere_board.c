@@ -695,6 +695,10 @@ static void usage(FILE *f)
 		"  --bootloader FILE.hex  a boot loader in front of the program (Intel HEX; the reset vector moves to its\n"
 		"                       first address, as the Nano's BOOTRST/BOOTSZ fuses): build/bootloader-NAME.hex,\n"
 		"                       NAME optiboot4 (the Nano's), atmegaboot (the old Nano's), optiboot8\n"
+		"  --previous FILE.elf:T  run FILE.elf (a sketch flashed before) from power-up, and at T s flash the firmware\n"
+		"                       over it and pulse the reset pin: the chips keep power and their registers, SRAM\n"
+		"                       is kept (a reflash over a stick left as the earlier sketch set it)\n"
+		"  --bus-pullup KOHM    the sensor board's pull-ups on SDA and SCL to its 3.3 V (default 4.7 kOhm)\n"
 		"  --hang T0:T1         the program hangs from T0 to T1 s: no instruction outside an interrupt handler\n"
 		"                       runs; interrupts, peripherals and the watchdog go on (a reset ends it)\n"
 		"  --drdy-pin PIN       wire the HMC5883L's DRDY to PIN (e.g. D3; not wired on the sphere)\n"
@@ -743,6 +747,9 @@ int main(int argc, char **argv)
 	int clocks_random = 0, sda_held = 0, n_brownouts = 0, n_stalls = 0, n_resets_mid = 0, n_resets_at = 0, n_power_offs = 0;
 	double glitch_rate = 0, power_offs[MAX_FAULTS], brownouts[MAX_FAULTS], resets_mid[MAX_FAULTS], host_stalls[MAX_FAULTS][2], resets_at[MAX_FAULTS];
 	const char *adapter = NULL, *times_path = NULL, *bootloader_path = NULL, *host_log_path = NULL;
+	char previous_path[PATH_MAX] = "";
+	double bus_pullup_kohm = 4.7;
+	double reflash_s = -1;
 	double hangs[MAX_FAULTS][2];
 	int n_hangs = 0;
 	uint32_t latency_timer_ms = 16; /* the FT232R latency timer as ftdi_sio leaves it (since Linux 4.x) */
@@ -768,7 +775,8 @@ int main(int argc, char **argv)
 		{"simavr-i2c-timing", no_argument, 0, 'U'}, {"capture-times", required_argument, 0, 'X'},
 		{"reset-at", required_argument, 0, 'A'}, {"drdy-pin", required_argument, 0, 'D'},
 		{"power-off", required_argument, 0, 'O'}, {"bootloader", required_argument, 0, 'Q'},
-		{"hang", required_argument, 0, 'G'}, {0, 0, 0, 0}};
+		{"hang", required_argument, 0, 'G'}, {"previous", required_argument, 0, 'V'},
+		{"bus-pullup", required_argument, 0, 'K'}, {0, 0, 0, 0}};
 	int o;
 	while ((o = getopt_long(argc, argv, "t:s:c:prj:vh", opts, NULL)) != -1) {
 		switch (o) {
@@ -834,6 +842,21 @@ int main(int argc, char **argv)
 		}
 		case 'Z': simavr_status = 1; break;
 		case 'Q': bootloader_path = optarg; break;
+		case 'K':
+			bus_pullup_kohm = atof(optarg);
+			if (!(bus_pullup_kohm > 0 && bus_pullup_kohm < 1000)) { fprintf(stderr, "--bus-pullup KOHM between 0 and 1000, not %s\n", optarg); return 2; }
+			break;
+		case 'V': {
+			char *c = strrchr(optarg, ':');
+			if (!c || c == optarg || (size_t)(c - optarg) >= sizeof previous_path || !(atof(c + 1) > 0)) {
+				fprintf(stderr, "--previous FILE.elf:T with T > 0\n");
+				return 2;
+			}
+			memcpy(previous_path, optarg, (size_t)(c - optarg));
+			previous_path[c - optarg] = 0;
+			reflash_s = atof(c + 1);
+			break;
+		}
 		case 'G': {
 			char *c = strchr(optarg, ':');
 			if (!c || n_hangs >= MAX_FAULTS) { fprintf(stderr, "--hang T0:T1\n"); return 2; }
@@ -905,7 +928,13 @@ int main(int argc, char **argv)
 	extint_level_poll_off(avr);
 	avr->frequency = 16000000;
 	avr->log = verbose > 3 ? LOG_TRACE : LOG_ERROR;
-	avr_load_firmware(avr, &fw);
+	elf_firmware_t prev;
+	memset(&prev, 0, sizeof prev);
+	if (previous_path[0] && (access(previous_path, R_OK) || elf_read_firmware(previous_path, &prev))) {
+		fprintf(stderr, "sphere-board: cannot read the previous program %s\n", previous_path);
+		return 1;
+	}
+	avr_load_firmware(avr, previous_path[0] ? &prev : &fw); /* the firmware itself goes in at the reflash */
 	avr->frequency = 16000000; /* a Nano's crystal, whatever the ELF says */
 	avr->sleep = no_sleep;     /* sleep is simulated time, never wall time */
 	avr->reset = on_reset;     /* counts resets after power-up (the watchdog's); MCUSR as the datasheet says */
@@ -913,6 +942,7 @@ int main(int argc, char **argv)
 		mcusr_addr = avr->reset_flags.porf.reg;
 	mcu_mcusr_flags(avr, mcusr_addr); /* flags cleared by writing 0, not set by writing 1 (mcu.c) */
 	mcu_eeprom_timing(avr);    /* EEPE busy for the datasheet's write time (mcu.c) */
+	mcu_bus_init(avr, bus_pullup_kohm); /* the bus's levels: the AVR's pull-ups, a line driven high (mcu.c) */
 	mcu_watchdog_init(avr);    /* the watchdog's interrupt and system reset mode as the datasheet says (mcu.c) */
 	uint32_t boot_start = 0, boot_size = 0;
 	if (bootloader_path) {
@@ -1080,6 +1110,13 @@ int main(int argc, char **argv)
 				log_fault(board_time_s(&board), "hang_start", -1);
 			}
 		}
+		if (!avr->pc && avr->interrupts.running_ptr) { /* left an interrupt handler for the reset vector (mcu.c) */
+			mcu_at_reset_vector(avr);
+			if (hanging) { /* the program restarted itself: that ends its hang */
+				hanging = 0;
+				log_fault(board_time_s(&board), "hang_end_by_restart", -1);
+			}
+		}
 		mcusr_before = avr->data[mcusr_addr];
 		if (mcu_watchdog_poll(avr)) {
 			log_fault(board_time_s(&board), "watchdog_unserved", -1);
@@ -1138,6 +1175,15 @@ int main(int argc, char **argv)
 			while (reset_at_i < n_resets_at && t >= resets_at[reset_at_i]) {
 				reset_at_i++;
 				log_fault(t, "reset", -1);
+				plain_reset = 1;
+				reset_avr(avr, MCUSR_EXTRF, imp.seed);
+				plain_reset = 0;
+			}
+			if (reflash_s > 0 && t >= reflash_s) { /* the programmer rewrote the application section */
+				reflash_s = -1;
+				memset(avr->flash, 0xFF, boot_start ? boot_start : avr->flashend + 1u);
+				avr_loadcode(avr, fw.flash, fw.flashsize, fw.flashbase);
+				log_fault(t, "reflash", -1);
 				plain_reset = 1;
 				reset_avr(avr, MCUSR_EXTRF, imp.seed);
 				plain_reset = 0;
@@ -1283,6 +1329,19 @@ int main(int argc, char **argv)
 		fprintf(sf, "  \"bootloader\": %s%s%s,\n", bootloader_path ? "\"" : "", bootloader_path ? bootloader_path : "null", bootloader_path ? "\"" : "");
 		fprintf(sf, "  \"bootloader_start\": %u,\n  \"bootloader_bytes\": %u,\n", boot_start, boot_size);
 		fprintf(sf, "  \"eeprom_writes\": %u,\n", mcu_eeprom_writes);
+		fprintf(sf, "  \"bus\": {\"avr_pullup_events\": %u, \"first_avr_pullup_s\": %.6f, \"driven_high_events\": %u, "
+			"\"first_driven_high_s\": %.6f, \"idle_high_v_max\": %.3f, \"limit_v\": %.2f, \"over_limit\": %s, "
+			"\"sensor_pullup_kohm\": %.2f, \"scl_khz\": %.1f, \"scl_low_us\": %.4f, \"scl_low_ok\": %s},\n",
+			mcu_bus.pullup_events, mcu_bus.first_pullup_s, mcu_bus.driven_high_events, mcu_bus.first_driven_high_s,
+			mcu_bus.idle_high_v_max ? mcu_bus.idle_high_v_max : 3.3, mcu_bus.limit_v,
+			mcu_bus.idle_high_v_max > mcu_bus.limit_v ? "true" : "false", bus_pullup_kohm,
+			mcu_bus.scl_low_us_min < 1e9 ? mcu_bus.scl_khz : 0.0, mcu_bus.scl_low_us_min < 1e9 ? mcu_bus.scl_low_us_min : 0.0,
+			/* t_LOW: 1.3 us in fast mode (above 100 kHz), 4.7 us in standard mode */
+			mcu_bus.scl_low_us_min < 1e9 && mcu_bus.scl_low_us_min >= (mcu_bus.scl_khz > 100.05 ? 1.3 : 4.7) ? "true" : "false");
+		fprintf(sf, "  \"adxl345_data_age_ms\": {\"max\": %.3f, \"first_after_start\": [", board.adxl_age_max_ms);
+		for (int i = 0; i < board.adxl_first_ages; i++)
+			fprintf(sf, "%s%.3f", i ? ", " : "", board.adxl_first_age_ms[i]);
+		fprintf(sf, "]},\n");
 		fprintf(sf, "  \"watchdog_interrupts\": %u,\n", mcu_watchdog_interrupts);
 		fprintf(sf, "  \"simulated_seconds\": %.6f,\n", sim_s);
 		fprintf(sf, "  \"wall_seconds\": %.3f,\n", wall);

@@ -424,3 +424,64 @@ def test_reset_flags_accumulate_until_the_program_clears_them():
     (`k`) finds the earlier reset's flag beside the new one."""
     r = probe([(0.1, "k"), (0.4, "k"), (0.7, "W")], T.still(1.0), 1.0, reset_at=[0.3], brownout=[0.5])
     assert [c for c, _ in _banners(r)] == [PORF, EXTRF, EXTRF | BORF, EXTRF | BORF | WDRF], _banners(r)
+
+
+# ---------------------------------------------------------------- the ADXL345's FIFO (datasheet rev. E, "FIFO",
+# "Register 0x38—FIFO_CTL", "Register 0x39—FIFO_STATUS") and its registers over an AVR reset
+
+
+def _entries(r):
+    """FIFO_STATUS's entries from the one-byte reads (the data reads are six bytes)."""
+    return [x.data[0] & 0x3F for x in r.tagged("r") if len(x.data) == 1]
+
+
+def test_adxl_stream_mode_keeps_the_newest_32_and_reading_takes_the_oldest_out():
+    """Stream mode: "the FIFO holds the last 32 data values. When the FIFO is full, the oldest data is
+    overwritten with newer data"; FIFO_STATUS's entries count them; each read of the data registers takes the
+    oldest set out. At 100 Hz (BW_RATE 0x0A) the FIFO fills in 0.32 s; reading 5 sets leaves 27 (28 when a new
+    set came in the meantime, one every 10 ms). Back in bypass the FIFO is empty (the model's FIFO_STATUS then
+    counts the data registers' set, as before the FIFO was modelled)."""
+    cmds = [(0.1, "w 53 38 9f"), (0.12, "w 53 2d 08"), (0.6, "r 53 39 1")]
+    cmds += [(0.61 + 0.0005 * i, "r 53 32 6") for i in range(5)]
+    cmds += [(0.615, "r 53 39 1"), (0.62, "w 53 38 00"), (0.63, "r 53 39 1")]
+    r = probe(cmds, T.still(0.7), 0.7)
+    full, after, bypass = _entries(r)
+    assert full == 32 and after in (27, 28) and bypass <= 1, r.lines
+    # the sets taken out are the oldest: 0.6 s - 32 x 10 ms old, which the board says too
+    assert r.stats["adxl345_data_age_ms"]["max"] > 300
+
+
+def test_adxl_fifo_mode_stops_when_full_and_the_watermark_counts_samples():
+    """FIFO mode "collects up to 32 values and then stops collecting data"; the watermark bit in INT_SOURCE is
+    set while the FIFO holds at least FIFO_CTL's samples (here 10) and DATA_READY while a set is waiting."""
+    cmds = [(0.1, "w 53 38 4a"), (0.11, "w 53 2d 08"), (0.15, "r 53 30 1"), (0.5, "r 53 39 1"), (0.6, "r 53 39 1"),
+            (0.61, "r 53 30 1")]
+    r = probe(cmds, T.still(0.7), 0.7)
+    src0, src1 = r.tagged("r")[0].data[0], r.tagged("r")[3].data[0]
+    assert _entries(r)[1:3] == [32, 32], r.lines  # full at 0.43 s, and it stays 32
+    assert not src0 & 0x02 and src1 & 0x82 == 0x82, r.lines  # 4 sets at 0.15 s: no watermark yet
+
+
+def test_adxl_registers_survive_an_avr_reset_and_a_power_on_clears_them():
+    """The chips keep their power over an AVR reset (the reset pin: a reflash, a DTR): FIFO_CTL and the offsets
+    stay as an earlier program left them; a power-on restores their reset values (0)."""
+    cmds = [(0.1, "w 53 38 9f"), (0.12, "w 53 1e 05"), (0.4, "r 53 38 1"), (0.41, "r 53 1e 1"), (0.7, "r 53 38 1"),
+            (0.71, "r 53 1e 1")]
+    r = probe(cmds, T.still(0.8), 0.8, reset_at=[0.3], power_off=[0.5])
+    assert [x.data[0] for x in r.tagged("r")] == [0x9F, 0x05, 0x00, 0x00], r.lines
+
+
+# ---------------------------------------------------------------- the bus's levels and timing (hardware/sim/mcu.c)
+
+
+def test_the_bus_model_flags_the_avr_pull_ups_and_a_line_driven_high():
+    """Arduino's Wire turns the ATmega's pull-ups (20-50 kOhm to 5 V) on beside the sensor board's (to 3.3 V): the
+    idle level, (5/20k + 3.3/4.7k) / (1/20k + 1/4.7k) = 3.62 V, is above the ADXL345's VDD I/O + 0.3 V = 3.6 V.
+    The probe's bus clear sets a pin as an output while its port bit is 1 (the pull-up): 5 V on the line."""
+    r = probe([(0.1, "c")], T.still(0.2), 0.2)
+    bus = r.stats["bus"]
+    assert bus["avr_pullup_events"] > 0 and abs(bus["first_avr_pullup_s"]) < 0.01
+    assert bus["driven_high_events"] > 0 and 0.1 <= bus["first_driven_high_s"] < 0.11
+    assert bus["over_limit"] and bus["idle_high_v_max"] == 5.0
+    r = probe([], T.still(0.2), 0.2, bus_pullup_kohm=10)
+    assert r.stats["bus"]["idle_high_v_max"] == pytest.approx((5 / 20 + 3.3 / 10) / (1 / 20 + 1 / 10), abs=1e-3)

@@ -121,9 +121,15 @@ struct FakeHal : sphere::DeviceHal {
         return true;
     }
     void eepromRead(uint16_t a, uint8_t* out, uint8_t n) override { std::memcpy(out, eeprom + a, n); }
-    bool eepromWrite(uint16_t a, const uint8_t* d, uint8_t n) override {
-        if (eeprom_fails) return false;
-        std::memcpy(eeprom + a, d, n);
+    // eeprom_write_us = 0: every write is done at once; else the ATmega328P's EEPE: busy that long after a byte
+    uint32_t eeprom_write_us = 0, eeprom_busy_until = 0;
+    int eeprom_bytes_written = 0;
+    bool eepromReady() override { return !eeprom_write_us || (int32_t)(now - eeprom_busy_until) >= 0; }
+    bool eepromWriteByte(uint16_t a, uint8_t v) override {
+        if (eeprom_fails || !eepromReady()) return false;
+        eeprom[a] = v;
+        ++eeprom_bytes_written;
+        eeprom_busy_until = now + eeprom_write_us;
         return true;
     }
     void margPin(bool h) override {

@@ -713,3 +713,96 @@ TEST_CASE("the start-up gain lasts until 400 samples had a usable accelerometer"
     for (auto& p : f)
         if (p[0] == PKT_ORIENTATION) CHECK_FALSE((p[2 + 4] & ORI_CONVERGING));
 }
+
+// The EEPROM as the ATmega328P has it: 3.4 ms a byte (EEPM 00, "EEPROM Mode Bits"). A block is written a byte a
+// period from tick(), never waited for; the REPLY comes when it reads back as written.
+TEST_CASE("SAVE_CALIBRATION writes a byte a period and answers when the block is stored; no period waits") {
+    Rig r, ref;
+    r.hal.eeprom_write_us = 3400;
+    r.dev.begin();
+    ref.dev.begin();
+    r.run(20);
+    ref.run(20);
+    r.hal.frames();
+    r.send(frameOf(CMD_SAVE_CALIBRATION, 7, {}));
+    CHECK(count(r.hal.frames(), PKT_REPLY) == 0);  // not yet: one byte is being written
+    int ticks = 0, replies = 0;
+    while (replies == 0 && ticks < 200) {
+        int before = r.hal.eeprom_bytes_written;
+        r.run(1);
+        ref.run(1);
+        CHECK(r.hal.eeprom_bytes_written - before <= 1);
+        ++ticks;
+        for (auto& p : r.hal.frames())
+            if (p[0] == PKT_REPLY) {
+                ++replies;
+                CHECK(p[2] == 7);
+                CHECK(p[4] == RESULT_OK);
+            }
+    }
+    // every byte of the image differs from the erased EEPROM: one a period, then the REPLY
+    CHECK(r.hal.eeprom_bytes_written == CALIBRATION_EEPROM_LEN);
+    CHECK(ticks == CALIBRATION_EEPROM_LEN);
+    CHECK((r.dev.calibrationState() & CAL_FROM_EEPROM));
+    Calibration back;
+    CHECK(readCalibrationImage(r.hal.eeprom, back));
+    // the sample periods ran as without the save: the same orientation, an update every period
+    int16_t q[4], qr[4];
+    r.dev.orientationQ14(q);
+    ref.dev.orientationQ14(qr);
+    for (int i = 0; i < 4; ++i) CHECK(q[i] == qr[i]);
+    CHECK(r.hal.pin_pulses == ref.hal.pin_pulses);
+    // saved again unchanged: nothing to write, the REPLY at once
+    r.send(frameOf(CMD_SAVE_CALIBRATION, 8, {}));
+    auto f = r.hal.frames();
+    REQUIRE(count(f, PKT_REPLY) == 1);
+    CHECK(first(f, PKT_REPLY)->at(4) == RESULT_OK);
+    CHECK(r.hal.eeprom_bytes_written == CALIBRATION_EEPROM_LEN);
+}
+
+TEST_CASE("while a block is being written: another store, LOAD and REBOOT are busy, other commands are answered") {
+    Rig r;
+    r.hal.eeprom_write_us = 3400;
+    r.dev.begin();
+    r.run(5);
+    r.hal.frames();
+    r.send(frameOf(CMD_SAVE_CALIBRATION, 1, {}));
+    r.send(frameOf(CMD_SET_BOARD, 2, {BOARD_GY85}));
+    r.send(frameOf(CMD_LOAD_CALIBRATION, 3, {}));
+    r.send(frameOf(CMD_REBOOT, 4, {0x07, 0xB0}));
+    r.send(frameOf(CMD_GET_STATUS, 5, {}));
+    auto f = r.hal.frames();
+    std::vector<std::pair<int, int>> replies;
+    for (auto& p : f)
+        if (p[0] == PKT_REPLY) replies.push_back({p[2], p[4]});
+    CHECK(replies == std::vector<std::pair<int, int>>{{2, RESULT_BUSY}, {3, RESULT_BUSY}, {4, RESULT_BUSY}, {5, RESULT_OK}});
+    CHECK(r.hal.reboots == 0);
+    r.run(60);
+    f = r.hal.frames();
+    REQUIRE(count(f, PKT_REPLY) == 1);
+    CHECK(first(f, PKT_REPLY)->at(2) == 1);
+    // SET_BOARD: the profile changes when its two bytes are stored, not before
+    r.send(frameOf(CMD_SET_BOARD, 6, {BOARD_GY85}));
+    CHECK(r.dev.boardProfile() == BOARD_ALIGNED);
+    r.run(3);
+    CHECK(r.dev.boardProfile() == BOARD_GY85);
+    f = r.hal.frames();
+    REQUIRE(count(f, PKT_REPLY) == 1);
+    CHECK(first(f, PKT_REPLY)->at(4) == RESULT_OK);
+}
+
+TEST_CASE("an EEPROM write that fails half way answers STORAGE_ERROR and leaves the EEPROM's block invalid") {
+    Rig r;
+    r.hal.eeprom_write_us = 3400;
+    r.dev.begin();
+    r.send(frameOf(CMD_SAVE_CALIBRATION, 1, {}));
+    r.run(10);
+    r.hal.eeprom_fails = true;
+    r.run(5);
+    auto f = r.hal.frames();
+    REQUIRE(count(f, PKT_REPLY) == 1);
+    CHECK(first(f, PKT_REPLY)->at(4) == RESULT_STORAGE_ERROR);
+    Calibration back;
+    CHECK_FALSE(readCalibrationImage(r.hal.eeprom, back));
+    CHECK_FALSE((r.dev.calibrationState() & CAL_FROM_EEPROM));
+}

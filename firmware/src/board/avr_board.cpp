@@ -8,18 +8,69 @@
 #include <util/atomic.h>
 #include <util/delay.h>
 
-// MCUSR as the chip reset: captured in .init3, before main() and the Arduino core run. Optiboot (the
-// Nano's newer bootloader) clears MCUSR itself and hands its copy over in r2, which nothing touches
-// before .init3; the old bootloader leaves MCUSR as it was.
+// Why the chip (or the firmware) last started, for HELLO reset_cause. MCUSR is read and cleared in .init3,
+// before main() and the Arduino core run, and the watchdog stopped there. What the Nano's boot loaders leave
+// in MCUSR (hardware/sim/README.md, "Boot loaders"): ATmegaBOOT leaves it as the reset set it; Optiboot 8
+// leaves it (but WDRF when EXTRF is set: its own time-out) and hands it over in r2 as well; Optiboot 4.4,
+// the Nano's, clears it and hands nothing over (r2 then holds whatever the last program left there). So
+// MCUSR is the only source: flags found there are the reset's; none found means a boot loader cleared them,
+// and the cause is reported as 0, unknown, rather than guessed. The firmware's own restarts (its watchdog's
+// interrupt, REBOOT) leave a mark in .noinit RAM and report the watchdog bit.
 static uint8_t g_reset_cause __attribute__((section(".noinit")));
+static uint8_t g_restart_mark[2] __attribute__((section(".noinit")));  // RESET_WATCHDOG and its complement
 extern "C" void captureResetCause() __attribute__((naked, used, section(".init3")));
 extern "C" void captureResetCause() {
-    uint8_t from_bootloader;
-    asm volatile("mov %0, r2" : "=r"(from_bootloader));
     uint8_t m = MCUSR;
     MCUSR = 0;  // a watchdog reset leaves WDRF set, which keeps the watchdog on: clear it, then stop it
     wdt_disable();
-    g_reset_cause = (uint8_t)((m ? m : from_bootloader) & 0x0F);
+    uint8_t cause = (uint8_t)(m & 0x0F);
+    if (!cause && g_restart_mark[0] == sphere::RESET_WATCHDOG && g_restart_mark[1] == (uint8_t)~sphere::RESET_WATCHDOG)
+        cause = sphere::RESET_WATCHDOG;
+    g_restart_mark[0] = 0;
+    g_reset_cause = cause;
+}
+
+// Starts the firmware again from its reset vector without a reset. A watchdog *reset* is not used: after one
+// the Nano's old bootloader (ATmegaBOOT, which leaves the watchdog on at 16 ms while WDRF is set) resets the
+// chip again before it reaches the program, for good (Arduino issue 4492), and the firmware cannot tell which
+// boot loader it sits behind (the Nano's lock bits keep the boot section from being read). The registers the
+// firmware and the Arduino core set are put back to their reset values ("Register Summary"), the pins to
+// inputs without pull-ups; the C start-up sets the stack pointer and SREG, and .init3 reads the mark.
+static void restartFirmware() __attribute__((noreturn));
+static void restartFirmware() {
+    cli();
+    wdt_disable();
+    g_restart_mark[0] = sphere::RESET_WATCHDOG;
+    g_restart_mark[1] = (uint8_t)~sphere::RESET_WATCHDOG;
+    TWCR = 0;
+    UCSR0B = 0;
+    UCSR0A = 0;
+    TIMSK0 = TIMSK1 = TIMSK2 = 0;
+    TCCR0A = TCCR0B = TCCR1A = TCCR1B = TCCR2A = TCCR2B = 0;
+    TIFR0 = TIFR1 = TIFR2 = 0xFF;  // flags are cleared by writing one
+    EIMSK = 0;
+    EICRA = 0;
+    EIFR = 0xFF;
+    PCICR = 0;
+    PCIFR = 0xFF;
+    ADCSRA = 0;
+    DDRB = DDRC = DDRD = 0;
+    PORTB = PORTC = PORTD = 0;
+    asm volatile("jmp 0");
+    __builtin_unreachable();
+}
+
+// The watchdog's time-out in interrupt mode (WDIE without WDE, "Watchdog Timer Configuration"): the main loop
+// stopped resetting it for 250 ms, and this restarts the firmware. A hang with interrupts off is not caught
+// (it would need the system reset mode, which the old bootloader cannot take).
+ISR(WDT_vect) { restartFirmware(); }
+
+void AvrBoard::startWatchdog() {
+    ATOMIC_BLOCK(ATOMIC_RESTORESTATE) {
+        wdt_reset();
+        WDTCSR = _BV(WDCE) | _BV(WDE);  // the timed sequence: the prescaler changes only within four cycles
+        WDTCSR = _BV(WDIE) | _BV(WDP2);  // interrupt mode, 32K cycles of the 128 kHz oscillator: 0.25 s
+    }
 }
 
 namespace {
@@ -117,9 +168,11 @@ void AvrBoard::eepromRead(uint16_t addr, uint8_t* out, uint8_t len) {
     eeprom_read_block(out, (const void*)addr, len);
 }
 
-bool AvrBoard::eepromWrite(uint16_t addr, const uint8_t* data, uint8_t len) {
-    eeprom_update_block(data, (void*)addr, len);  // writes only the bytes that differ
-    eeprom_busy_wait();
+bool AvrBoard::eepromReady() { return eeprom_is_ready(); }
+
+bool AvrBoard::eepromWriteByte(uint16_t addr, uint8_t value) {
+    if (!eeprom_is_ready()) return false;
+    eeprom_write_byte((uint8_t*)addr, value);  // starts the write (EEMPE, EEPE) and returns: EEPE stays set 3.4 ms
     return true;  // SphereDevice reads the block back to verify
 }
 
@@ -184,8 +237,6 @@ void AvrBoard::service() {
     }
     if (reboot_pending_) {
         Serial.flush();  // the REPLY is on the wire
-        wdt_enable(WDTO_15MS);
-        for (;;) {
-        }
+        restartFirmware();
     }
 }

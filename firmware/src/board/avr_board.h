@@ -1,5 +1,5 @@
 // The Nano's side of SphereDevice: UART frames, EEPROM, the D13 timing pin / LED, the ADXL345's INT1
-// on D2, the 200 Hz sample clock on Timer1, and the watchdog.
+// on D2, the 200 Hz sample clock on Timer1, and the watchdog (a restart, never a watchdog reset).
 #pragma once
 #include <stdint.h>
 
@@ -18,6 +18,9 @@ public:
     // Sleeps until the next interrupt (timer, UART, INT0) unless a period or a received byte already waits.
     static void idle();
     void blink(uint8_t times);    // 60 ms blinks at power-up (before the sample clock runs)
+    // The watchdog in interrupt mode, 0.25 s: a main loop that stops calling wdt_reset() for that long is
+    // restarted from the reset vector (no watchdog reset: avr_board.cpp says why)
+    static void startWatchdog();
 
     uint32_t micros() override;
     bool send(const uint8_t* frame, uint8_t len) override;
@@ -25,7 +28,8 @@ public:
     uint8_t resetCause() override;
     sphere::KeptBias& keptBias() override;
     void eepromRead(uint16_t addr, uint8_t* out, uint8_t len) override;
-    bool eepromWrite(uint16_t addr, const uint8_t* data, uint8_t len) override;
+    bool eepromReady() override;
+    bool eepromWriteByte(uint16_t addr, uint8_t value) override;
     void margPin(bool high) override;
     bool adxlInterrupt(uint32_t& t_us) override;
     void identify(uint8_t seconds) override;

@@ -5,16 +5,25 @@
 #include <util/twi.h>
 
 namespace {
-// One byte at 400 kHz is 22.5 µs = 360 CPU cycles; a polling pass is about 6 cycles. 1500 passes
+// One byte at 348 kHz is 25.9 µs = 414 CPU cycles; a polling pass is about 6 cycles. 1500 passes
 // (≈ 0.6 ms) leave room for clock stretching and still keep a stalled bus far from the 5 ms period.
 const uint16_t WAIT_PASSES = 1500;
 const uint8_t SDA_BIT = PC4, SCL_BIT = PC5;  // A4, A5 on the Nano
+// SCL = F_CPU / (16 + 2·TWBR) with the prescaler at 1 ("TWI Bit Rate Generator Unit"). Fast mode asks for an
+// SCL low time of at least 1.3 µs (the ATmega328P's "2-wire Serial Interface Characteristics", t_LOW; the
+// ADXL345's, ITG-3200's and HMC5883L's I²C timing tables alike), and the ATmega's TWI drives SCL low for half
+// the period less two CPU cycles (that table's notes): TWBR 12 (400 kHz) gives 18 cycles = 1.125 µs, too short;
+// TWBR 15 (347.8 kHz) gives 21 cycles = 1.3125 µs.
+const uint8_t TWBR_FAST = 15;
 }  // namespace
 
 void AvrTwi::begin() {
-    PORTC |= _BV(SDA_BIT) | _BV(SCL_BIT);  // internal pull-ups (the breakout boards carry stronger ones)
-    TWSR = 0;                              // prescaler 1
-    TWBR = (uint8_t)((F_CPU / 400000UL - 16) / 2);
+    // No internal pull-ups: the sensor boards pull SDA and SCL up to their 3.3 V, and the ATmega's 20-50 kΩ to
+    // 5 V beside them would lift the idle bus above the sensors' limit (the ADXL345's absolute maximum on a
+    // digital pin is VDD I/O + 0.3 V)
+    PORTC &= (uint8_t)~(_BV(SDA_BIT) | _BV(SCL_BIT));
+    TWSR = 0;  // prescaler 1
+    TWBR = TWBR_FAST;
     TWCR = _BV(TWEN);
 }
 
@@ -43,25 +52,25 @@ void AvrTwi::recover() {
     clearBus();
 }
 
+// Open drain by hand: a line is pulled low by making its pin an output with the port bit already 0, and let go by
+// making it an input again (the board's pull-ups raise it). The port bits stay 0 throughout, so neither pin is
+// ever driven high nor pulled up to 5 V, not even for the instant between two register writes.
 void AvrTwi::clearBus() {
-    TWCR = 0;  // release the pins to the port
-    DDRC &= (uint8_t)~_BV(SDA_BIT);
-    PORTC |= _BV(SDA_BIT);
+    PORTC &= (uint8_t)~(_BV(SDA_BIT) | _BV(SCL_BIT));  // first: low when driven, no pull-up when released
+    TWCR = 0;                                          // release the pins to the port: both inputs
+    DDRC &= (uint8_t)~(_BV(SDA_BIT) | _BV(SCL_BIT));
+    _delay_us(5);
     // clock out whatever a slave still holds: up to nine SCL pulses while SDA is low
     for (uint8_t i = 0; i < 9 && !(PINC & _BV(SDA_BIT)); ++i) {
-        DDRC |= _BV(SCL_BIT);
-        PORTC &= (uint8_t)~_BV(SCL_BIT);
+        DDRC |= _BV(SCL_BIT);  // SCL low
         _delay_us(5);
-        DDRC &= (uint8_t)~_BV(SCL_BIT);
-        PORTC |= _BV(SCL_BIT);
+        DDRC &= (uint8_t)~_BV(SCL_BIT);  // SCL released
         _delay_us(5);
     }
-    // STOP by hand: SDA low → high while SCL is high
+    // STOP by hand: SDA low, then released while SCL is high
     DDRC |= _BV(SDA_BIT);
-    PORTC &= (uint8_t)~_BV(SDA_BIT);
     _delay_us(5);
     DDRC &= (uint8_t)~_BV(SDA_BIT);
-    PORTC |= _BV(SDA_BIT);
     _delay_us(5);
     TWCR = _BV(TWEN);
 }

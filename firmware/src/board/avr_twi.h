@@ -1,4 +1,4 @@
-// Polled TWI (I²C) master for the ATmega328P at 400 kHz with bounded waits: no transaction can hang
+// Polled TWI (I²C) master for the ATmega328P at 348 kHz (fast mode's SCL low time) with bounded waits: no transaction can hang
 // the sample loop. A wait that runs out, or a bus error, triggers a bus recovery (nine SCL pulses
 // and a STOP by hand, then the TWI is re-enabled), counted in recoveries().
 #pragma once

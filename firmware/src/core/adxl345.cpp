@@ -11,11 +11,16 @@ void Adxl345::decode(const uint8_t raw[6], int16_t out[3]) {
     for (uint8_t i = 0; i < 3; ++i) out[i] = (int16_t)(raw[2 * i] | ((uint16_t)raw[2 * i + 1] << 8));
 }
 
-// Standby with interrupts off while configuring, then format, rate and routing: tap, double tap and
-// free fall on INT1 (bit = 0), everything else to the unused INT2.
+// Standby with interrupts off while configuring, then no offsets, the FIFO bypassed (DATAX0.. the newest
+// sample; switching to bypass also empties it, "Register 0x38—FIFO_CTL"), format, rate and routing: tap,
+// double tap and free fall on INT1 (bit = 0), everything else to the unused INT2.
 static const uint8_t ADXL_SETUP[][2] SPHERE_TABLE = {
     {Adxl345::POWER_CTL, 0},
     {Adxl345::INT_ENABLE, 0},
+    {Adxl345::OFSX, 0},
+    {Adxl345::OFSY, 0},
+    {Adxl345::OFSZ, 0},
+    {Adxl345::FIFO_CTL, 0},
     {Adxl345::DATA_FORMAT, Adxl345::DATA_FORMAT_FULL_RES_16G},
     {Adxl345::BW_RATE, Adxl345::BW_RATE_400HZ},
     {Adxl345::INT_MAP, (uint8_t)~Adxl345::EVENT_INTS},

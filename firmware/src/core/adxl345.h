@@ -1,7 +1,9 @@
 // ADXL345 accelerometer (Analog Devices, rev. E) at 0x53 (SDO low): full resolution (3.9 mg/LSB,
 // 256 LSB/g) at ±16 g so taps do not saturate, 400 Hz output (200 Hz bandwidth, datasheet Table 7),
 // read at 200 Hz, the newest of two samples, tap / double tap / free fall engines
-// routed to INT1 (wired to the Nano's D2).
+// routed to INT1 (wired to the Nano's D2). Every register whose value the driver relies on is written at
+// start: the chip keeps its registers while powered, and a sketch flashed before may have left a FIFO mode
+// (then DATAX0.. return the FIFO's oldest sample, up to 32 periods old) or offsets.
 #pragma once
 #include <stdint.h>
 
@@ -27,9 +29,9 @@ public:
     static const uint8_t ADDRESS = 0x53;
     static const uint8_t DEVID_VALUE = 0xE5;
     enum Reg : uint8_t {
-        DEVID = 0x00, THRESH_TAP = 0x1D, DUR = 0x21, LATENT = 0x22, WINDOW = 0x23, THRESH_FF = 0x28,
+        DEVID = 0x00, THRESH_TAP = 0x1D, OFSX = 0x1E, OFSY = 0x1F, OFSZ = 0x20, DUR = 0x21, LATENT = 0x22, WINDOW = 0x23, THRESH_FF = 0x28,
         TIME_FF = 0x29, TAP_AXES = 0x2A, ACT_TAP_STATUS = 0x2B, BW_RATE = 0x2C, POWER_CTL = 0x2D,
-        INT_ENABLE = 0x2E, INT_MAP = 0x2F, INT_SOURCE = 0x30, DATA_FORMAT = 0x31, DATAX0 = 0x32,
+        INT_ENABLE = 0x2E, INT_MAP = 0x2F, INT_SOURCE = 0x30, DATA_FORMAT = 0x31, DATAX0 = 0x32, FIFO_CTL = 0x38,
     };
     enum IntBit : uint8_t { INT_DATA_READY = 0x80, INT_SINGLE_TAP = 0x40, INT_DOUBLE_TAP = 0x20, INT_FREE_FALL = 0x04 };
     static const uint8_t BW_RATE_400HZ = 0x0C;

@@ -146,17 +146,6 @@ void SphereDevice::settingsBlock(uint8_t out[SETTINGS_BLOCK_LEN]) const {
     putU16(out + 12, beta_milli_);
 }
 
-// Writes `data` to the EEPROM and reads it back: false when a byte did not take.
-bool SphereDevice::eepromWriteVerified(uint16_t addr, const uint8_t* data, uint8_t len) {
-    bool ok = hal_.eepromWrite(addr, data, len);
-    for (uint8_t i = 0; i < len; ++i) {
-        uint8_t back;
-        hal_.eepromRead((uint16_t)(addr + i), &back, 1);
-        if (back != data[i]) ok = false;
-    }
-    return ok;
-}
-
 void SphereDevice::loadCalibration(bool at_start) {
     uint8_t image[CALIBRATION_EEPROM_LEN];
     hal_.eepromRead(0, image, CALIBRATION_EEPROM_LEN);
@@ -390,6 +379,7 @@ __attribute__((noinline)) void SphereDevice::tick() {
     keepTrackedBias();
     runFilter(dt);
     stream(t0);
+    if (store_cmd_) serviceStore();
     if (++phase_ >= IMU_RATE_HZ) phase_ = 0;
 
     uint32_t work = hal_.micros() - t0;
@@ -506,7 +496,8 @@ __attribute__((noinline)) void SphereDevice::execute(const uint8_t* payload, uin
     Command c;
     uint8_t result = CommandParser::parse(payload, len, c);
     if (result == RESULT_OK) result = executeCommand(c);
-    keepTrackedBias();  // a command that changed the bias is kept at once: a REBOOT may follow in this period
+    keepTrackedBias();
+    if (result == RESULT_LATER) return;  // the REPLY follows when the EEPROM holds the block (finishStore)  // a command that changed the bias is kept at once: a REBOOT may follow in this period
     uint8_t body[REPLY_CALIBRATION_LEN];
     uint8_t n;
     if (result == RESULT_OK && c.type == CMD_ECHO) {
@@ -591,9 +582,7 @@ __attribute__((noinline)) uint8_t SphereDevice::executeCommand(const Command& c)
             } else {
                 memset(image, 0xFF, sizeof image);  // an erased block: the next power-up uses the defaults
             }
-            if (!eepromWriteVerified(SETTINGS_EEPROM_ADDR, image, SETTINGS_EEPROM_LEN)) return RESULT_STORAGE_ERROR;
-            settings_state_ = c.type == CMD_SAVE_SETTINGS ? SETTINGS_SAVED : SETTINGS_NONE_SAVED;
-            return RESULT_OK;
+            return startStore(c, SETTINGS_EEPROM_ADDR, image, SETTINGS_EEPROM_LEN);
         }
         case CMD_CALIBRATION_STEP: {
             uint8_t step = c.calibration_step.step;
@@ -622,11 +611,10 @@ __attribute__((noinline)) uint8_t SphereDevice::executeCommand(const Command& c)
         case CMD_SAVE_CALIBRATION: {
             uint8_t image[CALIBRATION_EEPROM_LEN];
             writeCalibrationImage(cal_, image);
-            if (!eepromWriteVerified(0, image, CALIBRATION_EEPROM_LEN)) return RESULT_STORAGE_ERROR;
-            cal_state_ = (uint8_t)((cal_state_ & ~CAL_EEPROM_INVALID) | CAL_FROM_EEPROM);
-            return RESULT_OK;
+            return startStore(c, 0, image, CALIBRATION_EEPROM_LEN);
         }
         case CMD_LOAD_CALIBRATION: {
+            if (store_cmd_) return RESULT_BUSY;  // the EEPROM holds half of a block
             uint8_t image[CALIBRATION_EEPROM_LEN];
             hal_.eepromRead(0, image, CALIBRATION_EEPROM_LEN);
             Calibration cal;
@@ -648,23 +636,79 @@ __attribute__((noinline)) uint8_t SphereDevice::executeCommand(const Command& c)
             return RESULT_OK;
         case CMD_SET_BOARD: {
             uint8_t b[2] = {c.set_board.board_profile, (uint8_t)~c.set_board.board_profile};
-            if (!eepromWriteVerified(BOARD_EEPROM_ADDR, b, 2)) return RESULT_STORAGE_ERROR;
-            if (board_profile_ != b[0]) {
-                // another frame for the samples: the orientation and the field reference start again
-                board_profile_ = b[0];
-                filter_.begin(MargFilter::DEFAULT_DT_US);
-                filter_.setBetaMilli(MargFilter::STARTUP_BETA_MILLI);
-                converge_left_ = STARTUP_CONVERGE_SAMPLES;
-                gates_.reset();
-                // the bias was measured in the old frame (a GY-85's gyro x and y change sign): not valid, so
-                // the next still window sets it whole and a warm reset does not bring it back (kept_bias.h)
-                cal_state_ &= (uint8_t)~CAL_GYRO_BIAS_VALID;
-            }
-            return RESULT_OK;
+            return startStore(c, BOARD_EEPROM_ADDR, b, 2);
         }
-        default:  // GET_HELLO, GET_CALIBRATION, GET_STATUS, REBOOT: the reply and what follows it
+        case CMD_REBOOT:
+            return store_cmd_ ? RESULT_BUSY : RESULT_OK;  // not with a block half written
+        default:  // GET_HELLO, GET_CALIBRATION, GET_STATUS: the reply and what follows it
             return RESULT_OK;
     }
+}
+
+// Starts writing a block to the EEPROM (the calibration, the board profile, the settings); the command's REPLY
+// is sent by finishStore. One block at a time.
+uint8_t SphereDevice::startStore(const Command& c, uint16_t addr, const uint8_t* data, uint8_t len) {
+    if (store_cmd_) return RESULT_BUSY;
+    store_cmd_ = c.type;
+    store_seq_ = c.seq;
+    store_addr_ = addr;
+    store_len_ = len;
+    store_pos_ = 0;
+    memcpy(store_buf_, data, len);
+    serviceStore();  // bytes already as they should be cost nothing; the first that differs starts now
+    return RESULT_LATER;
+}
+
+// Writes the block's next byte that differs from the EEPROM's whenever the EEPROM is ready (on the AVR one a
+// period: a byte takes 3.4 ms), then reads the block back and answers the command.
+__attribute__((noinline)) void SphereDevice::serviceStore() {
+    while (hal_.eepromReady()) {
+        if (store_pos_ < store_len_) {
+            uint8_t now;
+            uint16_t a = (uint16_t)(store_addr_ + store_pos_);
+            hal_.eepromRead(a, &now, 1);
+            if (now != store_buf_[store_pos_] && !hal_.eepromWriteByte(a, store_buf_[store_pos_])) {
+                finishStore(RESULT_STORAGE_ERROR);
+                return;
+            }
+            ++store_pos_;
+            continue;
+        }
+        if (hal_.txRoom() < REPLY_ROOM) return;  // the REPLY must not be dropped: next period
+        uint8_t result = RESULT_OK;
+        for (uint8_t i = 0; i < store_len_; ++i) {
+            uint8_t back;
+            hal_.eepromRead((uint16_t)(store_addr_ + i), &back, 1);
+            if (back != store_buf_[i]) result = RESULT_STORAGE_ERROR;
+        }
+        finishStore(result);
+        return;
+    }
+}
+
+void SphereDevice::finishStore(uint8_t result) {
+    uint8_t cmd = store_cmd_;
+    store_cmd_ = 0;
+    if (result == RESULT_OK) {
+        if (cmd == CMD_SAVE_CALIBRATION) {
+            cal_state_ = (uint8_t)((cal_state_ & ~CAL_EEPROM_INVALID) | CAL_FROM_EEPROM);
+        } else if (cmd == CMD_SAVE_SETTINGS || cmd == CMD_CLEAR_SETTINGS) {
+            settings_state_ = cmd == CMD_SAVE_SETTINGS ? SETTINGS_SAVED : SETTINGS_NONE_SAVED;
+        } else if (board_profile_ != store_buf_[0]) {  // SET_BOARD
+            // another frame for the samples: the orientation and the field reference start again
+            board_profile_ = store_buf_[0];
+            filter_.begin(MargFilter::DEFAULT_DT_US);
+            filter_.setBetaMilli(MargFilter::STARTUP_BETA_MILLI);
+            converge_left_ = STARTUP_CONVERGE_SAMPLES;
+            gates_.reset();
+            // the bias was measured in the old frame (a GY-85's gyro x and y change sign): not valid, so
+            // the next still window sets it whole and a warm reset does not bring it back (kept_bias.h)
+            cal_state_ &= (uint8_t)~CAL_GYRO_BIAS_VALID;
+            keepTrackedBias();
+        }
+    }
+    uint8_t body[REPLY_CALIBRATION_LEN];
+    sendPacket(PKT_REPLY, body, writeReply(store_seq_, cmd, result, 0, 0, body));
 }
 
 }  // namespace sphere

@@ -31,7 +31,11 @@ public:
     // Free bytes in the transmit buffer now.
     virtual uint8_t txRoom() = 0;
     virtual void eepromRead(uint16_t addr, uint8_t* out, uint8_t len) = 0;
-    virtual bool eepromWrite(uint16_t addr, const uint8_t* data, uint8_t len) = 0;
+    // EEPROM writes never wait: eepromReady() is false while a byte is being written (3.4 ms on the ATmega328P,
+    // "EEPROM Mode Bits"), and eepromWriteByte() starts writing one byte (false when it cannot). SphereDevice
+    // writes a block a byte at a time from tick(), so no sample period waits for the EEPROM.
+    virtual bool eepromReady() = 0;
+    virtual bool eepromWriteByte(uint16_t addr, uint8_t value) = 0;
     // Why the chip last reset: HELLO reset_cause bits (captured before anything cleared them).
     virtual uint8_t resetCause() = 0;
     // The gyro bias record in RAM that a reset other than a power-on leaves as it was (kept_bias.h).
@@ -41,7 +45,8 @@ public:
     // True when the ADXL345's INT1 fired (edge captured or line high); t_us = when it was seen.
     virtual bool adxlInterrupt(uint32_t& t_us) = 0;
     virtual void identify(uint8_t seconds) = 0;
-    // Called after the REBOOT reply was queued: flush it, then let the watchdog reset the chip.
+    // Called after the REBOOT reply was queued: flush it, then start the firmware again (AvrBoard: a restart
+    // from the reset vector, not a watchdog reset).
     virtual void reboot() = 0;
     // The UART to `baud` once what is queued has left at the old rate (SET_BAUD, spec §5.4).
     virtual void setBaud(uint32_t baud) = 0;
@@ -75,6 +80,8 @@ public:
     // The longest reply and what follows it (GET_CALIBRATION's 52-byte frame): a command is taken
     // from the receive buffer only when the transmit buffer has this much room, so it is never dropped.
     static const uint8_t REPLY_ROOM = 52;
+    // executeCommand's answer for a command whose REPLY is sent later (not a wire value)
+    static const uint8_t RESULT_LATER = 0xFF;
 
     SphereDevice(I2cBus& bus, DeviceHal& hal);
 
@@ -135,7 +142,9 @@ private:
     void loadBoardProfile();
     void loadSettings();
     bool applySettings(const uint8_t block[SETTINGS_BLOCK_LEN]);
-    bool eepromWriteVerified(uint16_t addr, const uint8_t* data, uint8_t len);
+    uint8_t startStore(const Command& c, uint16_t addr, const uint8_t* data, uint8_t len);
+    void serviceStore();
+    void finishStore(uint8_t result);
 
     I2cBus& bus_;
     DeviceHal& hal_;
@@ -182,6 +191,12 @@ private:
     uint32_t rx_t_us_;         // when the last intact frame from the host was complete (ECHO's reply)
     uint16_t rx_idle_ticks_;   // periods since then (the fall-back of spec §5.4)
     bool link_quiet_;          // switched: nothing is sent until the host's first intact frame
+    // A block on its way into the EEPROM (SAVE_CALIBRATION, SET_BOARD, SAVE_SETTINGS,
+    // CLEAR_SETTINGS): a byte whenever the EEPROM is ready,
+    // from tick(); the command's REPLY goes when every byte reads back as written. store_cmd_ 0: none.
+    uint8_t store_cmd_, store_seq_, store_len_, store_pos_;
+    uint16_t store_addr_;
+    uint8_t store_buf_[CALIBRATION_EEPROM_LEN > SETTINGS_EEPROM_LEN ? CALIBRATION_EEPROM_LEN : SETTINGS_EEPROM_LEN];
     uint32_t last_fall_us_;
 };
 

@@ -45,6 +45,23 @@ DEFAULT_BETA = 0.041  # the firmware's DEFAULT_BETA_MILLI (firmware/src/core/mar
 CHIPS = ("adxl345", "itg3200", "hmc5883l", "qmc5883l")
 
 
+def _previous(text: str) -> tuple[str, float]:
+    """FILE.elf:T: an ELF that exists and a time after 0."""
+    import argparse
+
+    path, sep, t = text.rpartition(":")
+    try:
+        t_s = float(t)
+        if not sep or not path or not math.isfinite(t_s) or t_s <= 0:
+            raise ValueError
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: give FILE.elf:T, T the seconds after power-up at which the "
+                                         "firmware is flashed over it, e.g. sketch.elf:1.0") from None
+    if not Path(path).is_file():
+        raise argparse.ArgumentTypeError(f"{path}: no such file (the earlier sketch's ELF)")
+    return path, t_s
+
+
 def _span(text: str) -> str:
     """T0:T1 in seconds (T1 may be inf), checked here so a typo is one clear line, not a board error."""
     a, sep, b = text.partition(":")
@@ -161,6 +178,11 @@ def add_arguments(p) -> None:
                         "atmegaboot (the old Nano bootloader), optiboot8 (a current Optiboot) or none (the default)")
     p.add_argument("--hang", action="append", default=[], metavar="T0:T1", type=_span,
                    help="fault: the firmware's main program hangs from T0 to T1 s (interrupts and the watchdog go on)")
+    p.add_argument("--previous", metavar="FILE.elf:T", type=_previous, default=None,
+                   help="run an earlier sketch from power-up and flash the firmware over it at T s (the stick keeps "
+                        "its power and the registers that sketch set)")
+    p.add_argument("--bus-pullup", type=argtypes.positive, default=None, metavar="KOHM",
+                   help="the sensor board's pull-ups on SDA and SCL to 3.3 V, for the bus's level check (default 4.7)")
     p.add_argument("--accuracy", action="store_true",
                    help="compare the firmware's quaternions with BROAD's optical reference and the host Madgwick")
     p.add_argument("--beta", type=float, default=DEFAULT_BETA, help="β of the host Madgwick (default the firmware's)")
@@ -216,7 +238,8 @@ def board_options(args) -> dict:
     return dict(i2c_real_timing=not args.simavr_i2c_timing, board=args.board, noise=args.noise, seed=args.seed,
                 clock_ppm=args.clock_ppm, clocks_random=args.clocks == "random", glitch=args.glitch,
                 brownout=args.brownout, power_off=args.power_off, reset_mid_read=args.reset_mid_read, sda_held=args.sda_held,
-                host_stall=args.host_stall, adapter=args.adapter, bootloader=args.bootloader, hang=args.hang)
+                host_stall=args.host_stall, adapter=args.adapter, bootloader=args.bootloader, hang=args.hang,
+                previous=args.previous, bus_pullup_kohm=args.bus_pullup)
 
 
 def _one(args, source: str, elf, tmp: Path, index: int, multi: bool):

@@ -151,7 +151,8 @@ def board_command(elf, trace, seconds: float, capture=None, pty=False, realtime=
                   verbose=0, build=True, i2c_real_timing=True, board=None, noise=False, seed=None,
                   clock_ppm=(), clocks_random=False, glitch=None, reset_mid_read=(), brownout=(), sda_held=False,
                   host_stall=(), adapter=None, capture_times=None, reset_at=(), drdy_pin=None,
-                  power_off=(), latency_timer_ms=None, bootloader=None, hang=(), host_log=None) -> list[str]:
+                  power_off=(), latency_timer_ms=None, bootloader=None, hang=(), host_log=None, previous=None,
+                  bus_pullup_kohm=None) -> list[str]:
     """sphere-board's command line. I2C runs at its real 400 kHz timing unless ``i2c_real_timing=False``."""
     cmd = [str(board_path(build)), str(elf), "--trace", str(trace), "--seconds", f"{seconds:g}"]
     if capture:
@@ -215,6 +216,10 @@ def board_command(elf, trace, seconds: float, capture=None, pty=False, realtime=
         cmd += ["--bootloader", str(hexfile)]
     for h in hang:
         cmd += ["--hang", h]
+    if bus_pullup_kohm:
+        cmd += ["--bus-pullup", f"{bus_pullup_kohm:g}"]
+    if previous:  # (an earlier sketch's ELF, the time the firmware is flashed over it)
+        cmd += ["--previous", f"{previous[0]}:{previous[1]:g}"]
     cmd += ["-v"] * verbose
     return cmd
 
