@@ -158,8 +158,8 @@ const board_variant_t board_variants[] = {
 	 * SEN-10724: accelerometer and gyro both (-y, -x, -z), magnetometer (x, -y, -z) into its own frame) */
 	{"sen10724", "SparkFun 9DoF Sensor Stick SEN-10724 (ADXL345, ITG-3200, HMC5883L)",
 	 {{1, 2, 3}, {1, 2, 3}, {-2, 1, 3}}, MAG_HMC5883L},
-	/* GY-85: the ITG-3205 turned 180 deg about z against the ADXL345, the HMC5883L 90 deg the other way
-	 * (the same profile as the firmware's, firmware/src/core board profiles) */
+	/* GY-85: the ITG-3205 turned 180 deg about z against the ADXL345, the HMC5883L 90 deg the other way: a
+	 * copy of the firmware's profile, UNVERIFIED on a board (protocol/spec.md 4.2.1) */
 	{"gy85", "GY-85 (ADXL345, ITG-3205, HMC5883L)", {{1, 2, 3}, {-1, -2, 3}, {2, -1, 3}}, MAG_HMC5883L},
 	{"gy85-qmc", "GY-85 carrying a QMC5883L at 0x0D (sold as HMC5883L)", {{1, 2, 3}, {-1, -2, 3}, {2, -1, 3}},
 	 MAG_QMC5883L},

@@ -177,3 +177,29 @@ def test_profiles_are_the_specs_table_and_rotations():
             want = " ".join(w if w[0] in "+-−" else "+" + w for w in cell.replace(",", " ").split())
             assert np.allclose(A.axes_matrix(want), A.axes_matrix(axes[chip])), (name, chip, cell)
             assert np.isclose(np.linalg.det(A.axes_matrix(axes[chip])), 1.0)
+
+
+def test_a_mounting_no_profile_has_gets_the_maps_a_profile_would_need(turns):
+    """The maps are said in the spec's notation (body x, y, z from which chip axis), and a profile with exactly
+    those maps makes the three agree: map · mounting = identity, for every rotation of the magnetometer."""
+    m = A.axes_matrix("+z +x +y")
+    text = "\n".join(A.verdict(A.fit(_mapped(turns, np.eye(3), m)), "aligned").lines)
+    assert "maps accelerometer +x +y +z, gyroscope +x +y +z, magnetometer +y +z +x" in text, text
+    for rot in A.signed_permutations(proper=True):
+        words = A.profile_words({"mag": rot, "gyro": rot.T})
+        mag_words = words.split("magnetometer ")[1]
+        gyro_words = words.split("gyroscope ")[1].split(",")[0]
+        assert np.allclose(A.axes_matrix(mag_words) @ rot, np.eye(3)), (rot, words)
+        assert np.allclose(A.axes_matrix(gyro_words) @ rot.T, np.eye(3)), (rot, words)
+
+
+@pytest.mark.parametrize("profile", ["aligned", "gy85"])
+def test_the_gy85_profile_is_said_to_be_unverified_where_the_check_names_it(turns, profile):
+    """No board has confirmed the GY-85's maps (spec §4.2.1): a check that passes with them, or finds that they
+    fit, says so and asks for the report; the other profiles get no such line."""
+    r = _reported("gy85", profile)
+    text = "\n".join(A.verdict(A.fit(_mapped(turns, r["gyro"], r["mag"])), profile).lines)
+    assert "the gy85 profile is unverified" in text and "please report it" in text, text
+    r = _reported("sen10724", "aligned")
+    text = "\n".join(A.verdict(A.fit(_mapped(turns, r["gyro"], r["mag"])), "aligned").lines)
+    assert "unverified" not in text, text

@@ -6,7 +6,9 @@ namespace sphere {
 
 // [profile][chip][body axis]. Sources: SparkFun SEN-10724 (9DoF Sensor Stick) — the sign table of the
 // Razor AHRS firmware for hardware version 10724 (accelerometer and gyroscope share one frame there,
-// the HMC5883L is turned 90° about z); GY-85 — as the virtual board models it (hardware/sim/README.md).
+// the HMC5883L is turned 90° about z); GY-85 — UNVERIFIED: no datasheet or schematic gives its chips'
+// orientation and no GY-85 has confirmed this row; the virtual board copies it (protocol/spec.md §4.2.1 tells
+// how it came about). `sphere calibrate`'s axis check says which profile a board matches.
 static const uint8_t MAPS[BOARD_PROFILE_COUNT][3][3] SPHERE_TABLE = {
     {{0, 1, 2}, {0, 1, 2}, {0, 1, 2}},                                 // aligned
     {{0, 1, 2}, {0, 1, 2}, {1, 0 | AXIS_NEG, 2}},                      // sen10724: mag (+y, −x, +z)

@@ -50,6 +50,14 @@ PROFILE_AXES = {
     "sen10724": {"accel": "+x +y +z", "gyro": "+x +y +z", "mag": "+y -x +z"},
     "gy85": {"accel": "+x +y +z", "gyro": "-x -y +z", "mag": "-y +x +z"},
 }
+#: Where each profile's maps come from, and whether a board has confirmed them (spec §4.2.1). A profile no board
+#: has confirmed is said to be unverified wherever the check names it.
+PROFILE_SOURCES = {
+    "aligned": "by definition: all three chips mounted alike",
+    "sen10724": "the Razor AHRS firmware's axis table for that board (public, not measured here)",
+    "gy85": "unverified: no datasheet or schematic gives the GY-85's chip orientations, and no board has confirmed it",
+}
+UNVERIFIED = {"gy85"}
 #: What a person calls each profile.
 PROFILE_TITLES = {"aligned": "a board with all three chips mounted alike", "sen10724":
                   "a SparkFun 9DoF Sensor Stick (SEN-10724)", "gy85": "a GY-85"}
@@ -361,6 +369,24 @@ class Verdict:
     fitting_profile: str | None = None  # the profile that makes all three agree (None: no profile does)
 
 
+def profile_words(mounts: dict) -> str:
+    """The maps a profile would need for these mountings, in the spec's notation (§4.2.1: body x, y, z from which
+    of the chip's axes): 'accelerometer +x +y +z, gyroscope −x −y +z, magnetometer −y +x +z'."""
+    def words(b):  # chip = B · body, so body = Bᵀ · chip: row i of Bᵀ says which chip axis is body axis i
+        bt = np.asarray(b, float).T
+        return " ".join(("−" if bt[i, int(np.argmax(np.abs(bt[i])))] < 0 else "+") + "xyz"[int(np.argmax(np.abs(bt[i])))]
+                        for i in range(3))
+    parts = ["accelerometer +x +y +z"]
+    for c in ("gyro", "mag"):
+        parts.append(f"{CHIP_NAMES[c]} {words(mounts.get(c, np.eye(3)))}")
+    return ", ".join(parts)
+
+
+def _unverified_line(name: str) -> str:
+    return (f"the {name} profile is unverified ({PROFILE_SOURCES[name].split(': ', 1)[-1]}): this check confirms "
+            "it for your board; please report it, with the lines above, so it can be marked verified")
+
+
 def verdict(f: AxisFit, profile: str | None, port: str = "PORT") -> Verdict:
     """What the fit means for the profile the firmware uses (``profile``, a name of
     :data:`PROFILE_AXES`; None when the device did not say): pass, or which chip is mounted how and
@@ -368,9 +394,11 @@ def verdict(f: AxisFit, profile: str | None, port: str = "PORT") -> Verdict:
     assert f.gyro is not None and f.mag is not None
     seen = {"gyro": f.gyro.matrix, "mag": f.mag.matrix}
     if all(np.allclose(m, np.eye(3)) for m in seen.values()):
-        return Verdict(True, ["axes agree: turning about each body axis shows on the same axis in the gyroscope, "
-                              f"accelerometer and magnetometer (board profile {profile or 'unknown'})"],
-                       {}, profile, profile)
+        lines = ["axes agree: turning about each body axis shows on the same axis in the gyroscope, "
+                 f"accelerometer and magnetometer (board profile {profile or 'unknown'})"]
+        if profile in UNVERIFIED:
+            lines.append(_unverified_line(profile))
+        return Verdict(True, lines, {}, profile, profile)
     known = profile in PROFILE_AXES
     mounts = {c: (profile_matrix(profile, c).T @ m if known else m) for c, m in seen.items()}
     lines = [f"axes disagree with the board profile {profile or '(unknown)'}: a turn about one body axis (the "
@@ -390,9 +418,12 @@ def verdict(f: AxisFit, profile: str | None, port: str = "PORT") -> Verdict:
     if fitting:
         lines.append(f"the board looks like {PROFILE_TITLES[fitting]}: set its profile with "
                      f"`sphere device --port {port} set board={fitting}`, then run `sphere calibrate` again")
+        if fitting in UNVERIFIED:
+            lines.append(_unverified_line(fitting))
     elif known:
         lines.append(f"no board profile ({', '.join(PROFILE_AXES)}) mounts the chips this way: the firmware needs a "
-                     "profile for this board (protocol spec §4.2.1); `sphere calibrate --no-axis-check` calibrates "
+                     f"profile for this board with the maps {profile_words(mounts)} (body x, y, z from which of "
+                     "each chip's axes, protocol spec §4.2.1); `sphere calibrate --no-axis-check` calibrates "
                      "it as it is, but the orientation will be wrong")
     else:
         lines.append("the firmware did not say which profile it uses (HELLO board_profile); update it and run "
