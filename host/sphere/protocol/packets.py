@@ -228,7 +228,8 @@ class Hello(Packet):
         Field("orientation_rate_hz", "H"),
         Field("calibration_state", "B", show=lambda v: bit_names(v, CALIBRATION_STATE_BITS)),
         # version 2
-        Field("reset_cause", "B", show=lambda v: bit_names(v, RESET_CAUSE_BITS), default=0),
+        # 0: unknown (a boot loader cleared MCUSR without handing it over, or a version-1 HELLO)
+        Field("reset_cause", "B", show=lambda v: bit_names(v, RESET_CAUSE_BITS) or ["unknown"], default=0),
         Field("mag_chip", "B", show=lambda v: MAG_CHIPS.get(v, v), default=0),
         Field("board_profile", "B", show=lambda v: BOARD_PROFILES.get(v, v), default=0),
     )

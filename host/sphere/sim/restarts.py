@@ -15,6 +15,12 @@ from __future__ import annotations
 import tempfile
 from pathlib import Path
 
+from sphere.protocol import Reboot, encode_frame
+from sphere.protocol.packets import REBOOT_MAGIC, Hello
+from sphere.sim import trace as T
+from sphere.sim.board import run_board
+from sphere.sim.soak import read_frames
+
 KINDS = ("reboot", "hang", "dtr")
 EXPECTED_CAUSE = {"reboot": 0x08, "hang": 0x08, "dtr": 0x02}
 GYRO_BIAS_VALID = 0x01
@@ -33,12 +39,6 @@ def restart_run(elf, bootloader: str, kind: str, count: int, seed: int = 1, boar
     """Run ``count`` events of ``kind`` on the board behind ``bootloader``; returns the figures per event and in
     sum: ``latency_s`` (event to the next HELLO, None when none came before the next event), ``causes``,
     ``bias_kept`` (HELLO's calibration_state has gyro_bias_valid at once), ``within_2s``, ``wrong_cause``."""
-    from sphere.protocol import Reboot, encode_frame
-    from sphere.protocol.packets import REBOOT_MAGIC, Hello
-    from sphere.sim import trace as T
-    from sphere.sim.board import run_board
-    from sphere.sim.soak import read_frames
-
     if kind not in KINDS:
         raise ValueError(f"kind {kind!r}: one of {', '.join(KINDS)}")
     times = event_times(kind, count)

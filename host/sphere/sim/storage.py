@@ -14,12 +14,16 @@ from pathlib import Path
 
 import numpy as np
 
+from sphere.protocol import SaveCalibration, encode_frame
+from sphere.protocol.packets import Orientation, Reply, Status
+from sphere.sim import trace as T
+from sphere.sim.board import run_board
+from sphere.sim.soak import read_frames
+
 SAVE_AT_S = 3.0
 
 
 def _orientations(frames):
-    from sphere.protocol.packets import Orientation
-
     tq = [(f.t_s, f.packet.quat_float) for f in frames if f.ok and isinstance(f.packet, Orientation)]
     return np.array([t for t, _ in tq]), np.array([q for _, q in tq], dtype=float)
 
@@ -33,12 +37,6 @@ def save_while_turning(elf, dps: float = 200.0, seconds: float = 5.0, seed: int 
     """Two runs of a turn at ``dps`` about z (still 1 s first): one sends SAVE_CALIBRATION at SAVE_AT_S.
     Returns the REPLY's delay and result, the device's loop overruns and the board's missing updates in
     both, the EEPROM bytes written, and the largest angle between the two runs' ORIENTATIONs after the save."""
-    from sphere.protocol import SaveCalibration, encode_frame
-    from sphere.protocol.packets import Reply, Status
-    from sphere.sim import trace as T
-    from sphere.sim.board import run_board
-    from sphere.sim.soak import read_frames
-
     out = {}
     with tempfile.TemporaryDirectory(prefix="sphere-save-") as tmp:
         tmp = Path(tmp)
