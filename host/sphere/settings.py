@@ -153,6 +153,10 @@ def positive(v):
     return None if v > 0 else "must be greater than 0"
 
 
+def str_list(v):
+    return None if all(isinstance(s, str) for s in v) else "must be a list of strings"
+
+
 def resolve(params: dict, args: tuple = (), kwargs: dict | None = None) -> dict:
     """Constructor arguments (positional in ``params`` order, then keywords) → every parameter, checked,
     the defaults for those not given."""

@@ -36,7 +36,7 @@ def test_the_tour_through_sphere_mouse(tour_capture):
     from sphere.daemon.app import SphereMouse
     from sphere.daemon.backends.memory import RecordingBackend
     from sphere.daemon.config import Config
-    from sphere.daemon.sources import ReplaySource
+    from sphere.daemon.sources.replay import ReplaySource
 
     log = []
 

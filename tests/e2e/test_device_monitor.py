@@ -21,7 +21,9 @@ LISTEN_S = 4.0  # device seconds: at least two knocks
 
 @pytest.fixture(scope="module")
 def board(tmp_path_factory):
-    from sphere.daemon.sources import SourceError, start_simulator
+    from sphere.daemon.sources.base import SourceError
+
+    from sphere.daemon.sources.simulated import start_simulator
 
     need_board()
     need_firmware()

@@ -47,7 +47,8 @@ def _power_cycled(port, deadline_s: float) -> bool:
 
 
 def test_every_setting_is_read_back_and_kept_over_a_power_cycle(capsys):
-    from sphere.daemon.sources import SourceError, start_simulator
+    from sphere.daemon.sources.base import SourceError
+    from sphere.daemon.sources.simulated import start_simulator
     from sphere.link.device_settings import SETTINGS
 
     need_board()
@@ -88,14 +89,14 @@ def test_the_daemons_device_settings_reach_the_firmware_at_connect():
     """sphere-mouse's [device] settings are sent at every connect and the firmware acts on them: with
     ``stream.raw_rate_hz=50`` the RAW_SAMPLEs that follow come at 50 Hz, not the 200 Hz default."""
     from sphere.daemon.config import Config
-    from sphere.daemon.sources import SimulatorSource
+    from sphere.daemon.sources.simulated import SimulatorSource
 
     need_board()
     need_firmware()
     cfg = Config().with_overrides({"device": {"settings": ["stream.raw_rate_hz=50", "tap.axes=z"]},
-                                   "source": {"sim_trace": "synthetic:still", "sim_seconds": 20.0}}, "test")
+                                   "source.simulate": {"trace": "synthetic:still", "seconds": 20.0}}, "test")
     logs = []
-    src = SimulatorSource.from_config(cfg, logs.append)
+    src = SimulatorSource.from_settings(cfg["source.simulate"], logs.append, cfg)
     times = []
     try:
         for batch in src:

@@ -18,7 +18,7 @@ def test_sigkill_of_the_daemon_stops_the_virtual_board(tmp_path):
     need_firmware()
     env = {**os.environ, "XDG_CONFIG_HOME": str(tmp_path)}
     daemon = subprocess.Popen([sys.executable, "-m", "sphere.mouse", "--simulate", "--backend", "log", "--no-stream",
-                               "--quiet", "--set", "source.sim_seconds=30"], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, env=env)
+                               "--quiet", "--set", "source.simulate.seconds=30"], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, env=env)
     family: list[int] = []
     try:
         deadline = time.monotonic() + 120  # the first run may build the board

@@ -183,7 +183,7 @@ def test_pynput_backend_under_xvfb(xvfb, tmp_path):
 def run_simulated(display, trace, seconds):
     env = dict(os.environ, DISPLAY=display)
     r = subprocess.run(
-        [sys.executable, "-m", "sphere.mouse", "--simulate", "--trace", trace, "--set", f"source.sim_seconds={seconds}",
+        [sys.executable, "-m", "sphere.mouse", "--simulate", "--trace", trace, "--set", f"source.simulate.seconds={seconds}",
          "--backend", "x11", "--no-stream", "--config", os.devnull],
         env=env, capture_output=True, text=True, timeout=300,
     )

@@ -166,7 +166,9 @@ def test_the_board_stops_when_sphere_sim_is_killed():
     import signal
 
     from simscenarios import children, need_board, need_firmware, survivors
-    from sphere.daemon.sources import SourceError, start_simulator
+    from sphere.daemon.sources.base import SourceError
+
+    from sphere.daemon.sources.simulated import start_simulator
 
     need_board()
     need_firmware()

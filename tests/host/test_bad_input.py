@@ -74,7 +74,7 @@ def capture_file(tmp_path):
     (["--set", "pointer"], "SECTION.KEY=VALUE"),
     (["--stream-port", "70000"], "TCP port"),
     (["--speed", "-1"], "speed"),
-    (["--set", "source.usb_ids=[\"xyz\"]"], "VID:PID"),
+    (["--set", "source.serial.usb_ids=[\"xyz\"]"], "VID:PID"),
     (["--set", "source.discovery_timeout_s=1e300"], "discovery_timeout_s"),
     (["--set", "status.interval_s=0"], "interval_s"),
     (["--set", "source.kind=\"camera2\""], "must be one of"),

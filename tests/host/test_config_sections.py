@@ -123,11 +123,12 @@ def test_set_reference_choices_and_build(widget):
 
 def test_source_registry_is_the_list_of_kinds():
     from sphere.daemon import sources
+    from sphere.daemon.sources.base import Source
 
     for kind in sources.REGISTRY:
         cls = sources.source_class(kind)
-        assert cls.NAME == kind and issubclass(cls, sources.Source)
-        assert hasattr(cls, "from_config")
+        assert cls.NAME == kind and issubclass(cls, Source)
+        assert "from_settings" in vars(cls)
     kinds = C.sections()["source"].params["kind"].allowed()
     assert set(kinds) == {"auto", *sources.REGISTRY}
 

@@ -165,7 +165,7 @@ def test_orientation_only_stream_still_points():
 def test_recorded_captures_replay_cleanly():
     """Every capture the simulator recorded into tests/captures replays through the daemon without error."""
     import pytest
-    from sphere.daemon.sources import ReplaySource
+    from sphere.daemon.sources.replay import ReplaySource
     from sphere.paths import repo_path
 
     caps = sorted(repo_path("tests", "captures").glob("*.bin"))  # the README there names them sim_*.bin

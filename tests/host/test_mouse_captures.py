@@ -12,7 +12,7 @@ from sphere.daemon.app import SphereMouse
 from sphere.daemon.backends.memory import RecordingBackend
 from sphere.daemon.config import Config
 from sphere.daemon.motion import up_from_quat
-from sphere.daemon.sources import ReplaySource
+from sphere.daemon.sources.replay import ReplaySource
 from sphere.paths import repo_path
 
 CAPTURES = repo_path("tests", "captures")

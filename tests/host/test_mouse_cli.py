@@ -11,7 +11,8 @@ import time
 from sphere.daemon.app import SphereMouse
 from sphere.daemon.backends.memory import RecordingBackend
 from sphere.daemon.config import Config
-from sphere.daemon.sources import ReplaySource, ScriptedSource
+from sphere.daemon.sources.replay import ReplaySource
+from sphere.daemon.sources.scripted import ScriptedSource
 from sphere.daemon.status import StatusLine
 from sphere.daemon.scripted_sphere import script_bytes
 from sphere.protocol import encode_frame

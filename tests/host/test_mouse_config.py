@@ -79,7 +79,28 @@ def test_flags_override_file_and_set_overrides_flags(tmp_path):
     cfg = settings_from_args(args)
     assert cfg.output.backend == "log"
     assert cfg.pointer.slow_deg_per_width == 55.0 and cfg.pointer.fast_deg_per_width == 25.0
-    assert cfg.source.kind == "replay" and cfg.source.replay == "x.bin" and cfg.source.speed == 0.0
+    assert cfg.source.kind == "replay" and cfg["source.replay"].file == "x.bin" and cfg["source.replay"].speed == 0.0
+
+
+def test_keys_of_earlier_releases_load_in_their_new_place_with_one_note_each(tmp_path, capsys):
+    """A config.toml written before the sources and backends had sections of their own still loads; each
+    old key is read in its new place and named in one line that says what to rename."""
+    path = write(tmp_path, "[source]\nport = \"/dev/rfcomm0\"\nbaud = 9600\nsim_trace = \"synthetic:taps\"\n"
+                           "[output]\ndisplay = \":5\"\n")
+    cfg = C.load(path)
+    assert cfg["source.serial"].port == "/dev/rfcomm0" and cfg["source.serial"].baud == 9600
+    assert cfg["source.simulate"].trace == "synthetic:taps" and cfg["backend.x11"].display == ":5"
+    assert cfg.notes == [f"{path}: [source] port is now [source.serial] port (read as that; rename it there)",
+                         f"{path}: [source] baud is now [source.serial] baud (read as that; rename it there)",
+                         f"{path}: [source] sim_trace is now [source.simulate] trace (read as that; rename it there)",
+                         f"{path}: [output] display is now [backend.x11] display (read as that; rename it there)"]
+    with pytest.raises(C.ConfigError, match=r"\[source.serial\] baud = 7: "):  # checked as the new key
+        C.Config().with_overrides(C.parse_set(["source.baud=7"]), "--set")
+    from sphere.daemon.cli import main
+
+    assert main(["--config", str(path), "--check-config"]) == 0
+    err = capsys.readouterr().err
+    assert "[source] port is now [source.serial] port" in err and err.count("is now") == 4
 
 
 def test_bad_set_is_reported_as_such():

@@ -21,7 +21,7 @@ import pytest
 from sphere.daemon.app import SphereMouse
 from sphere.daemon.backends.memory import RecordingBackend
 from sphere.daemon.config import Config
-from sphere.daemon.sources import SerialSource
+from sphere.daemon.sources.serial import SerialSource
 from sphere.daemon.scripted_sphere import ScriptedSphere, hello_packet
 from sphere.protocol import PacketStream
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from sphere.daemon.sources import HidSource, hid_report_bytes
+from sphere.daemon.sources.hid import HidSource, hid_report_bytes
 from sphere.daemon.scripted_sphere import script_bytes
 
 
@@ -95,7 +95,7 @@ def test_missing_hidapi_says_what_to_install(monkeypatch):
         return real_import(name, *a, **k)
 
     monkeypatch.setattr(builtins, "__import__", no_hid)
-    from sphere.daemon.sources import SourceError
+    from sphere.daemon.sources.base import SourceError
 
     with pytest.raises(SourceError, match="pip install hidapi"):
         HidSource()

@@ -14,7 +14,8 @@ import pytest
 from sphere.daemon.app import SphereMouse
 from sphere.daemon.backends.memory import RecordingBackend
 from sphere.daemon.config import Config
-from sphere.daemon.sources import SerialSource, SourceError
+from sphere.daemon.sources.serial import SerialSource
+from sphere.daemon.sources.base import SourceError
 from sphere.daemon.scripted_sphere import ScriptedSphere, hello_packet
 from sphere.protocol import FrameDecoder, encode_frame
 

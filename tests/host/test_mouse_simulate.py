@@ -9,7 +9,8 @@ import textwrap
 
 import pytest
 
-from sphere.daemon import sources
+from sphere.daemon.sources import simulated
+from sphere.daemon.sources.base import SourceError
 from sphere.daemon.app import SphereMouse
 from sphere.daemon.backends.memory import RecordingBackend
 from sphere.daemon.config import Config
@@ -44,9 +45,9 @@ def test_simulate_runs_the_board_and_ends_with_it(tmp_path, monkeypatch):
         seen["trace"] = trace
         return [sys.executable, str(script)]
 
-    monkeypatch.setattr(sources.simulated, "simulator_command", command)
+    monkeypatch.setattr(simulated, "simulator_command", command)
     logs = []
-    src = sources.SimulatorSource("synthetic:taps", log=logs.append, hello_timeout_s=0.1, link_timeout_s=5.0,
+    src = simulated.SimulatorSource("synthetic:taps", log=logs.append, hello_timeout_s=0.1, link_timeout_s=5.0,
                                   reconnect_interval_s=0.1)
     backend = RecordingBackend()
     cfg = Config().with_overrides({"stream": {"enabled": False}}, "t")
@@ -61,12 +62,12 @@ def test_simulate_runs_the_board_and_ends_with_it(tmp_path, monkeypatch):
 def test_simulator_that_fails_says_why(tmp_path, monkeypatch):
     script = tmp_path / "broken.py"
     script.write_text("print('make: *** [Makefile:68: build/sphere.elf] Error 1'); raise SystemExit(2)\n")
-    monkeypatch.setattr(sources.simulated, "simulator_command", lambda trace="", seconds=0, extra=(): [sys.executable, str(script)])
-    with pytest.raises(sources.SourceError, match="did not open its pty: make: .*Error 1"):
-        sources.SimulatorSource()
+    monkeypatch.setattr(simulated, "simulator_command", lambda trace="", seconds=0, extra=(): [sys.executable, str(script)])
+    with pytest.raises(SourceError, match="did not open its pty: make: .*Error 1"):
+        simulated.SimulatorSource()
 
 
 def test_simulator_command_is_sphere_sim_pty():
-    cmd = sources.simulator_command("", 60)
-    assert sources.simulator_command()[-1] == "600"
+    cmd = simulated.simulator_command("", 60)
+    assert simulated.simulator_command()[-1] == "600"
     assert cmd[1:] == ["-m", "sphere.cli", "sim", "--trace", "synthetic:tour", "--pty", "--seconds", "60"]

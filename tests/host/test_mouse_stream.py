@@ -16,7 +16,7 @@ pytest.importorskip("websockets", reason="the 3-D stream needs websockets (pip i
 from sphere.daemon.app import SphereMouse  # noqa: E402
 from sphere.daemon.backends.memory import RecordingBackend  # noqa: E402
 from sphere.daemon.config import Config  # noqa: E402
-from sphere.daemon.sources import ReplaySource  # noqa: E402
+from sphere.daemon.sources.replay import ReplaySource  # noqa: E402
 from sphere.daemon.stream3d import OrientationStream  # noqa: E402
 from sphere.daemon.scripted_sphere import script_bytes  # noqa: E402
 

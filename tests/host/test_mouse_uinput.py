@@ -14,7 +14,7 @@ from sphere.daemon.app import SphereMouse  # noqa: E402
 from sphere.daemon.backends import BackendUnavailable  # noqa: E402
 from sphere.daemon.backends.uinput import UinputBackend, capabilities  # noqa: E402
 from sphere.daemon.config import Config  # noqa: E402
-from sphere.daemon.sources import ReplaySource  # noqa: E402
+from sphere.daemon.sources.replay import ReplaySource  # noqa: E402
 from sphere.daemon.scripted_sphere import script_bytes  # noqa: E402
 
 SYN = (e.EV_SYN, e.SYN_REPORT, 0)
@@ -96,6 +96,6 @@ def test_auto_backend_falls_back_to_log_and_says_why(monkeypatch, capsys):
     monkeypatch.delenv("DISPLAY", raising=False)
     warnings = []
     b = open_backend("auto", warn=warnings.append)
-    if b.name == "log":
+    if b.NAME == "log":
         assert warnings and "uinput:" in warnings[0] and "x11: no X display" in warnings[0]
     b.close()

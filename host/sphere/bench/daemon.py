@@ -55,7 +55,7 @@ except ImportError:  # --against a revision from before sphere.errors
 from sphere.daemon.app import SphereMouse
 from sphere.daemon.backends.memory import RecordingBackend
 from sphere.daemon.config import Config, parse_set
-from sphere.daemon.sources import SerialSource
+from sphere.daemon.sources.serial import SerialSource
 from sphere.protocol import FrameDecoder
 
 

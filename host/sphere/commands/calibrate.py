@@ -26,7 +26,7 @@ from sphere.calibration.session import (
     SeriesBuilder,
 )
 from sphere.calibration.session import FACES as _FACES
-from sphere.daemon.sources import version_problem
+from sphere.daemon.sources.base import version_problem
 from sphere.errors import LinkLost, SphereError
 from sphere.link.capture import CaptureError, CaptureFile, CaptureWriter
 from sphere.link.device import DeviceLink

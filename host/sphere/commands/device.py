@@ -7,7 +7,7 @@ import argparse
 import sys
 
 from sphere import argtypes
-from sphere.daemon.sources import version_problem
+from sphere.daemon.sources.base import version_problem
 from sphere.errors import SphereError
 from sphere.link.device import DeviceLink
 from sphere.link.device_settings import (

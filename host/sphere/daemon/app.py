@@ -63,7 +63,7 @@ class SphereMouse:
         width = cfg.output.screen_width_px
         if not width:
             size = backend.screen_size()
-            if size is None and backend.name == "uinput":
+            if size is None and backend.NAME == "uinput":
                 size = _desktop_size()
             width = size[0] if size else DEFAULT_SCREEN_WIDTH_PX
         self.screen_width_px = width

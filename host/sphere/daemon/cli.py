@@ -9,6 +9,7 @@ import signal
 import sys
 
 from sphere.daemon import config as config_mod
+from sphere.daemon.backends import REGISTRY as BACKENDS
 from sphere.daemon.config import ConfigError
 
 DESCRIPTION = """Turn the MARG sphere into a pointer (and a 3-D controller). Small wrist rotations move the
@@ -31,7 +32,7 @@ def build_parser() -> argparse.ArgumentParser:
     src.add_argument("--camera", metavar="INDEX|FILE", help="a webcam (0, 1 ...) or a video file that sees the ball: "
                      "its position joins the 3-D stream and the outputs ([camera] section; needs the camera extra)")
     out = p.add_argument_group("output")
-    out.add_argument("--backend", choices=("auto", "uinput", "x11", "pynput", "log"),
+    out.add_argument("--backend", choices=("auto", *BACKENDS),
                      help="where pointer motion goes (default auto)")
     out.add_argument("--display", help="X display for --backend x11")
     out.add_argument("--mode", choices=config_mod.MODES, help="mode at start (default pointer)")
@@ -94,20 +95,20 @@ def settings_from_args(args) -> config_mod.Config:
 
     if args.replay:
         put("source", "kind", "replay")
-        put("source", "replay", args.replay)
+        put("source.replay", "file", args.replay)
     elif args.simulate:
         put("source", "kind", "simulate")
     elif args.hid:
         put("source", "kind", "hid")
     elif args.port:
         put("source", "kind", "serial")
-        put("source", "port", args.port)
-    put("source", "speed", args.speed)
-    put("source", "sim_trace", args.trace)
-    put("source", "baud", args.baud)
+        put("source.serial", "port", args.port)
+    put("source.replay", "speed", args.speed)
+    put("source.simulate", "trace", args.trace)
+    put("source.serial", "baud", args.baud)
     put("camera", "source", args.camera)
     put("output", "backend", args.backend)
-    put("output", "display", args.display)
+    put("backend.x11", "display", args.display)
     put("mode", "start", args.mode)
     if args.sensitivity is not None:
         put("pointer", "slow_deg_per_width", args.sensitivity)
@@ -202,6 +203,8 @@ def _main(argv=None) -> int:
     except ConfigError as e:
         logger.error(f"config error: {e}")
         return 2
+    for note in cfg.notes:
+        logger.warning(note)
     if args.udev_rule:
         try:
             print(udev_rule(args.udev_rule))
@@ -215,7 +218,7 @@ def _main(argv=None) -> int:
 
     from sphere.daemon.app import SphereMouse
     from sphere.daemon.backends import BackendUnavailable, open_backend
-    from sphere.daemon.sources import SourceError
+    from sphere.daemon.sources.base import SourceError
     from sphere.daemon.status import StatusLine
 
     try:
@@ -232,7 +235,7 @@ def _main(argv=None) -> int:
         source.close()
         return 2
     try:
-        backend = open_backend(cfg.output.backend, cfg.output.display, warn=logger.warning)
+        backend = open_backend(cfg.output.backend, cfg.get, warn=logger.warning)
     except BackendUnavailable as e:
         logger.error(f"backend {cfg.output.backend} cannot start: {e}")
         source.close()
@@ -258,7 +261,7 @@ def _main(argv=None) -> int:
     if not args.quiet and (args.status or sys.stderr.isatty()):
         status = StatusLine(sys.stderr, cfg.status.interval_s)
     daemon = SphereMouse(cfg, source, backend, stream=stream, status=status, camera=camera)
-    log(f"source {source.state}, backend {backend.name}, mode {daemon.mode}, "
+    log(f"source {source.state}, backend {backend.NAME}, mode {daemon.mode}, "
         f"{cfg.pointer.slow_deg_per_width:g}° per screen width ({daemon.screen_width_px} px)")
 
     # the handlers only set flags; the loop acts on them between batches (no X, serial or log call in a handler)

@@ -22,8 +22,11 @@ import sys
 from pathlib import Path
 
 from sphere import paths
+from sphere.daemon.backends import REGISTRY as _BACKENDS
+from sphere.daemon.sources import PARAMS as _SOURCE_PARAMS
 from sphere.errors import SphereError
-from sphere.settings import Param, ParamError, Registry, Settings, load as load_object
+from sphere.settings import Param, ParamError, Registry, Settings
+from sphere.settings import load as load_object
 from sphere.smoothing.registry import DEFAULT as _SMOOTHING
 from sphere.smoothing.registry import POSITION as _POSITION_FILTERS
 from sphere.smoothing.registry import POSITION_DEFAULT as _POSITION_SMOOTHING
@@ -48,6 +51,7 @@ MODES = ("pointer", "tilt", "3d")
 
 #: Parts configured by one section each, ``[NAME]``: NAME → "module:Class" (a class with ``PARAMS``).
 PARTS = Registry("part", {
+    "device": "sphere.daemon.sources.serial:DeviceSettings",  # [device]: settings sent to the sphere at connect
     "camera": "sphere.camera.daemon_source:CameraPosition",  # a webcam or video file giving the ball's position
     "paths": "sphere.daemon.paths_config:PathsSettings",  # [paths] (read by sphere.paths)
     "gyro_bias": "sphere.daemon.gyro_bias:GyroBias",  # the host's one gyro-bias estimate (its [gyro] keys stay there)
@@ -57,6 +61,8 @@ PARTS = Registry("part", {
 #: Every registry whose components have a section of their own: "module:attribute" of a
 #: :class:`sphere.settings.Registry`, imported when the sections are first composed.
 REGISTRIES: tuple[str, ...] = (
+    "sphere.daemon.sources:REGISTRY",  # [source.NAME]
+    "sphere.daemon.backends:REGISTRY",  # [backend.NAME]
     "sphere.daemon.outputs:REGISTRY",  # [outputs.NAME]
     "sphere.smoothing.registry:REGISTRY",  # [smoothing.NAME]
     "sphere.smoothing.registry:POSITION",  # [position_smoothing.NAME]
@@ -64,9 +70,9 @@ REGISTRIES: tuple[str, ...] = (
 )
 
 #: The sections in the order the reference lists them (by their first part; others follow).
-ORDER = ("source", "output", "mode", "pointer", "tilt", "events", "freeze", "gyro", "gyro_bias", "rest_hold",
-         "orientation", "stream",
-         "device", "status", "outputs", "smoothing", "position_smoothing", "paths", "camera")
+ORDER = ("source", "output", "backend", "mode", "pointer", "tilt", "events", "freeze", "gyro", "gyro_bias",
+         "rest_hold", "orientation", "stream", "device", "status", "outputs", "smoothing", "position_smoothing",
+         "paths", "camera")
 
 #: Keys of earlier releases that live elsewhere now: (section, key) -> what to write instead.
 MOVED_KEYS = {
@@ -76,16 +82,28 @@ MOVED_KEYS = {
                                      "filter `tiered`: [pointer] smoothing = \"tiered\"; the default is now `tremor`)",
 }
 
+#: Keys of earlier releases that are read in their new place: (section, key) -> (section, key). A file that
+#: still has them loads, with one note a line saying what to rename.
+RENAMED = {
+    **{("source", key): ("source.serial", key) for key in (
+        "port", "candidates", "usb_ids", "baud", "reset_on_open", "low_latency", "baud_switch", "hello_timeout_s",
+        "discovery_timeout_s", "link_timeout_s")},
+    ("source", "replay"): ("source.replay", "file"),
+    ("source", "speed"): ("source.replay", "speed"),
+    ("source", "hid_vendor_id"): ("source.hid", "vendor_id"),
+    ("source", "hid_product_id"): ("source.hid", "product_id"),
+    ("source", "hid_product"): ("source.hid", "product"),
+    ("source", "sim_seconds"): ("source.simulate", "seconds"),
+    ("source", "sim_trace"): ("source.simulate", "trace"),
+    ("output", "display"): ("backend.x11", "display"),
+}
+
 
 class ConfigError(SphereError):
     """A config file, override or flag that cannot be used; the message says which and why."""
 
 
 # ---- checks a range cannot say -------------------------------------------------------------------
-
-
-def positive(v):
-    return None if v > 0 else "must be greater than 0"
 
 
 def _port(v):
@@ -101,36 +119,12 @@ def _modes_list(v):
     return None
 
 
-def _str_list(v):
-    return None if all(isinstance(s, str) for s in v) else "must be a list of strings"
-
-
-_HEX = frozenset("0123456789abcdefABCDEF")
-
-
-def _usb_id(s) -> bool:
-    return isinstance(s, str) and len(s) == 9 and s[4] == ":" and _HEX.issuperset(s[:4] + s[5:])
-
-
-def _usb_ids(v):
-    bad = [s for s in v if not _usb_id(s)]
-    return f"has {bad!r}: each entry is a USB VID:PID in hex, e.g. \"1a86:7523\"" if bad else None
-
-
-def _baud(v):
-    from sphere.link.port import check_baud  # TODO(step 2): the serial source's own PARAMS
-
-    return check_baud(v)
-
-
 def _smoothing_names():
     return tuple(_SMOOTHING_FILTERS)
 
 
-def _source_kinds():
-    from sphere.daemon.sources import REGISTRY
-
-    return ("auto", *REGISTRY)
+def _backends():
+    return ("auto", *_BACKENDS)
 
 
 def _host_filters():
@@ -140,27 +134,6 @@ def _host_filters():
     except ImportError:
         return ("auto",)
     return ("auto", *live_available())
-
-
-def _device_settings(items) -> str | None:
-    from sphere.link.device_settings import SettingError, parse_assignment  # the settings' own checks
-
-    seen = set()
-    try:
-        for item in items:
-            key, _ = parse_assignment(item)
-            if key in seen:
-                return f"{key} given twice"
-            seen.add(key)
-    except SettingError as e:
-        return str(e)
-    return None
-
-
-def _check_source(s):
-    if s.kind == "replay" and not s.replay:
-        return 'kind = "replay" needs a capture file: --replay FILE or [source] replay = "FILE"'
-    return None
 
 
 def _check_pointer(s):
@@ -179,50 +152,15 @@ def _check_tilt(s):
 
 #: section → its parameters
 CORE: dict[str, dict[str, Param]] = {
-    "source": {
-        "kind": Param("auto", doc="where frames come from: `serial`, `hid`, `replay`, `simulate`, `scripted`; `auto` = "
-                           "serial (with discovery), or `replay`/`simulate` when those flags are given", choices=_source_kinds),
-        "port": Param("auto", doc="serial port (`/dev/ttyUSB0`, `/dev/rfcomm0`, `/dev/sphere`); `auto` = discovery: the "
-                           "ports in `candidates` and those whose USB IDs are in `usb_ids`, not held by another program, "
-                           "listened to until one identifies itself as a sphere"),
-        "candidates": Param(["/dev/sphere"], doc="ports `port = \"auto\"` tries first: a literal path (the udev symlink) is "
-                                  "asked with GET_HELLO, a glob match is only listened to", check=_str_list),
-        "usb_ids": Param(["1a86:7523", "0403:6001", "10c4:ea60"], doc="USB VID:PID of the sphere's USB-serial chip "
-                               "(the Nano's CH340, FT232R, CP2102): such ports are listened to (never written to) until "
-                               "they identify themselves; [] = only `candidates`", check=_usb_ids),
-        "baud": Param(115200, doc="baud rate (the Nano's default; an HC-05/HC-06 must be set to the same)", check=_baud),
-        "reset_on_open": Param(False, doc="let opening the port reset a USB Nano through DTR; false holds DTR low "
-                                     "(Linux still raises it for a moment on open, so a Nano with its auto-reset "
-                                     "capacitor may reset anyway)"),
-        "low_latency": Param(True, doc="ask the serial driver to pass bytes on at once (ASYNC_LOW_LATENCY: an FTDI "
-                             "adapter's latency timer goes from 16 ms to 1 ms); false leaves the driver's default"),
-        "baud_switch": Param(1000000, doc="on a USB link, move a version-3 sphere to this exact rate after it connects "
-                             "(SET_BAUD, confirmed, back to 115200 when either side stops hearing the other; a 29-byte "
-                             "sample takes 0.29 ms at 1,000,000 instead of 2.5 ms); 0 = stay at `baud`. Never on "
-                             "Bluetooth", choices=(0, 250000, 500000, 1000000)),
-        "hello_timeout_s": Param(0.5, doc="send GET_HELLO to a named port if no HELLO came within this time (Bluetooth "
-                                        "links do not reset the board)", lo=0.01, hi=60.0),
-        "discovery_timeout_s": Param(3.0, doc="give up on a candidate port that did not identify itself within this "
-                                            "time", lo=0.05, hi=600.0),
-        "link_timeout_s": Param(2.0, doc="a connected port that delivers no byte for this long is taken as lost (a "
-                                       "Bluetooth link that dropped) and reopened", lo=0.05, hi=3600.0),
-        "reconnect_interval_s": Param(1.0, doc="pause between attempts to find the sphere again", lo=0.01, hi=3600.0),
-        "replay": Param("", doc="capture file to replay (same as `--replay`)"),
-        "speed": Param(1.0, doc="replay speed: 1 = as recorded, 4 = four times faster, 0 = as fast as possible", lo=0.0, hi=1e6),
-        "hid_vendor_id": Param(0, doc="USB vendor ID of a HID receiver (0 = any device whose product string contains "
-                                    "`hid_product`)", lo=0, hi=0xFFFF),
-        "hid_product_id": Param(0, doc="USB product ID of a HID receiver (0 = any)", lo=0, hi=0xFFFF),
-        "hid_product": Param("sphere", doc="substring of the HID product string looked for when no IDs are set"),
-        "sim_seconds": Param(600.0, doc="how long the virtual board runs with `--simulate` (the daemon ends with it)", lo=1.0, hi=86400.0),
-        "sim_trace": Param("", doc="motion the virtual board plays with `--simulate`: a BROAD trial (.mat, name or "
-                                "number) or `synthetic:NAME` (see `sphere sim --help`); empty = the tour, `synthetic:tour`"),
-    },
+    "source": _SOURCE_PARAMS,
     "output": {
-        "backend": Param("auto", doc="`uinput` (Linux, X11 and Wayland), `x11` (XTest), `pynput` (macOS, Windows), "
-                              "`log` (print only); `auto` tries uinput, x11, pynput, then falls back to log and says why", choices=("auto", "uinput", "x11", "pynput", "log")),
-        "display": Param("", doc="X display for the x11 backend (empty = `$DISPLAY`)"),
+        "backend": Param("auto", doc="where pointer motion goes, a backend of the registry: `uinput` (Linux, X11 and "
+                                     "Wayland), `x11` (XTest; its display in [backend.x11]), `pynput` (macOS, "
+                                     "Windows), `log` (print only); `auto` tries them in that order and falls back to "
+                                     "log, saying why", choices=_backends),
         "screen_width_px": Param(0, doc="screen width used to turn degrees into pixels; 0 = ask the backend (x11, "
-                                      "pynput; uinput asks the X display if there is one), else 1920", lo=0, hi=100000),
+                                        "pynput; uinput asks the X display if there is one), else 1920", lo=0,
+                                 hi=100000),
     },
     "mode": {
         "start": Param("pointer", doc="mode at start", choices=MODES),
@@ -294,18 +232,22 @@ CORE: dict[str, dict[str, Param]] = {
                                     "hybrid tracker's estimate as it is", choices=lambda: tuple(_POSITION_FILTERS)),
         "max_clients": Param(16, doc="most WebSocket and page connections at once; more are refused (503)", lo=1, hi=1000),
     },
-    "device": {
-        "settings": Param([], doc="device settings sent to the sphere at every connect, as `sphere device set` takes "
-                                  "them (`sphere device keys` lists them), e.g. [\"tap.threshold_g=2.5\", "
-                                  "\"tap.axes=z\"]; they win over what the sphere saved (`sphere device save`), "
-                                  "which it keeps for other programs; empty = the sphere's own", check=_device_settings),
-    },
     "status": {
         "interval_s": Param(1.0, doc="how often the status line is refreshed", lo=0.05, hi=3600.0),
     },}
 
 #: section → the check of keys that must agree (returns the reason, or None)
-CORE_CHECKS = {"source": _check_source, "pointer": _check_pointer, "tilt": _check_tilt}
+CORE_CHECKS = {"pointer": _check_pointer, "tilt": _check_tilt}
+
+
+def _check_replay(cfg):
+    if cfg.source.kind == "replay" and not cfg["source.replay"].file:
+        return '[source] kind = "replay" needs a capture file: --replay FILE or [source.replay] file = "FILE"'
+    return None
+
+
+#: checks of keys in different sections, on the whole Config (return the reason, or None)
+WHOLE_CHECKS = (_check_replay,)
 
 
 # ---- composing the sections ------------------------------------------------------------------------
@@ -358,8 +300,11 @@ def sections() -> dict[str, Section]:
 class Config:
     """All settings; ``Config()`` is the defaults. ``values`` are already validated (``{section: {key: value}}``)."""
 
-    def __init__(self, values: dict | None = None, origin: str = "defaults", _sections: dict | None = None):
+    def __init__(self, values: dict | None = None, origin: str = "defaults", _sections: dict | None = None,
+                 notes: list | None = None):
         self.origin = origin
+        #: what the user should change in the file (old key names read in their new place), one line each
+        self.notes = list(notes or [])
         self._specs = _sections if _sections is not None else sections()
         self._sections = {}
         values = values or {}
@@ -372,16 +317,24 @@ class Config:
     def __getitem__(self, name: str) -> Settings:
         return self._sections[name]
 
+    def __contains__(self, name: str) -> bool:
+        return name in self._sections
+
+    def get(self, name: str) -> Settings | None:
+        """A section's settings, or None for a component without parameters (it has no section)."""
+        return self._sections.get(name)
+
     def as_dict(self) -> dict:
         return {name: obj.as_dict() for name, obj in self._sections.items()}
 
     def with_overrides(self, overrides: dict, origin: str) -> "Config":
         """A copy with ``{section: {key: value}}`` validated and applied."""
-        checked = validate(overrides, origin, together=False, known=self._specs)
+        notes = list(self.notes)
+        checked = validate(overrides, origin, together=False, known=self._specs, notes=notes)
         values = self.as_dict()
         for s, keys in checked.items():
             values[s].update(keys)
-        return Config(values, origin=self.origin, _sections=self._specs)
+        return Config(values, origin=self.origin, _sections=self._specs, notes=notes)
 
 
 def smoothing_params(cfg: Config, name: str, registry: Registry = _SMOOTHING_FILTERS) -> dict:
@@ -442,9 +395,11 @@ def flatten(values: dict, where: str, known: dict | None = None) -> dict:
     return out
 
 
-def validate(values: dict, where: str, together: bool = True, known: dict | None = None) -> dict:
+def validate(values: dict, where: str, together: bool = True, known: dict | None = None,
+             notes: list | None = None) -> dict:
     """Check a ``{section: {key: value}}`` mapping (nested or dotted section names); returns the converted
-    values with dotted section names."""
+    values with dotted section names. A key of :data:`RENAMED` is read in its new place, with a line in
+    ``notes`` saying what to rename."""
     known = known if known is not None else sections()
     out: dict[str, dict] = {}
     for name, keys in flatten(values, where, known).items():
@@ -452,6 +407,13 @@ def validate(values: dict, where: str, together: bool = True, known: dict | None
         for key, value in keys.items():
             if key not in spec.params and (name, key) in MOVED_KEYS:
                 raise ConfigError(f"{where}: [{name}] {key} {MOVED_KEYS[name, key]}")
+            if key not in spec.params and (name, key) in RENAMED and RENAMED[name, key][0] in known:
+                new_name, new_key = RENAMED[name, key]
+                if notes is not None:
+                    notes.append(f"{where}: [{name}] {key} is now [{new_name}] {new_key} (read as that; rename it "
+                                 "there)")
+                out.setdefault(new_name, {})[new_key] = check_value(known[new_name], new_key, value, where)
+                continue
             if key not in spec.params:
                 raise ConfigError(f"{where}: unknown key [{name}] {key}{_suggest(key, spec.params)}; keys of "
                                   f"[{name}] are {', '.join(spec.params)}")
@@ -472,6 +434,10 @@ def check_config(cfg: Config, where: str) -> None:
         reason = spec.check(cfg[name]) if spec.check is not None else None
         if reason:
             raise ConfigError(f"{where}: [{name}] {reason}")
+    for check in WHOLE_CHECKS:
+        reason = check(cfg)
+        if reason:
+            raise ConfigError(f"{where}: {reason}")
 
 
 def load(path: Path | str | None = None, required: bool = False) -> Config:
@@ -485,8 +451,9 @@ def load(path: Path | str | None = None, required: bool = False) -> Config:
     if not data and not path.exists():
         return Config()
     known = sections()
-    checked = validate(data, str(path), known=known)
-    cfg = Config(checked, origin=str(path), _sections=known)
+    notes: list[str] = []
+    checked = validate(data, str(path), known=known, notes=notes)
+    cfg = Config(checked, origin=str(path), _sections=known, notes=notes)
     check_config(cfg, str(path))  # relations between keys: one key in the file, the other a default
     return cfg
 

@@ -3,53 +3,55 @@
 Every backend has ``move(dx, dy)`` (relative, pixels, x right, y down), ``press(button)``,
 ``release(button)``, ``click(button, count=1)``, ``move_to(x, y)`` (may be a no-op),
 ``screen_size()`` ((w, h) or None when unknown) and ``close()``. ``button`` is "left", "right" or
-"middle". :func:`open_backend` builds one by name; ``auto`` tries uinput, x11, pynput and falls
-back to ``log`` with the reasons the others could not start.
+"middle". A backend is one module (a :class:`~sphere.daemon.backends.base.Backend` with ``NAME``,
+``PARAMS`` — its ``[backend.NAME]`` section, if it has settings — and optionally
+``from_settings(settings, stream)``) and one line in :data:`REGISTRY`; this package imports none of them.
+:func:`open_backend` builds one by name; ``auto`` tries them in the registry's order and falls back to
+``log`` with the reasons the others could not start.
 """
 
 from __future__ import annotations
 
-import sys
+from sphere.daemon.backends.base import BackendUnavailable
+from sphere.settings import Registry, UnknownComponent
 
-from sphere.daemon.backends.base import Backend, BackendUnavailable
+#: ``[output] backend`` → "module:Class", in the order ``auto`` tries them. One line per backend.
+REGISTRY = Registry("backend", {
+    "uinput": "sphere.daemon.backends.uinput:UinputBackend",
+    "x11": "sphere.daemon.backends.x11:X11Backend",
+    "pynput": "sphere.daemon.backends.pynput_backend:PynputBackend",
+    "log": "sphere.daemon.backends.log:LogBackend",
+}, label="backend")
 
-NAMES = ("uinput", "x11", "pynput", "log")
-
-
-def _build(name: str, display: str = "", stream=None):
-    if name == "uinput":
-        from sphere.daemon.backends.uinput import UinputBackend
-
-        return UinputBackend()
-    if name == "x11":
-        from sphere.daemon.backends.x11 import X11Backend
-
-        return X11Backend(display or None)
-    if name == "pynput":
-        from sphere.daemon.backends.pynput_backend import PynputBackend
-
-        return PynputBackend()
-    if name == "log":
-        from sphere.daemon.backends.log import LogBackend
-
-        return LogBackend(stream or sys.stdout)
-    raise BackendUnavailable(f"unknown backend {name!r}; backends are {', '.join(NAMES)}")
+#: what ``auto`` falls back to when no other backend starts (it always does)
+FALLBACK = "log"
 
 
-def open_backend(name: str = "auto", display: str = "", warn=None, stream=None) -> Backend:
-    """The named backend (BackendUnavailable if it cannot start), or for ``auto`` the first that starts."""
+def _build(name: str, settings, stream):
+    try:
+        section = REGISTRY.section(name)
+        s = settings(section) if settings is not None else None
+        return REGISTRY.build(name, s, stream=stream)
+    except UnknownComponent as e:
+        raise BackendUnavailable(str(e)) from None
+
+
+def open_backend(name: str = "auto", settings=None, warn=None, stream=None):
+    """The named backend (BackendUnavailable if it cannot start), or for ``auto`` the first that starts.
+
+    ``settings(section)`` gives a backend's ``[backend.NAME]`` settings (None: its defaults); ``stream`` is
+    where the ``log`` backend prints."""
     if name != "auto":
-        return _build(name, display, stream)
+        return _build(name, settings, stream)
     reasons = []
-    for candidate in ("uinput", "x11", "pynput"):
+    for candidate in REGISTRY:
+        if candidate == FALLBACK:
+            continue
         try:
-            return _build(candidate, display, stream)
+            return _build(candidate, settings, stream)
         except BackendUnavailable as e:
             reasons.append(f"{candidate}: {e}")
     if warn is not None:
         warn("no pointer backend could start, so sphere-mouse only prints what it would do (backend log):\n  "
              + "\n  ".join(reasons))
-    return _build("log", display, stream)
-
-
-__all__ = ["Backend", "BackendUnavailable", "open_backend", "NAMES"]
+    return _build(FALLBACK, settings, stream)

@@ -12,7 +12,14 @@ class BackendUnavailable(SphereError):
 
 
 class Backend:
-    name = "base"
+    NAME = "base"
+    #: the settings of ``[backend.NAME]`` (sphere.settings.Param); none for most backends
+    PARAMS: dict = {}
+
+    @classmethod
+    def from_settings(cls, settings, stream=None) -> "Backend":
+        """The backend from its settings; ``stream`` is where a backend that prints (``log``) writes."""
+        return cls(**settings.as_dict())
 
     def move(self, dx: int, dy: int) -> None:
         raise NotImplementedError

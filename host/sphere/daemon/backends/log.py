@@ -14,7 +14,11 @@ from sphere.daemon.backends.base import Backend
 
 
 class LogBackend(Backend):
-    name = "log"
+    NAME = "log"
+
+    @classmethod
+    def from_settings(cls, settings, stream=None) -> "LogBackend":
+        return cls(stream)
 
     def __init__(self, stream=None, screen_size=None, interval_s: float = 1.0, clock=time.monotonic):
         self.stream = stream or sys.stdout

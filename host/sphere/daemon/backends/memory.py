@@ -11,7 +11,7 @@ class RecordingBackend(Backend):
     """Sums pointer steps into ``x``, ``y``; lists clicks with the position they happened at;
     ``on_call`` (if set) is called with ``time.perf_counter_ns()`` at each call."""
 
-    name = "memory"
+    NAME = "memory"
 
     def __init__(self, screen_size=(1920, 1080), on_call=None):
         self.x = self.y = 0

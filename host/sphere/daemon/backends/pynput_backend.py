@@ -6,7 +6,7 @@ from sphere.daemon.backends.base import Backend, BackendUnavailable
 
 
 class PynputBackend(Backend):
-    name = "pynput"
+    NAME = "pynput"
 
     def __init__(self, controller=None):
         import importlib.util

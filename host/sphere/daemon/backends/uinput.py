@@ -28,7 +28,7 @@ class UinputBackend(Backend):
     """``device`` is anything with ``write(type, code, value)`` and ``syn()`` (a python-evdev UInput);
     by default one is created on /dev/uinput."""
 
-    name = "uinput"
+    NAME = "uinput"
 
     def __init__(self, device=None):
         e = _ecodes()

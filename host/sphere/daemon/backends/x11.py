@@ -5,12 +5,14 @@ from __future__ import annotations
 import os
 
 from sphere.daemon.backends.base import Backend, BackendUnavailable
+from sphere.settings import Param
 
 _BUTTON = {"left": 1, "middle": 2, "right": 3}
 
 
 class X11Backend(Backend):
-    name = "x11"
+    NAME = "x11"
+    PARAMS = {"display": Param("", doc="X display of the x11 backend (empty = `$DISPLAY`)")}
 
     def __init__(self, display: str | None = None):
         name = display or os.environ.get("DISPLAY")

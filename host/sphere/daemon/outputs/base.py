@@ -14,11 +14,6 @@ class OutputUnavailable(SphereError):
     """This output cannot start here; the message says why and what to do."""
 
 
-def positive(v):
-    """A Param check: rates and the like."""
-    return None if v > 0 else "must be greater than 0"
-
-
 def relative_euler_deg(q_ref, q) -> tuple[float, float, float]:
     """(yaw, pitch, roll) in degrees of ``q`` relative to ``q_ref`` (both sensor-to-earth), in the sphere's
     own frame at the reference pose (x towards the screen, y left, z up), Tait-Bryan z-y'-x'':

@@ -13,8 +13,8 @@ from __future__ import annotations
 import socket
 import struct
 
-from sphere.daemon.outputs.base import Output, OutputUnavailable, positive
-from sphere.settings import Param
+from sphere.daemon.outputs.base import Output, OutputUnavailable
+from sphere.settings import Param, positive
 
 DATAGRAM = struct.Struct("<6d")
 

@@ -14,8 +14,8 @@ Messages (``prefix`` "/sphere" by default):
 
 from __future__ import annotations
 
-from sphere.daemon.outputs.base import Output, OutputUnavailable, positive
-from sphere.settings import Param
+from sphere.daemon.outputs.base import Output, OutputUnavailable
+from sphere.settings import Param, positive
 
 
 def _prefix(v):

@@ -7,50 +7,48 @@
 - :mod:`.simulated` — the virtual board (``sphere sim --pty``), a child that dies with the daemon;
 - :mod:`.scripted` — the built-in scripted sphere.
 
-A new source is one module (a ``Source`` subclass with ``NAME`` and ``from_config(cfg, log)``) and one
-line in :data:`REGISTRY`; its settings, if it needs its own, are a config section declared in its module
-(see host/docs/where-things-go.md).
+A new source is one module (a ``Source`` subclass with ``NAME``, ``PARAMS`` — its ``[source.NAME]``
+section — and ``from_settings(settings, log, cfg)``) and one line in :data:`REGISTRY` (see
+host/docs/where-things-go.md). This package imports none of them.
 """
 
 from __future__ import annotations
 
-from sphere.daemon.sources.base import LinkLost, Source, SourceEnded, SourceError, version_problem
-from sphere.daemon.sources.hid import HidSource, hid_report_bytes
-from sphere.daemon.sources.replay import ReplaySource
-from sphere.daemon.sources.scripted import ScriptedSource
-from sphere.daemon.sources.serial import SerialSource, candidate_ports, expand_candidates, usb_ports
-from sphere.daemon.sources.simulated import (DEFAULT_SIM_TRACE, PTY_RE, SimulatorSource, simulator_available,
-                                             simulator_command, start_simulator)
-from sphere.settings import load
+from sphere.settings import Param, Registry
 
 #: ``[source] kind`` → "module:Class". One line per source.
-REGISTRY = {
+REGISTRY = Registry("source", {
     "serial": "sphere.daemon.sources.serial:SerialSource",
     "hid": "sphere.daemon.sources.hid:HidSource",
     "replay": "sphere.daemon.sources.replay:ReplaySource",
     "simulate": "sphere.daemon.sources.simulated:SimulatorSource",
     "scripted": "sphere.daemon.sources.scripted:ScriptedSource",
+}, label="source")
+
+#: The ``[source]`` section: which source, and what every source that looks for a device shares.
+PARAMS = {
+    "kind": Param("auto", doc="where frames come from, a source of the registry: `serial`, `hid`, `replay`, "
+                              "`simulate`, `scripted` (each with its settings in [source.NAME]); `auto` = serial "
+                              "(with discovery), or `replay` when a capture file is named",
+                  choices=lambda: ("auto", *REGISTRY)),
+    "reconnect_interval_s": Param(1.0, doc="pause between attempts to find the sphere again", lo=0.01, hi=3600.0),
 }
 
 
 def source_class(kind: str):
-    return load(REGISTRY[kind])
+    return REGISTRY.load(kind)
 
 
 def kind_of(cfg) -> str:
     """The source kind the settings ask for (``auto``: replay when a capture is named, else serial)."""
     kind = cfg.source.kind
     if kind == "auto":
-        kind = "replay" if cfg.source.replay else "serial"
+        kind = "replay" if cfg["source.replay"].file else "serial"
     return kind
 
 
-def open_source(cfg, log) -> Source:
-    """The source the settings ask for. Raises SourceError (or ConfigError) with what to do."""
-    return source_class(kind_of(cfg)).from_config(cfg, log)
-
-
-__all__ = ["REGISTRY", "open_source", "source_class", "kind_of", "Source", "SourceError", "SourceEnded",
-           "LinkLost", "version_problem", "SerialSource", "HidSource", "ReplaySource", "ScriptedSource",
-           "SimulatorSource", "hid_report_bytes", "candidate_ports", "expand_candidates", "usb_ports",
-           "simulator_available", "simulator_command", "start_simulator", "DEFAULT_SIM_TRACE", "PTY_RE"]
+def open_source(cfg, log):
+    """The source the settings ask for, built from its ``[source.NAME]`` settings. Raises SourceError with
+    what to do."""
+    kind = kind_of(cfg)
+    return REGISTRY.build(kind, cfg.get(REGISTRY.section(kind)), log=log, cfg=cfg)

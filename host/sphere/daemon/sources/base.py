@@ -24,6 +24,7 @@ import logging
 import time
 from typing import Iterator
 
+from sphere.daemon.sources import PARAMS as SOURCE_PARAMS
 from sphere.errors import LinkLost, SphereError
 from sphere.protocol import PROTOCOL_VERSION, DecodedPacket, Hello, PacketStream
 from sphere.protocol.packets import SUPPORTED_VERSIONS
@@ -37,6 +38,15 @@ class SourceError(SphereError):
 
 class SourceEnded(Exception):
     """A finite source (a capture, the simulated board's run) has nothing more."""
+
+
+#: pause between attempts to find the sphere again, unless ``[source] reconnect_interval_s`` says otherwise
+RECONNECT_INTERVAL_S = SOURCE_PARAMS["reconnect_interval_s"].default
+
+
+def reconnect_interval_s(cfg) -> float:
+    """``[source] reconnect_interval_s`` of a loaded config (the sources' default without one)."""
+    return cfg.source.reconnect_interval_s if cfg is not None else RECONNECT_INTERVAL_S
 
 
 def version_problem(hello: Hello) -> str | None:
@@ -55,8 +65,10 @@ class Source:
 
     #: the name in ``[source] kind`` and in the registry (sphere.daemon.sources.REGISTRY)
     NAME = ""
+    #: the settings of ``[source.NAME]`` (sphere.settings.Param)
+    PARAMS: dict = {}
 
-    def __init__(self, reconnect_interval_s: float = 1.0, link_timeout_s: float = 0.0, log=None):
+    def __init__(self, reconnect_interval_s: float = RECONNECT_INTERVAL_S, link_timeout_s: float = 0.0, log=None):
         self.stream = PacketStream("device")
         self.reconnect_interval_s = reconnect_interval_s
         self.link_timeout_s = link_timeout_s  # 0 = silence is not a lost link
@@ -95,8 +107,9 @@ class Source:
             log.log(level, msg)
 
     @classmethod
-    def from_config(cls, cfg, log):
-        """The source as ``cfg`` (the whole Config) describes it; each source module defines this."""
+    def from_settings(cls, settings, log=None, cfg=None):
+        """The source from its ``[source.NAME]`` settings (its ``PARAMS``); ``cfg`` is the whole config, for
+        the ``[source]`` keys every source shares (``reconnect_interval_s``). Each source defines this."""
         raise NotImplementedError
 
     # -- what a subclass provides --

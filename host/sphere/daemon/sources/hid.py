@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import logging
 
-from sphere.daemon.sources.base import LinkLost, Source, SourceError
+from sphere.daemon.sources.base import LinkLost, Source, SourceError, reconnect_interval_s
+from sphere.settings import Param
 
 
 def hid_report_bytes(report) -> bytes:
@@ -20,6 +21,12 @@ class HidSource(Source):
     """The receiver found by USB IDs (or its product string), reopened when it is unplugged."""
 
     NAME = "hid"
+    PARAMS = {
+        "vendor_id": Param(0, doc="USB vendor ID of the receiver (0 = any device whose product string contains "
+                                  "`product`)", lo=0, hi=0xFFFF),
+        "product_id": Param(0, doc="USB product ID of the receiver (0 = any)", lo=0, hi=0xFFFF),
+        "product": Param("sphere", doc="substring of the HID product string looked for when no IDs are set"),
+    }
     DEVICE = "the HID receiver"
 
     def __init__(self, vendor_id: int = 0, product_id: int = 0, product: str = "sphere",
@@ -37,10 +44,8 @@ class HidSource(Source):
         self._warned = False
 
     @classmethod
-    def from_config(cls, cfg, log):
-        s = cfg.source
-        return cls(s.hid_vendor_id, s.hid_product_id, s.hid_product, reconnect_interval_s=s.reconnect_interval_s,
-                   log=log)
+    def from_settings(cls, s, log=None, cfg=None):
+        return cls(s.vendor_id, s.product_id, s.product, reconnect_interval_s=reconnect_interval_s(cfg), log=log)
 
     def _find(self):
         for info in self.hid.enumerate(self.vendor_id, self.product_id):

@@ -10,6 +10,7 @@ from sphere.daemon.sources.base import Source, SourceEnded, SourceError, version
 from sphere.link import session as session_mod
 from sphere.link.capture import CaptureError, CaptureFile
 from sphere.protocol import Hello
+from sphere.settings import Param
 
 
 class ReplaySource(Source):
@@ -21,6 +22,11 @@ class ReplaySource(Source):
     frames and samples meet exactly as they did, at any speed."""
 
     NAME = "replay"
+    PARAMS = {
+        "file": Param("", doc="capture file to replay (`sphere capture --out`; same as `--replay FILE`)"),
+        "speed": Param(1.0, doc="replay speed: 1 = as recorded, 4 = four times faster, 0 = as fast as possible "
+                                "(`--speed`)", lo=0.0, hi=1e6),
+    }
 
     def __init__(self, path, speed: float = 1.0, clock=time.perf_counter, sleep=time.sleep):
         super().__init__(reconnect_interval_s=0.0)
@@ -46,13 +52,10 @@ class ReplaySource(Source):
         self._done = False
 
     @classmethod
-    def from_config(cls, cfg, log):
-        from sphere.daemon.config import ConfigError
-
-        s = cfg.source
-        if not s.replay:
-            raise ConfigError("[source] kind = \"replay\" needs a capture file: --replay FILE or [source] replay")
-        return cls(s.replay, s.speed)
+    def from_settings(cls, s, log=None, cfg=None):
+        if not s.file:
+            raise SourceError('[source] kind = "replay" needs a capture file: --replay FILE or [source.replay] file')
+        return cls(s.file, s.speed)
 
     def _over(self) -> bool:
         return self._done

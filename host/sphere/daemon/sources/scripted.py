@@ -5,12 +5,14 @@ from __future__ import annotations
 import time
 
 from sphere.daemon.sources.base import Source, SourceEnded
+from sphere.settings import Param
 
 
 class ScriptedSource(Source):
     """Frames of :data:`sphere.daemon.scripted_sphere.DEMO_SCRIPT` (or ``script``), as a sphere would send them."""
 
     NAME = "scripted"
+    PARAMS = {"speed": Param(1.0, doc="how fast the script plays: 1 = real time", lo=0.01, hi=1000.0)}
 
     def __init__(self, script=None, speed: float = 1.0, loop: bool = True):
         super().__init__(reconnect_interval_s=0.0)
@@ -24,8 +26,8 @@ class ScriptedSource(Source):
         self._steps = None
 
     @classmethod
-    def from_config(cls, cfg, log):
-        return cls(speed=cfg.source.speed or 1.0)
+    def from_settings(cls, s, log=None, cfg=None):
+        return cls(speed=s.speed)
 
     def _over(self) -> bool:
         return self._done

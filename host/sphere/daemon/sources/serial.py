@@ -20,11 +20,15 @@ import os
 import select
 import time
 
-from sphere.daemon.sources.base import LinkLost, Source, SourceError, version_problem
+from sphere.daemon.sources.base import LinkLost, Source, SourceError, reconnect_interval_s, version_problem
 from sphere.link.clock import DeviceClock, SampleAges
+from sphere.link.device import DeviceLink
+from sphere.link.device_settings import SettingError, current_from_settings, parse_assignment, plan_settings, show
+from sphere.link.port import (PortBusy, PortError, check_baud, open_port, port_problem, request_low_latency,
+                              switchable_port)
 from sphere.protocol import Echo, GetHello, Hello, PacketStream, RawSample, Reply, SetBaud
-from sphere.protocol.packets import DEFAULT_BAUD
-from sphere.link.port import PortBusy, PortError, open_port, port_problem, request_low_latency, switchable_port
+from sphere.protocol.packets import DEFAULT_BAUD, GetSettings
+from sphere.settings import Param, str_list
 
 DEFAULT_CANDIDATES = ("/dev/sphere",)
 #: USB-serial chips of the Arduino Nano and its clones: CH340, FT232R, CP2102.
@@ -41,6 +45,45 @@ GARBAGE_BYTES = 32
 #: how long the switch waits for the REPLY to SET_BAUD, then for the one to ECHO at the new rate (the sphere's own
 #: confirmation window is 1 s: spec §5.4)
 SWITCH_REPLY_S = 1.0
+
+
+_HEX = frozenset("0123456789abcdefABCDEF")
+
+
+def _usb_ids(v):
+    bad = [s for s in v if not (isinstance(s, str) and len(s) == 9 and s[4] == ":" and _HEX.issuperset(s[:4] + s[5:]))]
+    return f"has {bad!r}: each entry is a USB VID:PID in hex, e.g. \"1a86:7523\"" if bad else None
+
+
+def _device_settings(items) -> str | None:
+    seen = set()
+    try:
+        for item in items:
+            key, _ = parse_assignment(item)
+            if key in seen:
+                return f"{key} given twice"
+            seen.add(key)
+    except SettingError as e:
+        return str(e)
+    return None
+
+
+class DeviceSettings:
+    """``[device]``: settings the serial source (and the virtual board's) sends the sphere at every connect."""
+
+    NAME = "device"
+    PARAMS = {
+        "settings": Param([], doc="device settings sent to the sphere at every connect, as `sphere device set` takes "
+                                  "them (`sphere device keys` lists them), e.g. [\"tap.threshold_g=2.5\", "
+                                  "\"tap.axes=z\"]; they win over what the sphere saved (`sphere device save`), "
+                                  "which it keeps for other programs; empty = the sphere's own",
+                          check=_device_settings),
+    }
+
+
+def device_settings(cfg) -> list:
+    """``[device] settings`` of a loaded config (none without one)."""
+    return cfg.device.settings if cfg is not None else []
 
 
 def _is_glob(pattern: str) -> bool:
@@ -102,6 +145,35 @@ class SerialSource(Source):
     for the sphere again every ``reconnect_interval_s`` without ending."""
 
     NAME = "serial"
+    PARAMS = {
+        "port": Param("auto", doc="serial port (`/dev/ttyUSB0`, `/dev/rfcomm0`, `/dev/sphere`; `--port`); `auto` = "
+                                  "discovery: the ports in `candidates` and those whose USB IDs are in `usb_ids`, not "
+                                  "held by another program, listened to until one identifies itself as a sphere"),
+        "candidates": Param(list(DEFAULT_CANDIDATES), doc="ports `port = \"auto\"` tries first: a literal path (the "
+                            "udev symlink) is asked with GET_HELLO, a glob match is only listened to", check=str_list),
+        "usb_ids": Param(list(DEFAULT_USB_IDS), doc="USB VID:PID of the sphere's USB-serial chip (the Nano's CH340, "
+                         "FT232R, CP2102): such ports are listened to (never written to) until they identify "
+                         "themselves; [] = only `candidates`", check=_usb_ids),
+        "baud": Param(115200, doc="baud rate (the Nano's default; an HC-05/HC-06 must be set to the same; `--baud`)",
+                      check=check_baud),
+        "reset_on_open": Param(False, doc="let opening the port reset a USB Nano through DTR; false holds DTR low "
+                                          "(Linux still raises it for a moment on open, so a Nano with its auto-reset "
+                                          "capacitor may reset anyway)"),
+        "low_latency": Param(True, doc="ask the serial driver to pass bytes on at once (ASYNC_LOW_LATENCY: an FTDI "
+                                       "adapter's latency timer goes from 16 ms to 1 ms); false leaves the driver's "
+                                       "default"),
+        "baud_switch": Param(1000000, doc="on a USB link, move a version-3 sphere to this exact rate after it "
+                                          "connects (SET_BAUD, confirmed, back to 115200 when either side stops "
+                                          "hearing the other; a 29-byte sample takes 0.29 ms at 1,000,000 instead of "
+                                          "2.5 ms); 0 = stay at `baud`. Never on Bluetooth",
+                             choices=(0, 250000, 500000, 1000000)),
+        "hello_timeout_s": Param(0.5, doc="send GET_HELLO to a named port if no HELLO came within this time "
+                                          "(Bluetooth links do not reset the board)", lo=0.01, hi=60.0),
+        "discovery_timeout_s": Param(3.0, doc="give up on a candidate port that did not identify itself within this "
+                                              "time", lo=0.05, hi=600.0),
+        "link_timeout_s": Param(2.0, doc="a connected port that delivers no byte for this long is taken as lost (a "
+                                         "Bluetooth link that dropped) and reopened", lo=0.05, hi=3600.0),
+    }
 
     def __init__(self, port: str = "auto", candidates=DEFAULT_CANDIDATES, baud: int = 115200,
                  reset_on_open: bool = False, hello_timeout_s: float = 0.5, discovery_timeout_s: float = 3.0,
@@ -138,17 +210,13 @@ class SerialSource(Source):
         self._next_echo = 0.0
 
     @classmethod
-    def from_config(cls, cfg, log):
-        s = cfg.source
+    def from_settings(cls, s, log=None, cfg=None):
         return cls(s.port, s.candidates, reset_on_open=s.reset_on_open, log=log, usb_ids=s.usb_ids,
-                   device_settings=cfg.device.settings, **serial_timing(s))
+                   device_settings=device_settings(cfg), **serial_timing(s, cfg))
 
     def _apply_device_settings(self, hello) -> None:
         """[device] settings, at every connect: the keys of a group not given keep what the sphere reports
         (GET_SETTINGS), so the config changes only what it names; what the sphere refuses is said."""
-        from sphere.link.device_settings import SettingError, current_from_settings, plan_settings, show
-        from sphere.protocol.packets import GetSettings
-
         current = None
         if hello.protocol_version >= 3:
             reply = self.link.command(GetSettings(), 1.0)
@@ -194,8 +262,6 @@ class SerialSource(Source):
 
     def _try_port(self, path: str, named: bool):
         """Open ``path`` and wait for the sphere to identify itself: the packets from its HELLO on, or None."""
-        from sphere.link.device import DeviceLink
-
         try:
             ser = self._open(path)
         except PortBusy as e:
@@ -409,10 +475,11 @@ class SerialSource(Source):
             ser.close()
 
 
-def serial_timing(s) -> dict:
-    """The link keys of ``[source]`` (rates, low latency, timing) as SerialSource's keyword arguments."""
+def serial_timing(s, cfg=None) -> dict:
+    """The link keys of ``[source.serial]`` (rates, low latency, timing) and ``[source]`` reconnect_interval_s as
+    SerialSource's keyword arguments."""
     return dict(baud=s.baud, hello_timeout_s=s.hello_timeout_s, discovery_timeout_s=s.discovery_timeout_s,
-                link_timeout_s=s.link_timeout_s, reconnect_interval_s=s.reconnect_interval_s,
+                link_timeout_s=s.link_timeout_s, reconnect_interval_s=reconnect_interval_s(cfg),
                 low_latency=s.low_latency, baud_switch=s.baud_switch)
 
 

@@ -17,7 +17,9 @@ import threading
 import time
 
 from sphere.daemon.sources.base import SourceError
-from sphere.daemon.sources.serial import SerialSource, serial_timing
+from sphere.daemon.sources.scripted import ScriptedSource
+from sphere.daemon.sources.serial import SerialSource, device_settings, serial_timing
+from sphere.settings import Param, Settings
 
 PTY_RE = re.compile(r"(/dev/pts/\d+)")
 #: what --simulate plays when no trace is named: the tour shows the product (pointer, clicks, the three modes)
@@ -85,7 +87,7 @@ def start_simulator(trace: str = "", log=None, timeout_s: float = 120.0, seconds
 
 
 def trace_problem(trace: str) -> str | None:
-    """Why `sphere sim` could not play ``trace`` ([source] sim_trace), or None: checked before the board
+    """Why `sphere sim` could not play ``trace`` ([source.simulate] trace), or None: checked before the board
     starts, so a typo is one clear line, not a fallback to the scripted sphere."""
     if not trace:
         return None
@@ -114,6 +116,13 @@ class SimulatorSource(SerialSource):
     """The virtual board's UART through the pty that `sphere sim --pty` exposes."""
 
     NAME = "simulate"
+    PARAMS = {
+        "seconds": Param(600.0, doc="how long the virtual board runs with `--simulate` (the daemon ends with it)",
+                         lo=1.0, hi=86400.0),
+        "trace": Param("", doc="motion the virtual board plays with `--simulate` (`--trace`): a BROAD trial (.mat, "
+                               "name or number) or `synthetic:NAME` (see `sphere sim --help`); empty = the "
+                               "tour, `synthetic:tour`"),
+    }
 
     def __init__(self, trace: str = "", log=None, seconds: float = 600.0, **serial_kwargs):
         if log:  # said before the board's first start, which prepares the motion and may build the board
@@ -127,23 +136,24 @@ class SimulatorSource(SerialSource):
         self.state = f"simulated sphere on {path}"
 
     @classmethod
-    def from_config(cls, cfg, log):
-        """The virtual board when it can run here, else the built-in scripted sphere (said in the log)."""
-        from sphere.daemon.sources.scripted import ScriptedSource
-
-        s = cfg.source
-        problem = trace_problem(s.sim_trace)
+    def from_settings(cls, s, log=None, cfg=None):
+        """The virtual board when it can run here, else the built-in scripted sphere (said in the log). The
+        link's timing is the serial source's ([source.serial])."""
+        log = log or (lambda m: None)
+        problem = trace_problem(s.trace)
         if problem:
             raise SimulatorRefused(problem)
+        serial = cfg["source.serial"] if cfg is not None else Settings(SerialSource.PARAMS)
         if simulator_available():
             try:
-                return cls(s.sim_trace, log=log, seconds=s.sim_seconds, device_settings=cfg.device.settings,
-                           **serial_timing(s))
+                return cls(s.trace, log=log, seconds=s.seconds, device_settings=device_settings(cfg),
+                           **serial_timing(serial, cfg))
             except SourceError as e:
                 log(f"the virtual board cannot run here ({e}); using the built-in scripted sphere")
         else:
             log("the virtual board (sphere sim) is not installed here; using the built-in scripted sphere")
-        return ScriptedSource.from_config(cfg, log)
+        scripted = cfg["source.scripted"] if cfg is not None else Settings(ScriptedSource.PARAMS)
+        return ScriptedSource.from_settings(scripted, log, cfg)
 
     def _lose(self, why: str) -> None:
         # the pty closes when the board's simulated seconds are over and `sphere sim` exits right after:
