@@ -157,6 +157,10 @@ def str_list(v):
     return None if all(isinstance(s, str) for s in v) else "must be a list of strings"
 
 
+def port_number(v):
+    return None if 0 <= v <= 65535 else "must be a TCP port number, 0 … 65535 (0 picks a free one)"
+
+
 def resolve(params: dict, args: tuple = (), kwargs: dict | None = None) -> dict:
     """Constructor arguments (positional in ``params`` order, then keywords) → every parameter, checked,
     the defaults for those not given."""

@@ -115,7 +115,8 @@ def test_set_reference_choices_and_build(widget):
         widget.NAMES.remove("gamma")
     md = C.markdown()
     assert "### [outputs.widget]" in md and "| `rate_hz` | `30.0` | how often (Hz) |" in md
-    out = attach(None, cfg)  # the daemon's build path: enabled outputs are built from their settings
+    cfg = cfg.with_overrides(C.parse_set(["outputs.page.enabled=false"]), "--set")
+    out = attach(cfg)  # the daemon's build path: enabled outputs are built from their settings
     out.publish_orientation((1.0, 0.0, 0.0, 0.0), 0)
     out.stop()
     assert widget.SENT == [("beta", (1.0, 0.0, 0.0, 0.0))]

@@ -87,7 +87,7 @@ def test_a_setting_reaches_every_part_of_the_measurement():
     subprocess of the CPU run accepts the same override (a bad key is refused as sphere-mouse refuses it)."""
     settings = bench._settings(["gyro.auto_bias=false"])
     cfg = bench._config(settings)
-    assert cfg.gyro.auto_bias is False and cfg.stream.enabled is False
+    assert cfg.gyro.auto_bias is False and cfg["outputs.page"].enabled is False
     assert bench._config({}).gyro.auto_bias is True
     assert bench.work_per_frame_us(frames=200, passes=1, settings=settings) > 0
     out = _bench("--json", "--seconds", "0.5", "--set", "gyro.auto_bias=false")

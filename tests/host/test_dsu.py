@@ -87,8 +87,8 @@ def test_a_subscription_ends_when_the_client_stops_asking():
 def test_dsu_through_the_daemons_seam():
     assert Config()["outputs.dsu"].enabled is False and Config()["outputs.dsu"].port == 26760
     port = free_udp_port()
-    out = attach(None, Config().with_overrides(parse_set(["outputs.dsu.enabled=true", f"outputs.dsu.port={port}"]),
-                                               "test"))
+    out = attach(Config().with_overrides(parse_set(["outputs.page.enabled=false", "outputs.dsu.enabled=true",
+                                                    f"outputs.dsu.port={port}"]), "test"))
     try:
         assert [o.NAME for o in out.outputs] == ["dsu"]
         with pytest.raises(OutputUnavailable, match=f"cannot serve UDP on 127.0.0.1:{port}: another DSU server"):

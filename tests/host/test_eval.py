@@ -116,19 +116,23 @@ def test_report_has_a_mean_table_and_us_column():
 def test_registry_is_one_table_with_defaults_inside_their_grids():
     from sphere.fusion import registry
 
-    assert set(registry.ALL) == set(registry.FILTERS) and set(registry.OURS) <= set(registry.FILTERS)
+    assert registry.ALL == registry.REGISTRY.names() and set(registry.OURS) | set(registry.PEERS) == set(registry.ALL)
     for name, spec in registry.FILTERS.items():
         points = spec.grid_points()
+        assert registry.filter_class(name).NAME == name
         keys = set(spec.grid) | (set(spec.structures[0]) if spec.structures else set())
         assert points and all(set(p) == keys for p in points), name
-        if spec.grid and name != "sphere":  # sphere's defaults live in its module, checked below
-            assert {k: spec.defaults[k] for k in spec.grid} in points, name
+        if spec.grid:  # the defaults are a point of the grid, and every grid value is in its parameter's range
+            assert {k: spec.defaults[k] for k in keys} in points, name
+            for k, values in spec.grid.items():
+                for v in values:
+                    registry.REGISTRY.params(name)[k].check(k, v)
     from sphere.fusion.sphere_filter import DEFAULTS
 
     sp = registry.FILTERS["sphere"]
     assert {k: DEFAULTS[k] for k in set(sp.grid) | set(sp.structures[0])} in sp.grid_points()
     f = registry.make("madgwick", 0.01, beta=0.05)
-    assert f.beta == 0.05 and registry.make("madgwick", 0.01).beta == registry.FILTERS["madgwick"].defaults["beta"]
+    assert f.beta == 0.05 and registry.make("madgwick", 0.01).beta == registry.defaults("madgwick")["beta"]
     kf = registry.make("dissertation-kf", 0.01).settings
     assert (kf["R"], kf["P0"], kf["H"]) == ("0.01*I", "I", "I")  # the dissertation's, not tuned
     with pytest.raises(TypeError):
@@ -138,12 +142,15 @@ def test_registry_is_one_table_with_defaults_inside_their_grids():
 
 
 def test_daemon_builds_its_filter_from_the_registry():
+    from sphere.daemon.config import Config, parse_set
     from sphere.daemon.motion import host_filter
     from sphere.fusion import registry
 
     f = host_filter("sphere")
     assert type(f.inner) is type(registry.make("sphere")) and f.inner.settings == registry.make("sphere").settings
     assert host_filter("madgwick", beta=0.2).beta == 0.2
+    cfg = Config().with_overrides(parse_set(["orientation.madgwick.beta=0.3"]), "--set")
+    assert host_filter("madgwick", cfg.get).beta == 0.3 and host_filter("madgwick").beta == 0.0135
     with pytest.raises(ValueError, match="unknown host filter"):
         host_filter("nope")
     # auto: the registry's daemon default when its library is installed, else the next live filter

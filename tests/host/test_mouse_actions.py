@@ -13,7 +13,7 @@ from sphere.protocol import FrameDecoder, TimeUnwrapper
 
 def cfg(**sections):
     c = Config()
-    over = {"stream": {"enabled": False}}
+    over = {"outputs.page": {"enabled": False}}
     over.update(sections)
     return c.with_overrides(over, "test")
 

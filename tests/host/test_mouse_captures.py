@@ -26,7 +26,7 @@ def capture(name):
 
 
 def replay(path, **overrides):
-    over = {"stream": {"enabled": False}, "output": {"screen_width_px": 1280}}
+    over = {"outputs.page": {"enabled": False}, "output": {"screen_width_px": 1280}}
     over.update(overrides)
     cfg = Config().with_overrides(over, "test")
     backend = RecordingBackend(screen_size=None)
@@ -84,7 +84,7 @@ def test_deferred_bias_step_changes_nothing(mode):
     GyroBias's trend sums; every move, orientation and bias is the same bit for bit as with them inside."""
 
     def run(defer):
-        cfg = Config().with_overrides({"stream": {"enabled": False}, "output": {"screen_width_px": 1280},
+        cfg = Config().with_overrides({"outputs.page": {"enabled": False}, "output": {"screen_width_px": 1280},
                                        "mode": {"start": mode}, "orientation": {"filter": "sphere"}}, "test")
         moves = []
 

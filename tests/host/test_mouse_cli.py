@@ -40,7 +40,7 @@ def test_replay_with_log_backend_prints_moves_and_exits(tmp_path):
 def test_replay_speed_paces_by_device_time(tmp_path):
     cap = tmp_path / "c.bin"
     cap.write_bytes(script_bytes([("still", 2.0)]))  # 2 s of device time
-    cfg = Config().with_overrides({"stream": {"enabled": False}}, "t")
+    cfg = Config().with_overrides({"outputs.page": {"enabled": False}}, "t")
     t0 = time.perf_counter()
     SphereMouse(cfg, ReplaySource(cap, speed=4.0), RecordingBackend(), log=lambda m: None).run()
     fast = time.perf_counter() - t0
@@ -66,7 +66,7 @@ def test_status_line():
     out = io.StringIO()
     clock = [0.0]
     status = StatusLine(out, interval_s=1.0, overwrite=False, clock=lambda: clock[0])
-    d = SphereMouse(Config().with_overrides({"stream": {"enabled": False}}, "t"), cap_src, RecordingBackend(),
+    d = SphereMouse(Config().with_overrides({"outputs.page": {"enabled": False}}, "t"), cap_src, RecordingBackend(),
                     status=status, log=lambda m: None)
     status.tick(d)
     for batch in cap_src:

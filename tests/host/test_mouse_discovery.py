@@ -120,7 +120,7 @@ def test_a_port_held_by_another_program_is_never_touched(tmp_path):
     logs = []
     source = SerialSource("auto", candidates=[str(tmp_path / "ttyUSB*")], usb_ids=[], hello_timeout_s=0.2,
                           discovery_timeout_s=1.0, reconnect_interval_s=0.2, log=logs.append)
-    cfg = Config().with_overrides({"stream": {"enabled": False}}, "t")
+    cfg = Config().with_overrides({"outputs.page": {"enabled": False}}, "t")
     daemon = SphereMouse(cfg, source, RecordingBackend(), log=lambda m: None)
     thread = threading.Thread(target=daemon.run, daemon=True)
     thread.start()

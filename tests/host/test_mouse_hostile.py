@@ -19,7 +19,7 @@ from sphere.protocol import PacketStream, RawSample, encode_frame
 
 
 def make_daemon(**overrides):
-    cfg = Config().with_overrides({"stream": {"enabled": False}, **overrides}, "test")
+    cfg = Config().with_overrides({"outputs.page": {"enabled": False}, **overrides}, "test")
     backend = RecordingBackend()
     return SphereMouse(cfg, source=None, backend=backend, log=lambda m: None), backend
 
@@ -67,7 +67,7 @@ def test_gyro_missing_while_still_does_not_move_the_pointer():
     """A 5 °/s offset learnt as bias, then the gyro stops answering (flags gyro_ok = 0, values 0) for 3 s while
     the sphere lies still: the pointer moves < 5 px (it ran at ~211 px/s before)."""
     logs = []
-    cfg = Config().with_overrides({"stream": {"enabled": False}, "orientation": {"source": "device"}}, "t")
+    cfg = Config().with_overrides({"outputs.page": {"enabled": False}, "orientation": {"source": "device"}}, "t")
     b = RecordingBackend()
     d = SphereMouse(cfg, source=None, backend=b, log=logs.append)
     offset = round(5.0 * 14.375)  # 5 °/s in ITG-3200 LSB about z
@@ -130,7 +130,7 @@ def test_requests_from_signal_handlers_are_served_by_the_loop():
                     d.request("pause")
                 yield batch
 
-    cfg = Config().with_overrides({"stream": {"enabled": False}}, "t")
+    cfg = Config().with_overrides({"outputs.page": {"enabled": False}}, "t")
     d = SphereMouse(cfg, Source(), Backend(), log=lambda m: None)
     d.run()
     assert len(calls) == 1 and d.paused
@@ -381,7 +381,7 @@ def test_a_magnetometer_whose_first_conversion_has_not_come_is_not_a_fault():
     (spec §4.2: its values are not valid yet): no "not answering", no "answers again". A sensor the HELLO says
     was not found at start is said once; one that stops later is said, and said again when it answers."""
     logs = []
-    cfg = Config().with_overrides({"stream": {"enabled": False}}, "t")
+    cfg = Config().with_overrides({"outputs.page": {"enabled": False}}, "t")
     d = SphereMouse(cfg, source=None, backend=RecordingBackend(), log=logs.append)
     stream = PacketStream()
     frames = [encode_frame(hello_packet(), 0)]

@@ -85,7 +85,7 @@ class FakeSphere:
 
 
 def start_daemon(source, backend=None):
-    cfg = Config().with_overrides({"stream": {"enabled": False}, "gyro": {"still_time_s": 0.3}}, "test")
+    cfg = Config().with_overrides({"outputs.page": {"enabled": False}, "gyro": {"still_time_s": 0.3}}, "test")
     backend = backend or RecordingBackend()
     daemon = SphereMouse(cfg, source, backend, log=lambda m: None)
     t = threading.Thread(target=daemon.run, daemon=True)

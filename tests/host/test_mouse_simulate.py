@@ -50,7 +50,7 @@ def test_simulate_runs_the_board_and_ends_with_it(tmp_path, monkeypatch):
     src = simulated.SimulatorSource("synthetic:taps", log=logs.append, hello_timeout_s=0.1, link_timeout_s=5.0,
                                   reconnect_interval_s=0.1)
     backend = RecordingBackend()
-    cfg = Config().with_overrides({"stream": {"enabled": False}}, "t")
+    cfg = Config().with_overrides({"outputs.page": {"enabled": False}}, "t")
     SphereMouse(cfg, src, backend, log=lambda m: None).run()  # returns once the board has exited
     src.close()
     assert seen["trace"] == "synthetic:taps"

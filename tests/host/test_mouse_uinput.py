@@ -68,7 +68,7 @@ def test_daemon_replay_through_uinput(tmp_path):
     cap.write_bytes(script_bytes([("still", 1.0), ("turn", (0, 0, 1), -10.0, 1.0), ("still", 0.2),
                                   ("tap", "single_tap"), ("still", 0.3)]))
     rec = EventRecorder()
-    cfg = Config().with_overrides({"stream": {"enabled": False}, "output": {"screen_width_px": 1920}}, "test")
+    cfg = Config().with_overrides({"outputs.page": {"enabled": False}, "output": {"screen_width_px": 1920}}, "test")
     SphereMouse(cfg, ReplaySource(cap, speed=0), UinputBackend(device=rec), log=lambda m: None).run()
     rel_x = sum(v for t, c, v in rec.events if (t, c) == (e.EV_REL, e.REL_X))
     rel_y = sum(v for t, c, v in rec.events if (t, c) == (e.EV_REL, e.REL_Y))

@@ -26,7 +26,8 @@ def turned(axis, deg, base=START):
 
 
 def cfg_with(*items):
-    return Config().with_overrides(parse_set(list(items)), "test")
+    """The defaults with ``items`` (--set syntax); the 3-D page off unless named (it would take port 8765)."""
+    return Config().with_overrides(parse_set(["outputs.page.enabled=false", *items]), "test")
 
 
 def udp_receiver():
@@ -48,7 +49,7 @@ def test_relative_angles(axis, deg, expected):
 def test_opentrack_datagrams_through_the_daemons_seam():
     rx, port = udp_receiver()
     cfg = cfg_with("outputs.opentrack.enabled=true", f"outputs.opentrack.port={port}", "outputs.opentrack.rate_hz=1000")
-    out = attach(None, cfg)
+    out = attach(cfg)
     assert isinstance(out, Outputs) and [o.NAME for o in out.outputs] == ["opentrack"]
     try:
         out.position = [1.0, 2.0, 0.5]  # NWU metres from a pose source
@@ -84,7 +85,7 @@ def test_osc_messages_to_a_python_osc_server():
     t.start()
     cfg = cfg_with("outputs.osc.enabled=true", f"outputs.osc.port={port}", 'outputs.osc.prefix="/ball"',
                    "outputs.osc.rate_hz=1000")
-    out = attach(None, cfg)
+    out = attach(cfg)
     try:
         out.publish_orientation(tuple(START), 0)
         time.sleep(0.002)
@@ -121,7 +122,7 @@ def test_gamepad_read_back_with_evdev():
     import evdev
     from evdev import ecodes
 
-    out = attach(None, cfg_with("outputs.gamepad.enabled=true", "outputs.gamepad.full_tilt_deg=20",
+    out = attach(cfg_with("outputs.gamepad.enabled=true", "outputs.gamepad.full_tilt_deg=20",
                                 "outputs.gamepad.rate_hz=1000"))
     pad = out.outputs[0]
     try:
@@ -147,8 +148,9 @@ def test_gamepad_read_back_with_evdev():
 
 
 def test_outputs_are_off_by_default_and_settings_are_checked():
-    assert open_outputs(Config()) == []
-    assert attach("the stream", Config()) == "the stream"
+    off = cfg_with()  # the 3-D page (the one output on by default) off
+    assert open_outputs(off) == [] and attach(off) is None
+    assert Config()["outputs.page"].enabled and not Config()["outputs.osc"].enabled
     with pytest.raises(ConfigError, match="port"):
         cfg_with("outputs.opentrack.port=70000")
     with pytest.raises(ConfigError, match="OSC address"):
@@ -166,7 +168,7 @@ def test_an_output_that_fails_is_dropped_not_fatal():
             pass
 
     logged = []
-    out = Outputs(None, [Broken()], log=logged.append)
+    out = Outputs([Broken()], log=logged.append)
     out.publish_orientation(tuple(START), 0)
     out.publish_orientation(tuple(START), 1)
     assert out.outputs == [] and logged == ["output broken stopped: gone"]

@@ -73,8 +73,7 @@ def test_tightening_is_soft_not_a_dead_zone():
 
 
 def test_smoothing_only_slow_motion():
-    s = plain(smoothing="tiered", smoothing_params={"smoothing_dps": 8.0, "smoothing_time_s": 0.05})
-    m = PointerMapper(s, 1920)
+    m = PointerMapper(plain(smoothing="tiered"), 1920, {"smoothing_dps": 8.0, "smoothing_time_s": 0.05})
     # alternating tremor at 2 °/s is averaged away
     out = [m.rate_px_s((0, 0, 2.0 if i % 2 else -2.0), None, DT)[0] for i in range(40)]
     assert max(abs(v) for v in out[10:]) < 0.15 * 2.0 * 48

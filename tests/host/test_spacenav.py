@@ -218,8 +218,8 @@ def test_spacenav_through_the_daemons_seam(tmp_path):
     cfg = Config()
     assert cfg["outputs.spacenav"].enabled is False and cfg["outputs.spacenav"].mapping == "puck"
     sock = tmp_path / "d.sock"
-    out = attach(None, Config().with_overrides(parse_set(["outputs.spacenav.enabled=true",
-                                                          f"outputs.spacenav.socket={sock}"]), "test"))
+    out = attach(Config().with_overrides(parse_set(["outputs.page.enabled=false", "outputs.spacenav.enabled=true",
+                                                    f"outputs.spacenav.socket={sock}"]), "test"))
     try:
         assert [o.NAME for o in out.outputs] == ["spacenav"] and sock.exists()
     finally:

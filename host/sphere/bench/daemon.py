@@ -54,7 +54,7 @@ except ImportError:  # --against a revision from before sphere.errors
     SphereError = Exception
 from sphere.daemon.app import SphereMouse
 from sphere.daemon.backends.memory import RecordingBackend
-from sphere.daemon.config import Config, parse_set
+from sphere.daemon.config import Config, ConfigError, parse_set
 from sphere.daemon.sources.serial import SerialSource
 from sphere.protocol import FrameDecoder
 
@@ -300,7 +300,10 @@ def _settings(set_items) -> dict:
 
 def _config(settings: dict | None):
     """The daemon's default config with the 3-D stream (a separate server) off, and ``settings`` over it."""
-    cfg = Config().with_overrides({"stream": {"enabled": False}}, "bench")
+    try:
+        cfg = Config().with_overrides({"outputs.page": {"enabled": False}}, "bench")
+    except ConfigError:  # a revision from before the 3-D page was an output (--against)
+        cfg = Config().with_overrides({"stream": {"enabled": False}}, "bench")
     return cfg.with_overrides(settings, "--set") if settings else cfg
 
 

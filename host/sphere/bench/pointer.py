@@ -209,7 +209,7 @@ def with_breaks_trials(directory=None):
 def pointer_paths(rec: Recording, smoothing: str, params: dict | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The pointer (px, summed integer steps) the daemon's mapper gives for these inputs, and the same plus
     the mapper's sub-pixel remainder (where the pointer is heading between whole pixels)."""
-    mapper = PointerMapper(PointerSettings(smoothing=smoothing, smoothing_params=params), 1920)
+    mapper = PointerMapper(PointerSettings(smoothing=smoothing), 1920, params)
     update = mapper.update
     out = np.empty((len(rec.inputs), 2))
     exact = np.empty((len(rec.inputs), 2))

@@ -327,8 +327,7 @@ def _code_version(name: str) -> str:
     """A digest of the code whose output --cache keeps for filter ``name``: its module, its registry entry (defaults
     and grid), the shared helpers and the metric (so a change to one filter leaves the others' results valid)."""
     spec = registry.FILTERS[name]
-    own = Path(inspect.getfile(type(spec.factory(0.005, (1.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0), **spec.defaults))
-                               if name in registry.OURS else registry.peers.PEERS[name]))
+    own = Path(inspect.getfile(spec.cls))
     h = hashlib.sha1()
     for f in (own, Path(common.__file__), Path(broad.__file__), Path(quaternion.__file__)):
         h.update(f.read_bytes())
@@ -396,11 +395,11 @@ def cross_validate(paths, names, seconds=None, jobs=1, cache=None, progress=None
         us = [[rows[t][i]["us_per_sample"] for i in idx] for t in trials]
         res = crossval.leave_one_out(trials, scores)
         defaults = ({k: v for k, v in registry.make(name, 1.0 / RATE_HZ).settings.items() if k in points[0]}
-                    if registry.FILTERS[name].grid else {})
+                    if registry.grid(name) else {})
         doc["cv"][name] = {
             "mean": res.mean,
             "us_per_sample": float(np.mean([us[k][f.choice] for k, f in enumerate(res.folds)])),
-            "grid": {k: list(v) for k, v in registry.FILTERS[name].grid.items()},
+            "grid": {k: list(v) for k, v in registry.grid(name).items()},
             "folds": [{"trial": f.trial, "choice": points[f.choice], "errors": f.errors} for f in res.folds],
             "all_trials_choice": points[res.all_trials_choice],
             "in_sample": res.in_sample,

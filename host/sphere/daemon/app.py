@@ -8,7 +8,7 @@ from sphere.daemon.actions import Action, EventActions
 from sphere.daemon.config import smoothing_params
 from sphere.daemon.gyro_bias import GyroBias, RestHold
 from sphere.daemon.motion import G_M_S2, MotionTracker
-from sphere.daemon.pointer import PointerMapper, PointerSettings, TiltMapper, TiltSettings
+from sphere.daemon.pointer import PointerMapper, TiltMapper
 from sphere.protocol.packets import RAW_ACCEL_OK, RAW_GYRO_OK, RAW_GYRO_STALE, RAW_MAG_OK, RAW_TAP_ACTIVE
 from sphere.protocol import Event, Hello, Orientation, RawSample, Status
 from sphere.smoothing.pose import PoseFilter
@@ -67,14 +67,15 @@ class SphereMouse:
                 size = _desktop_size()
             width = size[0] if size else DEFAULT_SCREEN_WIDTH_PX
         self.screen_width_px = width
-        self.mapper = PointerMapper(PointerSettings.from_config(cfg.pointer, cfg), width)
+        self.mapper = PointerMapper(cfg.pointer, width, smoothing_params(cfg, cfg.pointer.smoothing))
         self.pose = pose_filter(cfg)  # the pose the stream and every output get ([stream] smoothing)
-        self.tilt = TiltMapper(TiltSettings.from_config(cfg.tilt, cfg.pointer))
+        self.tilt = TiltMapper(cfg.tilt, cfg.pointer.invert_x, cfg.pointer.invert_y)
         g = cfg.gyro
-        self.motion = MotionTracker(cfg.orientation.source, cfg.orientation.use_mag, cfg.orientation.beta,
+        self.motion = MotionTracker(cfg.orientation.source, cfg.orientation.use_mag,
                                     GyroBias(still_dps=g.still_dps, still_time_s=g.still_time_s, enabled=g.auto_bias,
                                              **cfg["gyro_bias"].as_dict()),
-                                    filter_name=cfg.orientation.filter, rest_hold=RestHold(**cfg["rest_hold"].as_dict()))
+                                    filter_name=cfg.orientation.filter, rest_hold=RestHold(**cfg["rest_hold"].as_dict()),
+                                    filter_settings=cfg.get)
         self.motion.defer = True  # handle() runs the deferred work after each sample's move
         self.actions = EventActions(cfg.events, cfg.freeze)
         self.modes = list(cfg.mode.cycle)
@@ -106,8 +107,8 @@ class SphereMouse:
         self.mode_changes.append(mode)
         self.mapper.reset()
         self._recentre_tilt = True  # tilt starts from the pose held once the pointer unfreezes
-        port = getattr(self.stream, "port", None)
-        page = f" (the 3-D view: http://{self.stream.host}:{port}/)" if mode == "3d" and port else ""
+        url = getattr(self.stream, "url", None)
+        page = f" (the 3-D view: {url})" if mode == "3d" and url else ""
         self.log(f"mode {mode}{page}")
         if self.stream is not None:
             self.stream.publish_mode(mode)

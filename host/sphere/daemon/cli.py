@@ -114,8 +114,8 @@ def settings_from_args(args) -> config_mod.Config:
         put("pointer", "slow_deg_per_width", args.sensitivity)
         put("pointer", "fast_deg_per_width", args.sensitivity)
     if args.no_stream:
-        put("stream", "enabled", False)
-    put("stream", "port", args.stream_port)
+        put("outputs.page", "enabled", False)
+    put("outputs.page", "port", args.stream_port)
     if flags:
         cfg = cfg.with_overrides(flags, "command line")
     if args.set:
@@ -242,21 +242,9 @@ def _main(argv=None) -> int:
         if camera is not None:
             camera.close()
         return 2
-    stream = None
-    if cfg.stream.enabled:
-        try:
-            from sphere.daemon.stream3d import OrientationStream
-
-            stream = OrientationStream(cfg.stream.host, cfg.stream.port, cfg.stream.rate_hz, log=log,
-                                       max_clients=cfg.stream.max_clients)
-            stream.start()
-            log(f"3-D view on http://{cfg.stream.host}:{stream.port}/ (WebSocket ws://{cfg.stream.host}:{stream.port}/ws)")
-        except Exception as e:  # a taken port must not stop the pointer
-            logger.warning(f"no 3-D stream: {e}")
-            stream = None
     from sphere.daemon.outputs.fanout import attach
 
-    stream = attach(stream, cfg, log)  # OpenTrack, OSC, gamepad: those enabled get what the stream gets
+    stream = attach(cfg, log)  # the 3-D page, OpenTrack, OSC, gamepad: each enabled one gets the pose
     status = None
     if not args.quiet and (args.status or sys.stderr.isatty()):
         status = StatusLine(sys.stderr, cfg.status.interval_s)

@@ -52,6 +52,8 @@ MODES = ("pointer", "tilt", "3d")
 #: Parts configured by one section each, ``[NAME]``: NAME → "module:Class" (a class with ``PARAMS``).
 PARTS = Registry("part", {
     "device": "sphere.daemon.sources.serial:DeviceSettings",  # [device]: settings sent to the sphere at connect
+    "pointer": "sphere.daemon.pointer:PointerMapper",  # [pointer]: rotation → pointer motion
+    "tilt": "sphere.daemon.pointer:TiltMapper",  # [tilt]: tilt → pointer speed
     "camera": "sphere.camera.daemon_source:CameraPosition",  # a webcam or video file giving the ball's position
     "paths": "sphere.daemon.paths_config:PathsSettings",  # [paths] (read by sphere.paths)
     "gyro_bias": "sphere.daemon.gyro_bias:GyroBias",  # the host's one gyro-bias estimate (its [gyro] keys stay there)
@@ -64,6 +66,7 @@ REGISTRIES: tuple[str, ...] = (
     "sphere.daemon.sources:REGISTRY",  # [source.NAME]
     "sphere.daemon.backends:REGISTRY",  # [backend.NAME]
     "sphere.daemon.outputs:REGISTRY",  # [outputs.NAME]
+    "sphere.fusion.registry:REGISTRY",  # [orientation.NAME] (the filters the daemon can run: LIVE)
     "sphere.smoothing.registry:REGISTRY",  # [smoothing.NAME]
     "sphere.smoothing.registry:POSITION",  # [position_smoothing.NAME]
     "sphere.daemon.config:PARTS",  # [camera], [paths]
@@ -96,6 +99,8 @@ RENAMED = {
     ("source", "sim_seconds"): ("source.simulate", "seconds"),
     ("source", "sim_trace"): ("source.simulate", "trace"),
     ("output", "display"): ("backend.x11", "display"),
+    ("orientation", "beta"): ("orientation.madgwick", "beta"),
+    **{("stream", key): ("outputs.page", key) for key in ("enabled", "host", "port", "rate_hz", "max_clients")},
 }
 
 
@@ -104,10 +109,6 @@ class ConfigError(SphereError):
 
 
 # ---- checks a range cannot say -------------------------------------------------------------------
-
-
-def _port(v):
-    return None if 0 <= v <= 65535 else "must be a TCP port number, 0 … 65535 (0 picks a free one)"
 
 
 def _modes_list(v):
@@ -130,22 +131,10 @@ def _backends():
 def _host_filters():
     """``auto`` and the filters the fusion registry marks live (only ``auto`` without sphere.fusion)."""
     try:
-        from sphere.fusion.registry import live_available
+        from sphere.fusion.registry import live_available  # optional: the daemon runs without sphere.fusion
     except ImportError:
         return ("auto",)
     return ("auto", *live_available())
-
-
-def _check_pointer(s):
-    if s.accel_high_dps <= s.accel_low_dps:
-        return f"accel_high_dps = {s.accel_high_dps} must be greater than accel_low_dps = {s.accel_low_dps}"
-    return None
-
-
-def _check_tilt(s):
-    if s.full_speed_deg <= s.dead_zone_deg:
-        return f"full_speed_deg = {s.full_speed_deg} must be greater than dead_zone_deg = {s.dead_zone_deg}"
-    return None
 
 
 # ---- the daemon's own sections ---------------------------------------------------------------------
@@ -166,29 +155,6 @@ CORE: dict[str, dict[str, Param]] = {
         "start": Param("pointer", doc="mode at start", choices=MODES),
         "cycle": Param(["pointer", "tilt", "3d"], doc="modes that `next_mode` steps through, in order", check=_modes_list),
     },
-    "pointer": {
-        "slow_deg_per_width": Param(40.0, doc="degrees of wrist rotation that move the pointer one screen width when "
-                                           "turning slowly (below `accel_low_dps`)", lo=0.5, hi=3600.0),
-        "fast_deg_per_width": Param(40.0, doc="the same when turning fast (above `accel_high_dps`); smaller than "
-                                           "`slow_deg_per_width` = acceleration; equal = none", lo=0.5, hi=3600.0),
-        "accel_low_dps": Param(20.0, doc="rotation speed (°/s) up to which the slow sensitivity applies", lo=0.0, hi=2000.0),
-        "accel_high_dps": Param(120.0, doc="rotation speed (°/s) from which the fast sensitivity applies; between the "
-                                       "two it is blended linearly", lo=0.001, hi=5000.0),
-        "tightening_dps": Param(1.0, doc="rotations slower than this are scaled down in proportion to their speed "
-                                       "(soft, instead of a dead zone that swallows them); 0 = off", lo=0.0, hi=100.0),
-        "smoothing": Param(_SMOOTHING, doc="smoothing filter of the pointer, from the smoothing registry (its parameters "
-                                "in [smoothing.NAME]); `tremor` takes out the hand's 8–12 Hz tremor, `none` = off", choices=_smoothing_names),
-        "axes": Param("world", doc="`world`: turning about the vertical moves the pointer sideways however the sphere is "
-                           "rolled (uses gravity); `local`: the sensor's own z (yaw) and y (pitch) axes", choices=("world", "local")),
-        "invert_x": Param(False, doc="swap left and right"),
-        "invert_y": Param(False, doc="swap up and down"),
-    },
-    "tilt": {
-        "dead_zone_deg": Param(3.0, doc="tilt from the recentred pose that does not move the pointer", lo=0.0, hi=45.0),
-        "full_speed_deg": Param(25.0, doc="tilt at which the pointer reaches `max_speed_px_s`", lo=1.0, hi=90.0),
-        "max_speed_px_s": Param(1200.0, doc="pointer speed at full tilt", lo=1.0, hi=100000.0),
-        "exponent": Param(1.5, doc="response curve between dead zone and full tilt (1 = linear)", lo=0.5, hi=4.0),
-    },
     "events": {
         "single_tap": Param("left_click", doc="action of a single tap", choices=ACTIONS),
         "double_tap": Param("double_click", doc="action of a double tap (`double_click` counts the single tap's click as "
@@ -206,7 +172,8 @@ CORE: dict[str, dict[str, Param]] = {
     },
     "gyro": {
         "auto_bias": Param(True, doc="re-estimate the gyroscope bias on the host whenever the sphere lies still"),
-        "still_dps": Param(3.0, doc="the sphere counts as still while every gyro axis stays within this of its mean", lo=0.01, hi=100.0),
+        "still_dps": Param(3.0, doc="the sphere counts as still while every gyro axis stays within this of its mean",
+                           lo=0.01, hi=100.0),
         "still_time_s": Param(1.0, doc="how long it must be still for a bias update", lo=0.1, hi=30.0),
     },
     "orientation": {
@@ -214,30 +181,26 @@ CORE: dict[str, dict[str, Param]] = {
                              "packets; `auto` = host when raw samples arrive and sphere.fusion is installed", choices=("auto", "host", "device")),
         "use_mag": Param(False, doc="let the host filter use the magnetometer (needs a calibrated one; without it yaw "
                                "drifts slowly, which pointing does not mind)"),
-        "filter": Param("auto", doc="host filter: `vqf` (the VQF library, Laidig & Seel 2023: the best on data nobody "
-                             "tuned on, host/docs/fusion.md), `sphere` (sphere.fusion's SphereFilter), `madgwick`; "
-                             "`auto` = vqf if installed (the daemon extra installs it), else sphere", choices=_host_filters),
-        "beta": Param(0.1, doc="gain β (rad/s) of the host Madgwick filter", lo=0.0, hi=2.0),
+        "filter": Param("auto", doc="host filter: `vqf` (the VQF library, Laidig & Seel 2023: the best on data "
+                                    "nobody tuned on, host/docs/fusion.md), `sphere` (sphere.fusion's SphereFilter), "
+                                    "`madgwick`; `auto` = vqf if installed (the daemon extra installs it), else sphere "
+                                    "(each with its parameters in [orientation.NAME])", choices=_host_filters),
     },
     "stream": {
-        "enabled": Param(True, doc="serve orientation on a WebSocket and the 3-D page over HTTP"),
-        "host": Param("127.0.0.1", doc="address to listen on (keep it local)"),
-        "port": Param(8765, doc="TCP port of the WebSocket and the page (http://127.0.0.1:PORT/)", check=_port),
-        "rate_hz": Param(60.0, doc="orientation messages per second", lo=1.0, hi=200.0),
-        "smoothing": Param(_SMOOTHING, doc="smoothing filter of the streamed orientation, from the smoothing registry "
-                                           "(its parameters in [smoothing.NAME], degrees); `none` = the orientation as "
-                                           "measured", choices=_smoothing_names),
-        "position_smoothing": Param(_POSITION_SMOOTHING, doc="smoothing filter of the streamed position (with a "
-                                    "camera), its parameters in metres in [position_smoothing.NAME]; `none` = the "
-                                    "hybrid tracker's estimate as it is", choices=lambda: tuple(_POSITION_FILTERS)),
-        "max_clients": Param(16, doc="most WebSocket and page connections at once; more are refused (503)", lo=1, hi=1000),
+        "smoothing": Param(_SMOOTHING, doc="smoothing filter of the orientation every output gets (the 3-D page, "
+                                           "OpenTrack …), from the smoothing registry (its parameters in "
+                                           "[smoothing.NAME], degrees); `none` = the orientation as measured",
+                           choices=_smoothing_names),
+        "position_smoothing": Param(_POSITION_SMOOTHING, doc="smoothing filter of the position every output gets "
+                                    "(with a camera), its parameters in metres in [position_smoothing.NAME]; `none` "
+                                    "= the hybrid tracker's estimate as it is", choices=lambda: tuple(_POSITION_FILTERS)),
     },
     "status": {
         "interval_s": Param(1.0, doc="how often the status line is refreshed", lo=0.05, hi=3600.0),
     },}
 
 #: section → the check of keys that must agree (returns the reason, or None)
-CORE_CHECKS = {"pointer": _check_pointer, "tilt": _check_tilt}
+CORE_CHECKS: dict = {}
 
 
 def _check_replay(cfg):
@@ -283,7 +246,7 @@ def sections() -> dict[str, Section]:
                     raise
                 continue
             params = getattr(cls, "PARAMS", None)
-            if params:
+            if params and getattr(cls, "LIVE", True):  # an orientation filter the daemon cannot run: none
                 found[registry.section(name)] = Section(registry.section(name), params,
                                                         getattr(cls, "check_settings", None), cls)
 

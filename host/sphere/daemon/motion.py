@@ -72,15 +72,16 @@ class _NwuFilter:
         pass
 
 
-def host_filter(name: str = "auto", beta: float | None = 0.1, dt_s: float = 0.005):
+def host_filter(name: str = "auto", settings=None, dt_s: float = 0.005, **overrides):
     """The host fusion filter by its name in ``sphere.fusion.registry`` (the filters it marks live: ``vqf``, the
     default, ``sphere`` and ``madgwick``), or ``auto`` = the first of them that is installed. Built by the registry
-    with its defaults, so the daemon runs the same settings as `sphere eval`; ``beta`` (when not None) replaces
-    Madgwick's; ``dt_s`` is the sample step for a filter built for a fixed rate (VQF). None when sphere.fusion is
-    not installed. Returns NWU quaternions."""
+    from its PARAMS, so the daemon runs the same settings as `sphere eval`: ``settings(section)`` gives its
+    ``[orientation.NAME]`` values (the daemon passes ``cfg.get``), ``overrides`` replace single ones; ``dt_s`` is
+    the sample step for a filter built for a fixed rate (VQF). None when sphere.fusion is not installed. Returns
+    NWU quaternions."""
     try:
-        from sphere.fusion import registry
-    except ImportError:  # the daemon works without the fusion package (device orientation only)
+        from sphere.fusion import registry  # optional: the daemon works without the fusion package
+    except ImportError:  # (device orientation only)
         return None
     known = registry.live_available()
     if name == "auto":
@@ -88,23 +89,25 @@ def host_filter(name: str = "auto", beta: float | None = 0.1, dt_s: float = 0.00
     if name not in known:
         missing = " (its package is not installed: pip install 'marg-sphere[daemon]')" if name in registry.LIVE else ""
         raise ValueError(f"unknown host filter {name!r}{missing}; known: auto, {', '.join(known)}")
-    f = registry.make(name, dt_s, **({"beta": beta} if name == "madgwick" and beta is not None else {}))
+    given = settings(registry.REGISTRY.section(name)) if settings is not None else None
+    f = registry.make(name, dt_s, **{**(given.as_dict() if given is not None else {}), **overrides})
     return f if f.earth_frame == "NWU" else _NwuFilter(f)
 
 
 class MotionTracker:
     """Feed packets in; read ``gyro_dps`` (bias-corrected, sensor axes), ``up`` and ``quat`` (sensor-to-NWU)."""
 
-    def __init__(self, orientation_source: str = "auto", use_mag: bool = False, beta: float = 0.1,
-                 bias: GyroBias | None = None, imu_rate_hz: float = 200.0, filter_name: str = "auto",
-                 rest_hold: RestHold | None = None):
+    def __init__(self, orientation_source: str = "auto", use_mag: bool = False, bias: GyroBias | None = None,
+                 imu_rate_hz: float = 200.0, filter_name: str = "auto", rest_hold: RestHold | None = None,
+                 filter_settings=None):
+        """``filter_settings(section)``: the host filter's ``[orientation.NAME]`` settings (see host_filter)."""
         self.bias = bias or GyroBias()
         self.rest_hold = rest_hold or RestHold()
         self.orientation_source = orientation_source
         self.use_mag = use_mag
         self.filter = None
         if orientation_source in ("auto", "host"):
-            self.filter = host_filter(filter_name, beta, 1.0 / imu_rate_hz)
+            self.filter = host_filter(filter_name, filter_settings, 1.0 / imu_rate_hz)
         inner = getattr(self.filter, "inner", self.filter)
         # the work that may wait until the sample's pointer move is out: SphereFilter's bias step (every 10th
         # sample) and GyroBias's still detection (but on a window's last sample); ``raw()`` leaves it, the daemon calls run_deferred() after the move

@@ -26,33 +26,37 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
-from sphere.daemon.config import smoothing_params
+from sphere.settings import Param, Settings
 from sphere.smoothing.registry import DEFAULT as DEFAULT_SMOOTHING
+from sphere.smoothing.registry import REGISTRY as SMOOTHING
 from sphere.smoothing.registry import make_filter
 
+#: the ``[pointer]`` section: :class:`PointerMapper`'s parameters
+POINTER_PARAMS = {
+    "slow_deg_per_width": Param(40.0, doc="degrees of wrist rotation that move the pointer one screen width when "
+                                       "turning slowly (below `accel_low_dps`)", lo=0.5, hi=3600.0),
+    "fast_deg_per_width": Param(40.0, doc="the same when turning fast (above `accel_high_dps`); smaller than "
+                                       "`slow_deg_per_width` = acceleration; equal = none", lo=0.5, hi=3600.0),
+    "accel_low_dps": Param(20.0, doc="rotation speed (°/s) up to which the slow sensitivity applies", lo=0.0, hi=2000.0),
+    "accel_high_dps": Param(120.0, doc="rotation speed (°/s) from which the fast sensitivity applies; between the "
+                                   "two it is blended linearly", lo=0.001, hi=5000.0),
+    "tightening_dps": Param(1.0, doc="rotations slower than this are scaled down in proportion to their speed "
+                                   "(soft, instead of a dead zone that swallows them); 0 = off", lo=0.0, hi=100.0),
+    "smoothing": Param(DEFAULT_SMOOTHING, doc="smoothing filter of the pointer, from the smoothing registry (its parameters "
+                            "in [smoothing.NAME]); `tremor` takes out the hand's 8–12 Hz tremor, `none` = off", choices=lambda: tuple(SMOOTHING)),
+    "axes": Param("world", doc="`world`: turning about the vertical moves the pointer sideways however the sphere is "
+                       "rolled (uses gravity); `local`: the sensor's own z (yaw) and y (pitch) axes", choices=("world", "local")),
+    "invert_x": Param(False, doc="swap left and right"),
+    "invert_y": Param(False, doc="swap up and down"),
+}
 
-@dataclass
-class PointerSettings:
-    slow_deg_per_width: float = 40.0  # ° of rotation per screen width below accel_low_dps
-    fast_deg_per_width: float = 40.0  # ° per screen width above accel_high_dps
-    accel_low_dps: float = 20.0  # °/s
-    accel_high_dps: float = 120.0  # °/s
-    tightening_dps: float = 1.0  # °/s; 0 = off
-    smoothing: str = DEFAULT_SMOOTHING  # a name from sphere.smoothing.registry.FILTERS
-    smoothing_params: dict | None = None  # the filter's parameters (None = its defaults)
-    axes: str = "world"  # "world" or "local"
-    invert_x: bool = False
-    invert_y: bool = False
 
-    @classmethod
-    def from_config(cls, section, cfg=None) -> "PointerSettings":
-        """From the [pointer] section; with the whole config, the filter's [smoothing.NAME] parameters too."""
-        settings = cls(**{k: v for k, v in section.as_dict().items() if k in cls.__dataclass_fields__})
-        if cfg is not None:
-            settings.smoothing_params = smoothing_params(cfg, settings.smoothing)
-        return settings
+class PointerSettings(Settings):
+    """:class:`PointerMapper`'s settings: ``PointerSettings(axes="local")``, the defaults for the rest."""
+
+    def __init__(self, **values):
+        super().__init__(POINTER_PARAMS, values)
 
 
 def _norm3(v):
@@ -89,6 +93,12 @@ def screen_rates_dps(gyro_dps, up_body, axes: str, last_forward=None):
     return yaw, pitch, (fx, fy, fz)
 
 
+def _check_pointer(s):
+    if s.accel_high_dps <= s.accel_low_dps:
+        return f"accel_high_dps = {s.accel_high_dps} must be greater than accel_low_dps = {s.accel_low_dps}"
+    return None
+
+
 class PointerMapper:
     """Angular rate → integer pointer steps. Feed every gyro sample to :meth:`update`.
 
@@ -96,13 +106,21 @@ class PointerMapper:
     by that many pixels.
     """
 
-    def __init__(self, settings: PointerSettings | None = None, screen_width_px: int = 1920):
+    NAME = "pointer"
+    PARAMS = POINTER_PARAMS
+
+    def __init__(self, settings: Settings | None = None, screen_width_px: int = 1920,
+                 smoothing_params: dict | None = None):
+        """``settings``: the [pointer] values (:class:`PointerSettings`); ``smoothing_params``: the smoothing
+        filter's own (its [smoothing.NAME] section; None = its defaults)."""
         self.settings = settings or PointerSettings()
         self.screen_width_px = int(screen_width_px)
-        self.filter = make_filter(self.settings.smoothing, **(self.settings.smoothing_params or {}))
+        self.filter = make_filter(self.settings.smoothing, **(smoothing_params or {}))
         self._forward = None
         self._holding = False
         self.reset()
+
+    check_settings = staticmethod(_check_pointer)
 
     def reset(self) -> None:
         """Forget smoothing history and sub-pixel remainders (after a pause, a freeze, a mode switch)."""
@@ -182,22 +200,26 @@ class PointerMapper:
         return ix, iy
 
 
-@dataclass
-class TiltSettings:
-    dead_zone_deg: float = 3.0
-    full_speed_deg: float = 25.0
-    max_speed_px_s: float = 1200.0
-    exponent: float = 1.5
-    invert_x: bool = False
-    invert_y: bool = False
+#: the ``[tilt]`` section: :class:`TiltMapper`'s parameters (its left/right and up/down follow [pointer])
+TILT_PARAMS = {
+    "dead_zone_deg": Param(3.0, doc="tilt from the recentred pose that does not move the pointer", lo=0.0, hi=45.0),
+    "full_speed_deg": Param(25.0, doc="tilt at which the pointer reaches `max_speed_px_s`", lo=1.0, hi=90.0),
+    "max_speed_px_s": Param(1200.0, doc="pointer speed at full tilt", lo=1.0, hi=100000.0),
+    "exponent": Param(1.5, doc="response curve between dead zone and full tilt (1 = linear)", lo=0.5, hi=4.0),
+}
 
-    @classmethod
-    def from_config(cls, tilt, pointer=None) -> "TiltSettings":
-        values = {k: v for k, v in tilt.as_dict().items() if k in cls.__dataclass_fields__}
-        if pointer is not None:
-            values["invert_x"] = pointer.invert_x
-            values["invert_y"] = pointer.invert_y
-        return cls(**values)
+
+class TiltSettings(Settings):
+    """:class:`TiltMapper`'s settings: ``TiltSettings(exponent=1.0)``, the defaults for the rest."""
+
+    def __init__(self, **values):
+        super().__init__(TILT_PARAMS, values)
+
+
+def _check_tilt(s):
+    if s.full_speed_deg <= s.dead_zone_deg:
+        return f"full_speed_deg = {s.full_speed_deg} must be greater than dead_zone_deg = {s.dead_zone_deg}"
+    return None
 
 
 def pointing_angles_deg(quat):
@@ -215,8 +237,14 @@ def pointing_angles_deg(quat):
 class TiltMapper:
     """Orientation relative to a recentred pose → pointer velocity; :meth:`update` per orientation sample."""
 
-    def __init__(self, settings: TiltSettings | None = None):
+    NAME = "tilt"
+    PARAMS = TILT_PARAMS
+    check_settings = staticmethod(_check_tilt)
+
+    def __init__(self, settings: Settings | None = None, invert_x: bool = False, invert_y: bool = False):
+        """``settings``: the [tilt] values (:class:`TiltSettings`); ``invert_x``/``invert_y``: [pointer]'s."""
         self.settings = settings or TiltSettings()
+        self.invert_x, self.invert_y = invert_x, invert_y
         self.reference = None  # (heading, elevation) of the recentred pose
         self.remainder = [0.0, 0.0]
 
@@ -240,9 +268,9 @@ class TiltMapper:
         de = elevation - self.reference[1]
         vx = -self._speed(dh)  # turned left → pointer goes left
         vy = -self._speed(de)  # nose up → pointer goes up
-        if self.settings.invert_x:
+        if self.invert_x:
             vx = -vx
-        if self.settings.invert_y:
+        if self.invert_y:
             vy = -vy
         return vx, vy
 

@@ -98,6 +98,11 @@ class OrientationStream:
         self._error: BaseException | None = None
         self._stop_event = None
 
+    @property
+    def url(self) -> str:
+        """The page's address (the WebSocket is ``ws://…/ws``)."""
+        return f"http://{self.host}:{self.port}/"
+
     # -- daemon side (any thread) --
     def publish_orientation(self, quat, t_us=None) -> None:
         if quat is None:

@@ -46,6 +46,7 @@ import numpy as np
 
 from sphere import quaternion as quat
 from sphere.fusion.common import ecompass
+from sphere.settings import Param
 
 EARTH_FRAME = "NWU"
 #: σ_g default of the class; `sphere eval` uses the value `sphere eval --cv` chose (sphere.fusion.registry)
@@ -172,6 +173,21 @@ class DissertationKF:
     """Quaternion Kalman filter with gyro prediction and an acc+mag quaternion measurement (NWU)."""
 
     earth_frame = EARTH_FRAME
+    NAME = "dissertation-kf"
+    # R = 10⁻² I, P₀ = I, H = I are the dissertation's and fixed in the class; only σ_g and ψ are free. The
+    # defaults are the grid point `sphere eval --cv` picks on all shipped BROAD trials (host/docs/fusion.md)
+    PARAMS = {
+        "gyro_noise_rad_s": Param(0.5, "rad/s", 1e-6, 100.0, "σ_g: the gyro's noise in the prediction"),
+        "robust": Param("huber-norm", doc="heavy-tail protection of the measurement", choices=ROBUST),
+        "threshold": Param(0.036, "", 0.0, 1e6, "ψ: the gate or Huber threshold on the innovation"),
+    }
+    GRID = {"gyro_noise_rad_s": (0.1, 0.5), "robust": ("huber-norm",), "threshold": (0.012, 0.024, 0.036, 0.07, 0.15)}
+    STARTUP_BIAS = True
+    LIVE = False  # `sphere eval` only: the daemon does not run it (no section in its config)
+
+    @classmethod
+    def from_settings(cls, s, dt_s=None, q0=(1.0, 0.0, 0.0, 0.0), gyro_bias_rad_s=(0.0, 0.0, 0.0)):
+        return cls(q0=q0, gyro_bias_rad_s=gyro_bias_rad_s, **s.as_dict())
 
     def __init__(self, gyro_noise_rad_s: float = DEFAULT_GYRO_NOISE_RAD_S, r: float = 1e-2,
                  robust: str = "none", threshold: float = 3.0, q0=(1.0, 0.0, 0.0, 0.0),

@@ -37,6 +37,7 @@ import math
 import numpy as np
 
 from sphere.fusion.common import batch_inputs
+from sphere.settings import Param
 
 EARTH_FRAME = "NWU"
 DEFAULT_BETA = 0.041  # Madgwick's published default (rad/s); eval uses the β `sphere eval --cv` chose (registry)
@@ -113,6 +114,16 @@ class Madgwick:
     """
 
     earth_frame = EARTH_FRAME
+    NAME = "madgwick"
+    #: β's default is the grid point `sphere eval --cv` picks on all shipped BROAD trials (host/docs/fusion.md)
+    PARAMS = {"beta": Param(0.0135, "rad/s", 0.0, 2.0, "gain β: how fast the accelerometer and magnetometer "
+                                                        "correct the gyro's orientation")}
+    GRID = {"beta": (0.005, 0.0075, 0.01, 0.0135, 0.02, 0.03, 0.05)}
+    STARTUP_BIAS = True  # gets the device's start-up gyro calibration and the e-compass initial orientation
+
+    @classmethod
+    def from_settings(cls, s, dt_s=None, q0=(1.0, 0.0, 0.0, 0.0), gyro_bias_rad_s=(0.0, 0.0, 0.0)):
+        return cls(q0=q0, gyro_bias_rad_s=gyro_bias_rad_s, **s.as_dict())
 
     def __init__(self, beta: float = DEFAULT_BETA, q0=(1.0, 0.0, 0.0, 0.0), gyro_bias_rad_s=(0.0, 0.0, 0.0)):
         self.beta = float(beta)

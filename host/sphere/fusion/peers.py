@@ -61,8 +61,19 @@ def to_enu(q: np.ndarray, frame: str) -> np.ndarray:
     raise ValueError(f"unknown earth frame {frame!r}")
 
 
+#: the step a live peer is built with when the caller gives none (the sphere's sample rate, 200 Hz)
+LIVE_DT_S = 0.005
+
+
 class _Peer:
+    """A published filter with its library's defaults: no parameters of ours, never tuned."""
+
     earth_frame = "ENU"
+    PARAMS: dict = {}
+
+    @classmethod
+    def from_settings(cls, s=None, dt_s=None, q0=None, gyro_bias_rad_s=None):
+        return cls(LIVE_DT_S if dt_s is None else dt_s)
 
     def update_batch(self, gyr, acc, mag, dt_s):
         out = np.empty((len(gyr), 4))
@@ -74,6 +85,9 @@ class _Peer:
 
 class VqfPeer(_Peer):
     """VQF with its default parameters (``vqf.VQF(gyrTs)``); output ``quat9D`` (ENU), or ``quat6D`` without mag."""
+
+    NAME = "vqf"
+    NEEDS = "vqf"  # the package a live daemon needs installed to run it
 
     earth_frame = "ENU"
 
@@ -147,6 +161,8 @@ def _version(dist: str) -> str:
 
 class FusionPeer(_Peer):
     """x-io Fusion (imufusion ``Ahrs``) with ``AhrsSettings(sample_rate=…)`` defaults, NWU convention."""
+
+    NAME = "fusion"
 
     earth_frame = "NWU"
 
@@ -230,6 +246,7 @@ class _AhrsPeer(_Peer):
 
 
 class AhrsMadgwickPeer(_AhrsPeer):
+    NAME = "ahrs-madgwick"
     cls_name = "Madgwick"
     earth_frame = "NWU"
     _shown = ("gain", "frequency")
@@ -246,12 +263,14 @@ class AhrsMadgwickPeer(_AhrsPeer):
 
 
 class AhrsMahonyPeer(AhrsMadgwickPeer):
+    NAME = "ahrs-mahony"
     cls_name = "Mahony"
     earth_frame = "ENU"
     _shown = ("k_P", "k_I", "frequency")
 
 
 class AhrsEkfPeer(AhrsMadgwickPeer):
+    NAME = "ahrs-ekf"
     cls_name = "EKF"
     earth_frame = "NED"
     _shown = ("frame", "noises", "magnetic_ref", "frequency")
@@ -297,12 +316,3 @@ def _first_q(acc, mag, frame):
         # NWU → NED: rotate 180° about north (x)
         return quat.multiply(np.array([0.0, 1.0, 0.0, 0.0]), qn)
     return np.array(ecompass(*acc, *(mag if mag is not None else (0.0, 0.0, 0.0)), frame=frame))
-
-
-PEERS = {
-    "vqf": VqfPeer,
-    "fusion": FusionPeer,
-    "ahrs-madgwick": AhrsMadgwickPeer,
-    "ahrs-mahony": AhrsMahonyPeer,
-    "ahrs-ekf": AhrsEkfPeer,
-}

@@ -1,14 +1,17 @@
-"""Every orientation filter by the name `sphere eval` and the daemon use: one table, name → :class:`Filter`.
+"""Every orientation filter by the name `sphere eval` and the daemon use: one registry, name → "module:Class".
 
-Adding a filter is one module and one line in :data:`FILTERS`. Each entry holds the factory, the default
-values of the filter's free parameters (defined here once; the daemon and `sphere eval` both build from
-them) and the small grid ``sphere eval --cv`` chooses them from, leave one trial out. The defaults are the
-grid point ``--cv`` picks on all shipped BROAD trials (it prints that choice; host/docs/fusion.md has the
-run), so the figures that describe them are the held-out ones.
+Adding a filter is one module and one line in :data:`REGISTRY`. The class carries ``NAME``, ``PARAMS`` (its
+free parameters with their defaults, units and ranges: the daemon's ``[orientation.NAME]`` section and
+`sphere eval` both build from them), ``GRID`` (the small grid ``sphere eval --cv`` chooses them from, leave
+one trial out), ``STARTUP_BIAS`` (it takes the start-up gyro calibration and the e-compass start),
+``STRUCTURES`` (part switches ``--cv`` chooses among, nested) and ``from_settings(settings, dt_s, q0,
+gyro_bias_rad_s)``; one the daemon cannot run says ``LIVE = False``. The defaults
+are the grid point ``--cv`` picks on all shipped BROAD trials (it prints that choice; host/docs/fusion.md
+has the run), so the figures that describe them are the held-out ones.
 
-Ours: ``madgwick`` (NWU), ``dissertation-kf`` (NWU), ``sphere`` (ENU). Peers (optional packages):
-``vqf``, ``fusion``, ``ahrs-madgwick``, ``ahrs-mahony``, ``ahrs-ekf`` (see :mod:`sphere.fusion.peers`),
-run with their published defaults and never tuned.
+Ours: ``madgwick`` (NWU), ``dissertation-kf`` (NWU), ``sphere`` (ENU). Peers (optional packages, the
+entries in :mod:`sphere.fusion.peers`): ``vqf``, ``fusion``, ``ahrs-madgwick``, ``ahrs-mahony``,
+``ahrs-ekf``, run with their published defaults and never tuned.
 
 Our Madgwick and KF start from the e-compass orientation of the first sample (as BROAD's own example
 code starts its Madgwick and Mahony) and get the start-up gyro calibration (``startup_bias``); the
@@ -18,116 +21,100 @@ first samples and estimates its own bias.
 
 from __future__ import annotations
 
+import importlib.util
 import itertools
-from dataclasses import dataclass, field
-from typing import Callable
 
-from sphere.fusion import peers
+import numpy as np
+
 from sphere.fusion.common import ecompass
-from sphere.fusion.kalman import DissertationKF
-from sphere.fusion.madgwick import Madgwick
-from sphere.fusion.sphere_filter import STRUCTURES, SphereFilter
+from sphere.settings import Registry, Settings, UnknownComponent
 
 #: seconds of still data at the start used as the start-up gyro calibration for madgwick and the KF
 STARTUP_BIAS_S = 1.0
 
+#: name → "module:Class" (imported when first used). One line per filter.
+REGISTRY = Registry("orientation", {
+    "madgwick": "sphere.fusion.madgwick:Madgwick",
+    "dissertation-kf": "sphere.fusion.kalman:DissertationKF",
+    "sphere": "sphere.fusion.sphere_filter:SphereFilter",
+    "vqf": "sphere.fusion.peers:VqfPeer",
+    "fusion": "sphere.fusion.peers:FusionPeer",
+    "ahrs-madgwick": "sphere.fusion.peers:AhrsMadgwickPeer",
+    "ahrs-mahony": "sphere.fusion.peers:AhrsMahonyPeer",
+    "ahrs-ekf": "sphere.fusion.peers:AhrsEkfPeer",
+}, label="filter")
 
-@dataclass(frozen=True)
-class Filter:
-    """One filter: ``factory(dt_s, q0, gyro_bias_rad_s, **params)``, its defaults and its ``--cv`` grid."""
-
-    factory: Callable
-    defaults: dict = field(default_factory=dict)
-    grid: dict = field(default_factory=dict)
-    #: gets the device's start-up gyro calibration and the e-compass initial orientation
-    startup_bias: bool = False
-    #: usable by the daemon (per-sample update with acc_valid / mag_valid)
-    live: bool = False
-
-    #: structure variants (dicts of the filter's part switches), simplest first; ``--cv`` chooses among them as it
-    #: chooses parameters (nested: crossval.nested)
-    structures: tuple = ()
-    #: point → the same point with the parameters its structure does not use set to one value (so that equal
-    #: filters are one point)
-    canonical: Callable | None = None
-
-    def grid_points(self) -> list[dict]:
-        """Every combination of the structures and the grid's values, structures first and in their order (one
-        point, the defaults, for a filter without either); points that build the same filter appear once."""
-        keys = sorted(self.grid)
-        params = [dict(zip(keys, vals)) for vals in itertools.product(*(self.grid[k] for k in keys))]
-        out = []
-        for s in self.structures or ({},):
-            for p in params:
-                pt = dict(s, **p)
-                if self.canonical is not None:
-                    pt = self.canonical(pt)
-                if pt not in out:
-                    out.append(pt)
-        return out
-
-    def structure_of(self, point: dict) -> tuple:
-        """The structure a grid point belongs to (its part switches), as a hashable key."""
-        keys = sorted(self.structures[0]) if self.structures else []
-        return tuple((k, point[k]) for k in keys)
-
-
-def _madgwick(dt_s, q0, bias, **p):
-    return Madgwick(q0=q0, gyro_bias_rad_s=bias, **p)
-
-
-def _kf(dt_s, q0, bias, **p):
-    # R = 10⁻² I, P₀ = I, H = I are the dissertation's and fixed in the class; only σ_g and ψ are free
-    return DissertationKF(q0=q0, gyro_bias_rad_s=bias, **p)
-
-
-def _sphere(dt_s, q0, bias, **p):
-    return SphereFilter(**p)
-
-
-#: the step a live peer is built with when the caller gives none (the sphere's sample rate, 200 Hz)
-LIVE_DT_S = 0.005
-
-
-def _peer(name):
-    return lambda dt_s, q0, bias: peers.PEERS[name](LIVE_DT_S if dt_s is None else dt_s)
-
-
-FILTERS: dict[str, Filter] = {
-    "madgwick": Filter(_madgwick, {"beta": 0.0135},
-                       {"beta": (0.005, 0.0075, 0.01, 0.0135, 0.02, 0.03, 0.05)}, startup_bias=True, live=True),
-    "dissertation-kf": Filter(_kf, {"gyro_noise_rad_s": 0.5, "robust": "huber-norm", "threshold": 0.036},
-                              {"gyro_noise_rad_s": (0.1, 0.5), "robust": ("huber-norm",),
-                               "threshold": (0.012, 0.024, 0.036, 0.07, 0.15)}, startup_bias=True),
-    "sphere": Filter(_sphere, {}, {"tau_acc_s": (3.0, 4.5)}, live=True, structures=STRUCTURES),
-    **{name: Filter(_peer(name), live=name == "vqf") for name in peers.PEERS},
-}
-
-OURS = ("madgwick", "dissertation-kf", "sphere")
-PEERS = tuple(peers.PEERS)
-ALL = tuple(FILTERS)
+ALL = REGISTRY.names()
+PEERS = tuple(n for n in ALL if REGISTRY[n].startswith("sphere.fusion.peers:"))
+OURS = tuple(n for n in ALL if n not in PEERS)
 #: the daemon's ``[orientation] filter = auto``: the filter that wins on the held-out folds of the shipped BROAD
 #: trials (nested leave-one-trial-out, `sphere eval --cv`) and on the stress seeds (sphere.fusion.stress), see
 #: host/docs/fusion.md
 DAEMON_DEFAULT = "vqf"
 #: the filters the daemon can run, the default first, then ours (its ``auto`` takes the first one installed)
-LIVE = (DAEMON_DEFAULT, *(n for n in ("sphere", "vqf", "madgwick") if n != DAEMON_DEFAULT and FILTERS[n].live))
-#: what a peer in LIVE needs installed
-_LIVE_NEEDS = {"vqf": "vqf"}
+LIVE = (DAEMON_DEFAULT, *(n for n in ("sphere", "vqf", "madgwick") if n != DAEMON_DEFAULT))
+
+
+def filter_class(name: str):
+    try:
+        return REGISTRY.load(name)
+    except UnknownComponent:
+        raise KeyError(f"unknown filter {name!r}; known: {', '.join(REGISTRY)}") from None
 
 
 def live_available() -> tuple:
-    """The names of LIVE whose libraries are installed, in LIVE's order."""
-    import importlib.util
+    """The names of LIVE whose libraries are installed (a peer's ``NEEDS``), in LIVE's order."""
+    out = []
+    for n in LIVE:
+        needs = getattr(filter_class(n), "NEEDS", None)
+        if needs is None or importlib.util.find_spec(needs) is not None:
+            out.append(n)
+    return tuple(out)
 
-    return tuple(n for n in LIVE if n not in _LIVE_NEEDS or importlib.util.find_spec(_LIVE_NEEDS[n]) is not None)
+
+def grid(name: str) -> dict:
+    """The filter's ``--cv`` grid of parameters: name → values (empty without one)."""
+    return dict(getattr(filter_class(name), "GRID", None) or {})
+
+
+def structures(name: str) -> tuple:
+    """The filter's structure variants (dicts of its part switches), simplest first; () without any."""
+    return tuple(getattr(filter_class(name), "STRUCTURES", ()) or ())
+
+
+def grid_points(name: str) -> list[dict]:
+    """Every combination of the structures and the grid's values, structures first and in their order (one
+    point, the defaults, for a filter without either); points that build the same filter appear once."""
+    space = grid(name)
+    keys = sorted(space)
+    params = [dict(zip(keys, vals)) for vals in itertools.product(*(space[k] for k in keys))]
+    canonical = getattr(filter_class(name), "canonical", None)
+    out = []
+    for s in structures(name) or ({},):
+        for p in params:
+            pt = dict(s, **p)
+            if canonical is not None:
+                pt = canonical(pt)
+            if pt not in out:
+                out.append(pt)
+    return out
+
+
+def structure_of(name: str, point: dict) -> tuple:
+    """The structure a grid point belongs to (its part switches), as a hashable key."""
+    s = structures(name)
+    keys = sorted(s[0]) if s else []
+    return tuple((k, point[k]) for k in keys)
+
+
+def defaults(name: str) -> dict:
+    """The defaults of the filter's free parameters (its PARAMS)."""
+    return {k: p.default for k, p in REGISTRY.params(name).items()}
 
 
 def startup_gyro_bias(gyr_rad_s, dt_s: float, seconds: float = STARTUP_BIAS_S, max_std_rad_s: float = 0.02):
     """Mean gyro over the first ``seconds`` if the sensor was still then (the device's start-up gyro
     calibration); zeros otherwise."""
-    import numpy as np
-
     n = max(1, int(round(seconds / dt_s)))
     g = np.asarray(gyr_rad_s, dtype=float)[:n]
     if len(g) < n or np.any(g.std(axis=0) > max_std_rad_s):
@@ -136,29 +123,37 @@ def startup_gyro_bias(gyr_rad_s, dt_s: float, seconds: float = STARTUP_BIAS_S, m
 
 
 def params(name: str, **overrides) -> dict:
-    """The defaults of ``name`` with ``overrides`` (the class refuses a parameter it does not have)."""
-    return dict(_spec(name).defaults, **overrides)
+    """The defaults of ``name`` with ``overrides`` (checked against its PARAMS; TypeError for a parameter it
+    does not have)."""
+    cls = filter_class(name)
+    known = getattr(cls, "PARAMS", {})
+    unknown = sorted(set(overrides) - set(known))
+    if unknown:
+        raise TypeError(f"filter {name!r} has no parameter {', '.join(unknown)}; its parameters are "
+                        f"{', '.join(known) or 'none'}")
+    return Settings(known, overrides).as_dict()
 
 
 def make(name: str, dt_s: float | None = None, first_acc=None, first_mag=None, gyro_bias_rad_s=(0.0, 0.0, 0.0),
          **overrides):
     """A fresh filter called ``name`` for a stream with step ``dt_s``; first samples give the initial state.
 
-    ``gyro_bias_rad_s`` (filters with ``startup_bias`` only) is the start-up gyro calibration the device
-    would apply; ``overrides`` replace the defaults (``sphere eval --cv`` passes its grid points)."""
-    spec = _spec(name)
+    ``gyro_bias_rad_s`` (filters with ``STARTUP_BIAS`` only) is the start-up gyro calibration the device
+    would apply; ``overrides`` replace the defaults (``sphere eval --cv`` passes its grid points, the daemon
+    its ``[orientation.NAME]`` values)."""
+    cls = filter_class(name)
     q0 = (1.0, 0.0, 0.0, 0.0)
     if first_acc is not None:
         q0 = ecompass(*map(float, first_acc), *(map(float, first_mag) if first_mag is not None else (0.0, 0.0, 0.0)),
                       frame="NWU")
-    return spec.factory(dt_s, q0, gyro_bias_rad_s, **params(name, **overrides))
+    s = Settings(getattr(cls, "PARAMS", {}), params(name, **overrides), checked=True)
+    return cls.from_settings(s, dt_s=dt_s, q0=q0, gyro_bias_rad_s=gyro_bias_rad_s)
 
 
 def make_for_trial(name: str, gyr, acc, mag, dt_s: float, **overrides):
     """``make`` as `sphere eval` calls it for a recording: the start-up calibration from its first second and
     the initial orientation from its first sample, for the filters that take them."""
-    spec = _spec(name)
-    if not spec.startup_bias:
+    if not getattr(filter_class(name), "STARTUP_BIAS", False):
         return make(name, dt_s, **overrides)
     return make(name, dt_s, acc[0], None if mag is None else mag[0],
                 gyro_bias_rad_s=startup_gyro_bias(gyr, dt_s), **overrides)
@@ -166,14 +161,79 @@ def make_for_trial(name: str, gyr, acc, mag, dt_s: float, **overrides):
 
 def settings(name: str, f) -> dict:
     s = dict(f.settings)
-    if _spec(name).startup_bias:
+    if getattr(filter_class(name), "STARTUP_BIAS", False):
         s["initial"] = "e-compass of the first sample (BROAD example code's choice)"
         s["gyro_bias"] = f"start-up calibration: mean of the first {STARTUP_BIAS_S:g} s if still"
     return s
 
 
-def _spec(name: str) -> Filter:
-    try:
-        return FILTERS[name]
-    except KeyError:
-        raise KeyError(f"unknown filter {name!r}; known: {', '.join(FILTERS)}") from None
+class FilterView:
+    """One registry entry as `sphere eval` reads it (everything derived from the filter's class: nothing is
+    declared here): ``defaults``, ``grid``, ``structures``, ``startup_bias``, ``live``, ``factory``,
+    ``grid_points()`` and ``structure_of(point)``."""
+
+    def __init__(self, name: str):
+        self.name = name
+        self.cls = filter_class(name)
+
+    @property
+    def defaults(self) -> dict:
+        return defaults(self.name)
+
+    @property
+    def grid(self) -> dict:
+        return grid(self.name)
+
+    @property
+    def structures(self) -> tuple:
+        return structures(self.name)
+
+    @property
+    def startup_bias(self) -> bool:
+        return bool(getattr(self.cls, "STARTUP_BIAS", False))
+
+    @property
+    def live(self) -> bool:
+        return self.name in LIVE
+
+    def factory(self, dt_s, q0, gyro_bias_rad_s, **overrides):
+        s = Settings(getattr(self.cls, "PARAMS", {}), params(self.name, **overrides), checked=True)
+        return self.cls.from_settings(s, dt_s=dt_s, q0=q0, gyro_bias_rad_s=gyro_bias_rad_s)
+
+    def grid_points(self) -> list[dict]:
+        return grid_points(self.name)
+
+    def structure_of(self, point: dict) -> tuple:
+        return structure_of(self.name, point)
+
+
+class _Filters(dict):
+    """name → :class:`FilterView`, made when first asked for (the registry's order)."""
+
+    def __missing__(self, name):
+        if name not in REGISTRY:
+            raise KeyError(f"unknown filter {name!r}; known: {', '.join(REGISTRY)}")
+        view = self[name] = FilterView(name)
+        return view
+
+    def __iter__(self):
+        return iter(REGISTRY)
+
+    def __len__(self):
+        return len(REGISTRY)
+
+    def __contains__(self, name):
+        return name in REGISTRY
+
+    def keys(self):
+        return list(REGISTRY)
+
+    def items(self):
+        return [(n, self[n]) for n in REGISTRY]
+
+    def values(self):
+        return [self[n] for n in REGISTRY]
+
+
+#: every entry as `sphere eval` reads it
+FILTERS = _Filters()

@@ -37,6 +37,7 @@ from math import atan2 as _atan2, cos as _cos, sin as _sin, sqrt as _sqrt
 import numpy as np
 
 from sphere.fusion.common import batch_inputs
+from sphere.settings import Param
 
 EARTH_FRAME = "ENU"
 
@@ -90,9 +91,29 @@ STRUCTURES = tuple(sorted((dict(zip(PARTS, v)) for v in itertools.product((False
 
 
 class SphereFilter:
-    """Our orientation filter (ENU). See the module docstring for the method; settings in ``DEFAULTS``."""
+    """Our orientation filter (ENU). See the module docstring for the method; settings in ``DEFAULTS``, of which
+    ``PARAMS`` are the free ones and the part switches (``sphere eval --cv`` chooses them from ``GRID`` and
+    ``STRUCTURES``)."""
 
     earth_frame = EARTH_FRAME
+    NAME = "sphere"
+    PARAMS = {
+        "tau_acc_s": Param(DEFAULTS["tau_acc_s"], "s", 0.1, 60.0, "time constant of the accelerometer's low-pass "
+                                                                  "in the gyro frame (two stages of half of it)"),
+        "bias_rest": Param(DEFAULTS["bias_rest"], doc="the rest measurement of the bias (the low-passed gyro while "
+                                                      "still)"),
+        "mag_reject": Param(DEFAULTS["mag_reject"], doc="the field's disturbance test (norm and dip against the "
+                                                        "reference); off: every reading is used"),
+    }
+    GRID = {"tau_acc_s": (3.0, 4.5)}
+    #: the structure variants `sphere eval --cv` chooses among (nested), simplest first
+    STRUCTURES = STRUCTURES
+
+    @classmethod
+    def from_settings(cls, s, dt_s=None, q0=None, gyro_bias_rad_s=None):
+        """It initialises itself from its first samples and estimates its own bias (no q0, no start-up bias)."""
+        return cls(**s.as_dict())
+
     #: ``update_batch(..., diagnostics=True)`` returns the per-sample rest flag, bias and disturbance flag
     diagnostics = ("rest", "bias_rad_s", "mag_disturbed")
 

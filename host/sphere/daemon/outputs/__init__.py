@@ -1,6 +1,7 @@
 """Outputs for other programs: sphere-mouse sends the sphere's orientation, position, events and mode to
-them beside the pointer and the 3-D page. Each is optional and off by default (its ``enabled`` key).
+them beside the pointer. Each has an ``enabled`` key; only the page is on by default.
 
+- :mod:`.page` — the 3-D page and its WebSocket (sphere.daemon.stream3d), for browsers and local programs;
 - :mod:`.opentrack` — OpenTrack's "UDP over network" input: six little-endian doubles per datagram;
 - :mod:`.osc` — Open Sound Control over UDP (python-osc), for creative tools;
 - :mod:`.gamepad` — a virtual gamepad through uinput (python-evdev): tilt → sticks, taps → buttons;
@@ -13,8 +14,7 @@ A new output is one module (an :class:`~sphere.daemon.outputs.base.Output` subcl
 
 The daemon talks to all of them through :class:`~sphere.daemon.outputs.fanout.Outputs`, which has the
 orientation stream's interface (``publish_orientation``, ``publish_event``, ``publish_mode``,
-``recentre``, ``position``) and passes each call on to the WebSocket stream (if any) and to every enabled
-output.
+``recentre``, ``position``, ``mode``, ``url``) and passes each call on to every enabled output.
 """
 
 from __future__ import annotations
@@ -23,6 +23,7 @@ from sphere.settings import Registry
 
 #: ``[outputs.NAME]`` → "module:Class". One line per output.
 REGISTRY = Registry("outputs", {
+    "page": "sphere.daemon.outputs.page:PageOutput",
     "opentrack": "sphere.daemon.outputs.opentrack:OpenTrackOutput",
     "osc": "sphere.daemon.outputs.osc:OscOutput",
     "gamepad": "sphere.daemon.outputs.gamepad:GamepadOutput",

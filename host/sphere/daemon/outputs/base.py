@@ -37,6 +37,10 @@ class Output:
     and optionally :meth:`send_event`, :meth:`send_mode`, :meth:`close`."""
 
     NAME = "output"
+    #: where a person looks at it (the 3-D page), or None
+    url = None
+    #: the camera's diagnostics, for an output that shows them (the 3-D page), or None
+    camera = None
     #: the settings of ``[outputs.NAME]`` (each output has ``enabled``); see sphere.settings
     PARAMS: dict = {}
     #: False: the output takes the orientation from :meth:`motion` and needs no smoothed pose (``orientation``

@@ -1,30 +1,26 @@
-"""The daemon's side: :class:`Outputs` stands where the WebSocket stream stands and passes every call on."""
+"""The daemon's side: :class:`Outputs` passes every call on to the enabled outputs."""
 
 from __future__ import annotations
 
 from sphere.daemon.outputs import REGISTRY
-from sphere.daemon.outputs.base import OutputUnavailable
+from sphere.daemon.outputs.base import Output, OutputUnavailable
 
 
 class Outputs:
-    """The orientation stream's interface, fanned out to the stream (may be None) and the outputs."""
+    """The orientation stream's interface, fanned out to every output."""
 
-    def __init__(self, stream, outputs, log=None):
-        self.stream = stream
+    def __init__(self, outputs, log=None):
         self.outputs = list(outputs)
         self.log = log or (lambda m: None)
         self._rates = self._rate_outputs()
         self._position = None
         self._mode = None
-
-    # the stream's attributes the daemon reads or sets
-    @property
-    def host(self):
-        return getattr(self.stream, "host", None)
+        self._camera = None
 
     @property
-    def port(self):
-        return getattr(self.stream, "port", None)
+    def url(self):
+        """The 3-D page's address, when it is one of the outputs."""
+        return next((o.url for o in self.outputs if o.url), None)
 
     @property
     def mode(self):
@@ -33,20 +29,16 @@ class Outputs:
     @mode.setter
     def mode(self, value):  # the daemon sets the starting mode this way
         self._mode = value
-        if self.stream is not None:
-            self.stream.mode = value
         self._each(lambda o: o.mode(value))
 
     def _rate_outputs(self) -> list:
-        from sphere.daemon.outputs.base import Output
-
         self._pose = [o for o in self.outputs if getattr(o, "POSE", True)]
         return [o for o in self.outputs if getattr(type(o), "motion", Output.motion) is not Output.motion]
 
     @property
     def wants_pose(self) -> bool:
-        """Whether anyone takes the smoothed pose (the stream, or an output with POSE): else the daemon skips it."""
-        return self.stream is not None or bool(self._pose)
+        """Whether any output takes the smoothed pose (one with POSE): else the daemon skips it."""
+        return bool(self._pose)
 
     @property
     def position(self):
@@ -55,17 +47,16 @@ class Outputs:
     @position.setter
     def position(self, value):  # a pose source (hybrid tracking) sets it
         self._position = value
-        if self.stream is not None:
-            self.stream.position = value
 
     @property
     def camera(self):
-        return getattr(self.stream, "camera", None)
+        return self._camera
 
     @camera.setter
-    def camera(self, value):  # the camera's diagnostics, for the WebSocket's messages
-        if self.stream is not None:
-            self.stream.camera = value
+    def camera(self, value):  # the camera's diagnostics, for the outputs that show them (the 3-D page)
+        self._camera = value
+        for out in self.outputs:
+            out.camera = value
 
     @property
     def frames_wanted(self) -> bool:
@@ -92,8 +83,6 @@ class Outputs:
             pass
 
     def publish_orientation(self, quat, t_us=None) -> None:
-        if self.stream is not None:
-            self.stream.publish_orientation(quat, t_us)
         for out in self._pose:
             try:
                 out.orientation(quat, t_us, self._position)
@@ -101,7 +90,7 @@ class Outputs:
                 self._drop(out, e)
 
     def publish_motion(self, gyro_dps, accel_g, t_us=None, quat=None) -> None:
-        """Each sample's rates, acceleration and orientation, to the outputs that use them (the stream does not)."""
+        """Each sample's rates, acceleration and orientation, to the outputs that use them."""
         for out in self._rates:
             try:
                 out.motion(gyro_dps, accel_g, t_us, quat)
@@ -109,24 +98,16 @@ class Outputs:
                 self._drop(out, e)
 
     def publish_event(self, event: str, t_us=None) -> None:
-        if self.stream is not None:
-            self.stream.publish_event(event, t_us)
         self._each(lambda o: o.event(event, t_us))
 
     def publish_mode(self, mode: str) -> None:
         self._mode = mode
-        if self.stream is not None:
-            self.stream.publish_mode(mode)
         self._each(lambda o: o.mode(mode))
 
     def recentre(self) -> None:
-        if self.stream is not None:
-            self.stream.recentre()
         self._each(lambda o: o.recentre())
 
     def stop(self) -> None:
-        if self.stream is not None and hasattr(self.stream, "stop"):
-            self.stream.stop()
         self._each(lambda o: o.close())
         self.outputs = []
         self._rates = []
@@ -134,13 +115,13 @@ class Outputs:
 
 
 def open_outputs(cfg, log=None) -> list:
-    """The outputs enabled in ``cfg`` (``[outputs.NAME] enabled = true``), started. One that cannot start
-    is reported and left out: it must not stop the pointer."""
+    """The outputs enabled in ``cfg`` (``[outputs.NAME] enabled = true``), built from their settings and
+    started. One that cannot start is reported and left out: it must not stop the pointer."""
     log = log or (lambda m: None)
     out = []
     for name in REGISTRY:
-        settings = cfg[REGISTRY.section(name)]
-        if not settings.enabled:
+        settings = cfg.get(REGISTRY.section(name))
+        if settings is None or not settings.enabled:
             continue
         try:
             o = REGISTRY.build(name, settings, log=log)
@@ -152,7 +133,7 @@ def open_outputs(cfg, log=None) -> list:
     return out
 
 
-def attach(stream, cfg, log=None):
-    """What the daemon publishes to: the stream alone when no output is enabled, else :class:`Outputs`."""
+def attach(cfg, log=None):
+    """What the daemon publishes to: :class:`Outputs` over the enabled outputs, or None when none is."""
     outputs = open_outputs(cfg, log)
-    return Outputs(stream, outputs, log) if outputs else stream
+    return Outputs(outputs, log) if outputs else None
