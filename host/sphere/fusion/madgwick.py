@@ -120,6 +120,7 @@ class Madgwick:
                                                         "correct the gyro's orientation")}
     GRID = {"beta": (0.005, 0.0075, 0.01, 0.0135, 0.02, 0.03, 0.05)}
     STARTUP_BIAS = True  # gets the device's start-up gyro calibration and the e-compass initial orientation
+    LIVE = True  # the daemon can run it (per-sample update with acc_valid / mag_valid)
 
     @classmethod
     def from_settings(cls, s, dt_s=None, q0=(1.0, 0.0, 0.0, 0.0), gyro_bias_rad_s=(0.0, 0.0, 0.0)):

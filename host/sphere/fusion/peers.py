@@ -88,6 +88,7 @@ class VqfPeer(_Peer):
 
     NAME = "vqf"
     NEEDS = "vqf"  # the package a live daemon needs installed to run it
+    LIVE = True  # the daemon can run it (per-sample update with acc_valid / mag_valid)
 
     earth_frame = "ENU"
 

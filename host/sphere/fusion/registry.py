@@ -4,8 +4,8 @@ Adding a filter is one module and one line in :data:`REGISTRY`. The class carrie
 free parameters with their defaults, units and ranges: the daemon's ``[orientation.NAME]`` section and
 `sphere eval` both build from them), ``GRID`` (the small grid ``sphere eval --cv`` chooses them from, leave
 one trial out), ``STARTUP_BIAS`` (it takes the start-up gyro calibration and the e-compass start),
-``STRUCTURES`` (part switches ``--cv`` chooses among, nested) and ``from_settings(settings, dt_s, q0,
-gyro_bias_rad_s)``; one the daemon cannot run says ``LIVE = False``. The defaults
+``STRUCTURES`` (part switches ``--cv`` chooses among, nested), ``LIVE`` (the daemon can run it: a per-sample
+update with acc_valid / mag_valid) and ``from_settings(settings, dt_s, q0, gyro_bias_rad_s)``. The defaults
 are the grid point ``--cv`` picks on all shipped BROAD trials (it prints that choice; host/docs/fusion.md
 has the run), so the figures that describe them are the held-out ones.
 
@@ -51,7 +51,8 @@ OURS = tuple(n for n in ALL if n not in PEERS)
 #: trials (nested leave-one-trial-out, `sphere eval --cv`) and on the stress seeds (sphere.fusion.stress), see
 #: host/docs/fusion.md
 DAEMON_DEFAULT = "vqf"
-#: the filters the daemon can run, the default first, then ours (its ``auto`` takes the first one installed)
+#: the daemon's order of preference among the filters it can run (``LIVE = True`` on their class): the default
+#: first, then ours (its ``auto`` takes the first one installed)
 LIVE = (DAEMON_DEFAULT, *(n for n in ("sphere", "vqf", "madgwick") if n != DAEMON_DEFAULT))
 
 
@@ -63,9 +64,11 @@ def filter_class(name: str):
 
 
 def live_available() -> tuple:
-    """The names of LIVE whose libraries are installed (a peer's ``NEEDS``), in LIVE's order."""
+    """The filters the daemon can run (their class says ``LIVE = True``) whose libraries are installed (a
+    peer's ``NEEDS``): those of LIVE in its order, then any other in the registry's."""
+    names = list(LIVE) + [n for n in REGISTRY if n not in LIVE and getattr(filter_class(n), "LIVE", False)]
     out = []
-    for n in LIVE:
+    for n in names:
         needs = getattr(filter_class(n), "NEEDS", None)
         if needs is None or importlib.util.find_spec(needs) is not None:
             out.append(n)
@@ -194,7 +197,7 @@ class FilterView:
 
     @property
     def live(self) -> bool:
-        return self.name in LIVE
+        return bool(getattr(self.cls, "LIVE", False))
 
     def factory(self, dt_s, q0, gyro_bias_rad_s, **overrides):
         s = Settings(getattr(self.cls, "PARAMS", {}), params(self.name, **overrides), checked=True)

@@ -108,6 +108,7 @@ class SphereFilter:
     GRID = {"tau_acc_s": (3.0, 4.5)}
     #: the structure variants `sphere eval --cv` chooses among (nested), simplest first
     STRUCTURES = STRUCTURES
+    LIVE = True  # the daemon can run it (per-sample update with acc_valid / mag_valid)
 
     @classmethod
     def from_settings(cls, s, dt_s=None, q0=None, gyro_bias_rad_s=None):
