@@ -52,7 +52,7 @@ def test_the_tour_through_sphere_mouse(tour_capture):
             log.append((self.daemon.now_us / 1e6, "click", count, self.daemon.mode))
 
     backend = Recorder()
-    cfg = Config().with_overrides({"stream": {"enabled": False}}, "test")
+    cfg = Config().with_overrides({"outputs.page": {"enabled": False}}, "test")
     d = SphereMouse(cfg, ReplaySource(tour_capture, speed=0), backend, log=lambda m: None)
     backend.daemon = d
     d.run()

@@ -603,7 +603,7 @@ def output_cost(name: str | None, samples: int = 4000) -> float:
             while not wait() and time.monotonic() < deadline:
                 time.sleep(0.02)
             time.sleep(0.5)
-        fan = Outputs(None, outs)
+        fan = Outputs(outs)
         fan.mode = "3d"
         dt_us = 5000
         step = quat.from_axis_angle((0.0, 0.0, 1.0), math.radians(90.0) * dt_us / 1e6)

@@ -96,13 +96,13 @@ def test_sphere_mouse_status_line_reports_the_age():
     from sphere.daemon.app import SphereMouse
     from sphere.daemon.backends.memory import RecordingBackend
     from sphere.daemon.config import Config
-    from sphere.daemon.sources import SerialSource
+    from sphere.daemon.sources.serial import SerialSource
     from sphere.daemon.status import StatusLine
 
     dev = AgedSphere(8.0)
     src = SerialSource(dev.path, hello_timeout_s=0.15, discovery_timeout_s=2.0, link_timeout_s=2.0,
                        reconnect_interval_s=0.1)
-    cfg = Config().with_overrides({"stream": {"enabled": False}}, "test")
+    cfg = Config().with_overrides({"outputs.page": {"enabled": False}}, "test")
     daemon = SphereMouse(cfg, src, RecordingBackend(), log=lambda m: None)
     t = threading.Thread(target=daemon.run, daemon=True)
     t.start()

@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import argparse
 import glob
+import inspect
 import json
 import multiprocessing as mp
 import os
@@ -268,16 +269,25 @@ def work_per_frame_us(frames: int = 12000, passes: int = 3, settings: dict | Non
     class _NoSource:
         generation = 0
 
-    try:  # the outputs a --set switches on (the daemon's fan-out), as sphere-mouse attaches them
-        from sphere.daemon.outputs import attach
-    except ImportError:  # a revision from before the outputs
-        def attach(stream, cfg, log=None):
-            return stream
+    # the outputs a --set switches on (the daemon's fan-out), as sphere-mouse attaches them
+    try:
+        from sphere.daemon.outputs.fanout import attach as _attach
+    except ImportError:
+        try:
+            from sphere.daemon.outputs import attach as _attach  # a revision from before issue 25 (--against)
+        except ImportError:  # a revision from before the outputs
+            _attach = None
+
+    def attach(cfg):
+        if _attach is None:
+            return None
+        # before the 3-D page was an output (--against), attach took the stream first
+        return _attach(cfg) if "stream" not in inspect.signature(_attach).parameters else _attach(None, cfg)
 
     best = float("inf")
     for _ in range(passes):
         feed = stream()
-        outputs = attach(None, cfg)
+        outputs = attach(cfg)
         daemon = SphereMouse(cfg, _NoSource(), RecordingBackend(), stream=outputs, log=lambda m: None)
         handle = daemon.handle
         c0 = time.process_time()

@@ -52,9 +52,9 @@ from sphere import argtypes
 from sphere.bench._xvfb import Xvfb as _Server
 from sphere.bench._xvfb import XvfbUnavailable
 from sphere.bench.pointer import Recording, _low_pass, daemon, ideal_path, turn_figures
-from sphere.daemon.config import Config, ConfigError, parse_set
+from sphere.daemon.config import Config, ConfigError, parse_set, smoothing_params
 from sphere.daemon.motion import up_from_quat
-from sphere.daemon.pointer import PointerMapper, PointerSettings
+from sphere.daemon.pointer import PointerMapper
 from sphere.protocol import PacketStream, RawSample
 from sphere.sim import hold as H
 from sphere.sim import trace as T
@@ -351,7 +351,7 @@ def reference_pointer(sc: Scenario, n: int, cfg=None) -> np.ndarray:
     m = min(n, len(h.true_gyro_dps) // k)
     rates = h.true_gyro_dps[: m * k].reshape(m, k, 3).mean(axis=1)
     quats = h.quat_enu[k - 1:: k][:m]
-    mapper = PointerMapper(PointerSettings.from_config(cfg.pointer, cfg), 1920)
+    mapper = PointerMapper(cfg.pointer, 1920, smoothing_params(cfg, cfg.pointer.smoothing))
     out = np.zeros((n, 2))
     x = y = 0
     rem = mapper.remainder
