@@ -85,7 +85,7 @@ class CameraPosition:
         if not s.source:
             return None
         try:
-            from sphere.camera.live import CameraError, CameraSource, LiveTracker
+            from sphere.camera.live import CameraError, CameraSource, LiveTracker  # optional: OpenCV (the camera extra)
             from sphere.camera.model import Camera, CameraFileError
         except ImportError as e:  # OpenCV missing
             raise CameraUnavailable(f"[camera] source = {s.source!r} needs OpenCV ({e}); install the camera extra: "
@@ -104,7 +104,7 @@ class CameraPosition:
 
     @classmethod
     def _session(cls, s, log, source) -> "CameraPosition":
-        from sphere.camera.live import CameraError, LiveTracker, SessionCamera
+        from sphere.camera.live import CameraError, LiveTracker, SessionCamera  # optional: OpenCV (the camera extra)
         from sphere.camera.model import Camera, CameraFileError
 
         session = source.session

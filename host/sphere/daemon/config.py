@@ -153,22 +153,24 @@ CORE: dict[str, dict[str, Param]] = {
     },
     "mode": {
         "start": Param("pointer", doc="mode at start", choices=MODES),
-        "cycle": Param(["pointer", "tilt", "3d"], doc="modes that `next_mode` steps through, in order", check=_modes_list),
+        "cycle": Param(["pointer", "tilt", "3d"], doc="modes that `next_mode` steps through, in order",
+            check=_modes_list),
     },
     "events": {
         "single_tap": Param("left_click", doc="action of a single tap", choices=ACTIONS),
-        "double_tap": Param("double_click", doc="action of a double tap (`double_click` counts the single tap's click as "
-                                 "the first one)", choices=ACTIONS),
+        "double_tap": Param("double_click", doc="action of a double tap (`double_click` counts the single tap's "
+                                                "click as the first one)", choices=ACTIONS),
         "free_fall": Param("next_mode", doc="action of a free fall (toss and catch)", choices=ACTIONS),
-        "single_tap_wait_ms": Param(0, doc="hold a single tap's action this long and drop it if a double tap follows (use "
-                                         "with `double_tap = \"right_click\"`); 0 = act at once", lo=0, hi=1000),
+        "single_tap_wait_ms": Param(0, doc="hold a single tap's action this long and drop it if a double tap follows "
+                                           "(use with `double_tap = \"right_click\"`); 0 = act at once", lo=0, hi=1000),
     },
     "freeze": {
-        "tap_before_ms": Param(80, doc="pointer motion in this time before a tap is undone, so the click lands where the "
-                                    "pointer was aimed before the knock jolted it", lo=0, hi=1000),
+        "tap_before_ms": Param(80, doc="pointer motion in this time before a tap is undone, so the click lands where "
+                                       "the pointer was aimed before the knock jolted it", lo=0, hi=1000),
         "tap_after_ms": Param(150, doc="the pointer stays still this long after a tap", lo=0, hi=2000),
         "free_fall_before_ms": Param(400, doc="motion undone before a free fall (the toss)", lo=0, hi=3000),
-        "free_fall_after_ms": Param(700, doc="the pointer stays still this long after a free fall (the catch)", lo=0, hi=5000),
+        "free_fall_after_ms": Param(700, doc="the pointer stays still this long after a free fall (the catch)",
+            lo=0, hi=5000),
     },
     "gyro": {
         "auto_bias": Param(True, doc="re-estimate the gyroscope bias on the host whenever the sphere lies still"),
@@ -177,8 +179,9 @@ CORE: dict[str, dict[str, Param]] = {
         "still_time_s": Param(1.0, doc="how long it must be still for a bias update", lo=0.1, hi=30.0),
     },
     "orientation": {
-        "source": Param("auto", doc="`host`: the host's fusion filter on RAW_SAMPLE; `device`: the firmware's ORIENTATION "
-                             "packets; `auto` = host when raw samples arrive and sphere.fusion is installed", choices=("auto", "host", "device")),
+        "source": Param("auto", doc="`host`: the host's fusion filter on RAW_SAMPLE; `device`: the firmware's "
+                                    "ORIENTATION packets; `auto` = host when raw samples arrive and sphere.fusion is "
+                                    "installed", choices=("auto", "host", "device")),
         "use_mag": Param(False, doc="let the host filter use the magnetometer (needs a calibrated one; without it yaw "
                                "drifts slowly, which pointing does not mind)"),
         "filter": Param("auto", doc="host filter: `vqf` (the VQF library, Laidig & Seel 2023: the best on data "
@@ -192,8 +195,10 @@ CORE: dict[str, dict[str, Param]] = {
                                            "[smoothing.NAME], degrees); `none` = the orientation as measured",
                            choices=_smoothing_names),
         "position_smoothing": Param(_POSITION_SMOOTHING, doc="smoothing filter of the position every output gets "
-                                    "(with a camera), its parameters in metres in [position_smoothing.NAME]; `none` "
-                                    "= the hybrid tracker's estimate as it is", choices=lambda: tuple(_POSITION_FILTERS)),
+                                                             "(with a camera), its parameters in metres in "
+                                                             "[position_smoothing.NAME]; `none` = the hybrid "
+                                                             "tracker's estimate as it is",
+            choices=lambda: tuple(_POSITION_FILTERS)),
     },
     "status": {
         "interval_s": Param(1.0, doc="how often the status line is refreshed", lo=0.05, hi=3600.0),

@@ -209,7 +209,7 @@ class MotionTracker:
         """Start the host filter at the accelerometer's tilt (no slow convergence from identity)."""
         self._filter_started = True
         try:
-            from sphere.fusion.common import ecompass
+            from sphere.fusion.common import ecompass  # optional: sphere.fusion (numpy)
 
             self.filter.quat = ecompass(ax, ay, az, None, None, None, frame="NWU")
         except Exception:

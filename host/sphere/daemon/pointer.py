@@ -38,15 +38,18 @@ POINTER_PARAMS = {
                                        "turning slowly (below `accel_low_dps`)", lo=0.5, hi=3600.0),
     "fast_deg_per_width": Param(40.0, doc="the same when turning fast (above `accel_high_dps`); smaller than "
                                        "`slow_deg_per_width` = acceleration; equal = none", lo=0.5, hi=3600.0),
-    "accel_low_dps": Param(20.0, doc="rotation speed (°/s) up to which the slow sensitivity applies", lo=0.0, hi=2000.0),
+    "accel_low_dps": Param(20.0, doc="rotation speed (°/s) up to which the slow sensitivity applies",
+        lo=0.0, hi=2000.0),
     "accel_high_dps": Param(120.0, doc="rotation speed (°/s) from which the fast sensitivity applies; between the "
                                    "two it is blended linearly", lo=0.001, hi=5000.0),
     "tightening_dps": Param(1.0, doc="rotations slower than this are scaled down in proportion to their speed "
                                    "(soft, instead of a dead zone that swallows them); 0 = off", lo=0.0, hi=100.0),
-    "smoothing": Param(DEFAULT_SMOOTHING, doc="smoothing filter of the pointer, from the smoothing registry (its parameters "
-                            "in [smoothing.NAME]); `tremor` takes out the hand's 8–12 Hz tremor, `none` = off", choices=lambda: tuple(SMOOTHING)),
+    "smoothing": Param(DEFAULT_SMOOTHING, doc="smoothing filter of the pointer, from the smoothing registry (its "
+                                              "parameters in [smoothing.NAME]); `tremor` takes out the hand's 8–12 "
+                                              "Hz tremor, `none` = off", choices=lambda: tuple(SMOOTHING)),
     "axes": Param("world", doc="`world`: turning about the vertical moves the pointer sideways however the sphere is "
-                       "rolled (uses gravity); `local`: the sensor's own z (yaw) and y (pitch) axes", choices=("world", "local")),
+                               "rolled (uses gravity); `local`: the sensor's own z (yaw) and y (pitch) axes",
+        choices=("world", "local")),
     "invert_x": Param(False, doc="swap left and right"),
     "invert_y": Param(False, doc="swap up and down"),
 }

@@ -11,6 +11,7 @@ import json
 import textwrap
 
 from sphere import __version__
+from sphere.daemon import config
 
 
 def _toml_value(v) -> str:
@@ -26,8 +27,6 @@ def _toml_value(v) -> str:
 
 
 def defaults_toml(path_hint: str = "~/.config/sphere-mouse/config.toml") -> str:
-    from sphere.daemon import config
-
     out = [f"# sphere-mouse {__version__}: every setting with its default (sphere-mouse --print-config).",
            f"# Copy to {path_hint}, keep the keys you change, delete the rest.",
            "# Reference with examples: host/docs/sphere-mouse.md", ""]

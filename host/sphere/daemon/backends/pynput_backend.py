@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+import ctypes
+import importlib.util
+import sys
+
 from sphere.daemon.backends.base import Backend, BackendUnavailable
 
 
@@ -9,12 +13,10 @@ class PynputBackend(Backend):
     NAME = "pynput"
 
     def __init__(self, controller=None):
-        import importlib.util
-
         if importlib.util.find_spec("pynput") is None:
             raise BackendUnavailable("pynput is not installed: pip install pynput")
         try:
-            from pynput import mouse
+            from pynput import mouse  # optional: pynput (the daemon extra)
         except Exception as e:  # pynput raises ImportError at import when it finds no display server
             raise BackendUnavailable(f"pynput cannot start here: {str(e).splitlines()[0]}") from None
         self._buttons = {"left": mouse.Button.left, "right": mouse.Button.right, "middle": mouse.Button.middle}
@@ -44,12 +46,8 @@ class PynputBackend(Backend):
 
 def main_screen_size():
     """(width, height) of the main screen in pixels, by the platform's own means; None if unknown."""
-    import sys
-
     try:
         if sys.platform == "win32":
-            import ctypes
-
             user32 = ctypes.windll.user32
             return (user32.GetSystemMetrics(0), user32.GetSystemMetrics(1))
         if sys.platform == "darwin":
@@ -57,7 +55,7 @@ def main_screen_size():
 
             d = Quartz.CGMainDisplayID()
             return (Quartz.CGDisplayPixelsWide(d), Quartz.CGDisplayPixelsHigh(d))
-        from Xlib import display
+        from Xlib import display  # optional: python-xlib
 
         dpy = display.Display()
         try:

@@ -13,7 +13,7 @@ DEVICE_NAME = "MARG sphere mouse"
 
 def _ecodes():
     try:
-        from evdev import ecodes
+        from evdev import ecodes  # optional: python-evdev (the daemon extra, Linux)
     except ImportError:
         raise BackendUnavailable("python-evdev is not installed: pip install evdev") from None
     return ecodes
@@ -36,7 +36,7 @@ class UinputBackend(Backend):
         self._buttons = {"left": e.BTN_LEFT, "right": e.BTN_RIGHT, "middle": e.BTN_MIDDLE}
         if device is None:
             try:
-                from evdev import UInput
+                from evdev import UInput  # optional: python-evdev
                 from evdev.uinput import UInputError
             except ImportError:
                 raise BackendUnavailable("python-evdev is not installed: pip install evdev") from None

@@ -19,7 +19,7 @@ class X11Backend(Backend):
         if not name:
             raise BackendUnavailable("no X display: DISPLAY is not set (on Wayland use the uinput backend)")
         try:
-            from Xlib import X, display as xdisplay
+            from Xlib import X, display as xdisplay  # optional: python-xlib (the daemon extra)
             from Xlib.ext import xtest
         except ImportError:
             raise BackendUnavailable("python-xlib is not installed: pip install python-xlib") from None

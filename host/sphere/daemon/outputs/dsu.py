@@ -78,7 +78,8 @@ DSU_PARAMS = {
     "port": Param(26760, doc="UDP port (cemuhook's 26760)", lo=1, hi=65535),
     "only_3d": Param(False, doc="send motion only in 3-D mode (false: in every mode)"),
     "rate_hz": Param(250.0, doc="pad data packets a second at most (the sphere samples at 200 Hz)", lo=10.0, hi=1000.0),
-    "timeout_s": Param(5.0, doc="a client that has not asked for pad data this long stops getting them", check=positive),
+    "timeout_s": Param(5.0, doc="a client that has not asked for pad data this long stops getting them",
+        check=positive),
     "tap_hold_ms": Param(100, doc="how long a tap holds its button (A: single tap, B: double tap)", lo=10, hi=2000),
 }
 

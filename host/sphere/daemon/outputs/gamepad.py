@@ -40,7 +40,7 @@ class GamepadOutput(Output):
     def __init__(self, name: str = "MARG sphere gamepad", full_tilt_deg: float = 30.0, rate_hz: float = 200.0, **kw):
         super().__init__(rate_hz, **kw)
         try:
-            import evdev
+            import evdev  # optional: python-evdev (the daemon extra, Linux)
             from evdev import AbsInfo, UInput, ecodes
         except ImportError:
             raise OutputUnavailable("python-evdev is not installed: pip install evdev (Linux only)") from None

@@ -37,7 +37,7 @@ class OscOutput(Output):
                  **kw):
         super().__init__(rate_hz, **kw)
         try:
-            from pythonosc.udp_client import SimpleUDPClient
+            from pythonosc.udp_client import SimpleUDPClient  # optional: python-osc (the daemon extra)
         except ImportError:
             raise OutputUnavailable("python-osc is not installed: pip install python-osc "
                                     "(or the daemon extra: pip install 'marg-sphere[daemon]')") from None

@@ -108,8 +108,10 @@ def _socket_check(v):
 #: the ``[outputs.spacenav]`` section
 SPACENAV_PARAMS = {
     "enabled": Param(False, doc="a 3-D mouse for libspnav programs (Blender, FreeCAD): spacenavd's protocol"),
-    "socket": Param("", doc="the AF_UNIX socket to serve; \"\" = $SPNAV_SOCKET, else $XDG_RUNTIME_DIR/spnav.sock", check=_socket_check),
-    "protocol": Param(1, doc="highest spacenavd protocol version offered (0 = answer as a spacenavd before 1.0)", lo=0, hi=1),
+    "socket": Param("", doc="the AF_UNIX socket to serve; \"\" = $SPNAV_SOCKET, else $XDG_RUNTIME_DIR/spnav.sock",
+        check=_socket_check),
+    "protocol": Param(1, doc="highest spacenavd protocol version offered (0 = answer as a spacenavd before 1.0)",
+        lo=0, hi=1),
     "mapping": Param("puck", doc="puck: tilt from the start pose is a rate (a SpaceMouse cap); direct: the "
             "sphere's own rotation, the model turns with the hand", choices=("puck", "direct")),
     "zoom": Param("roll", doc="roll: the roll about the axis facing the screen zooms (clockwise = in) instead of "

@@ -24,6 +24,8 @@ import logging
 import time
 from typing import Iterator
 
+import serial
+
 from sphere.daemon.sources import PARAMS as SOURCE_PARAMS
 from sphere.errors import LinkLost, SphereError
 from sphere.protocol import PROTOCOL_VERSION, DecodedPacket, Hello, PacketStream
@@ -172,7 +174,7 @@ class Source:
             except SourceEnded:
                 self._close()
                 return
-            except (LinkLost, OSError, _serial_errors()) as e:
+            except (LinkLost, OSError, serial.SerialException) as e:
                 self._lose(str(e))
                 yield []
                 continue
@@ -201,18 +203,3 @@ class Source:
         self._stop = True
         if not self._iterating:
             self._close()
-
-
-_SERIAL_ERRORS = None
-
-
-def _serial_errors():
-    global _SERIAL_ERRORS
-    if _SERIAL_ERRORS is None:
-        try:
-            import serial
-
-            _SERIAL_ERRORS = serial.SerialException
-        except ImportError:  # pragma: no cover
-            _SERIAL_ERRORS = OSError
-    return _SERIAL_ERRORS

@@ -35,7 +35,7 @@ class HidSource(Source):
         self.vendor_id, self.product_id, self.product = vendor_id, product_id, product.lower()
         if hid_module is None:
             try:
-                import hid as hid_module
+                import hid as hid_module  # optional: hidapi (the daemon extra)
             except ImportError:
                 raise SourceError("the HID source needs hidapi: pip install hidapi") from None
         self.hid = hid_module

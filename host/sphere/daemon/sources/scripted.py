@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import time
 
+from sphere.daemon import scripted_sphere
 from sphere.daemon.sources.base import Source, SourceEnded
 from sphere.settings import Param
 
@@ -16,8 +17,6 @@ class ScriptedSource(Source):
 
     def __init__(self, script=None, speed: float = 1.0, loop: bool = True):
         super().__init__(reconnect_interval_s=0.0)
-        from sphere.daemon import scripted_sphere
-
         self.script = script or scripted_sphere.DEMO_SCRIPT
         self.speed = speed
         self.loop = loop
@@ -33,9 +32,7 @@ class ScriptedSource(Source):
         return self._done
 
     def _connect(self):
-        from sphere.daemon.scripted_sphere import ScriptedSphere
-
-        self._sphere = ScriptedSphere()
+        self._sphere = scripted_sphere.ScriptedSphere()
         self._t0, hello = self._sphere.hello()
         self._start = time.perf_counter()
         self._steps = iter(self._sphere.iter_steps(self.script))

@@ -20,6 +20,9 @@ import os
 import select
 import time
 
+import serial
+from serial.tools import list_ports
+
 from sphere.daemon.sources.base import LinkLost, Source, SourceError, reconnect_interval_s, version_problem
 from sphere.link.clock import DeviceClock, SampleAges
 from sphere.link.device import DeviceLink
@@ -96,10 +99,7 @@ def usb_ports(usb_ids, comports=None) -> list[str]:
     if not wanted:
         return []
     if comports is None:
-        try:
-            from serial.tools.list_ports import comports
-        except ImportError:  # pragma: no cover
-            return []
+        comports = list_ports.comports
     out = []
     for info in comports():
         if info.vid is not None and f"{info.vid:04x}:{info.pid:04x}" in wanted:
@@ -302,7 +302,7 @@ class SerialSource(Source):
                 if next_ask is not None and time.monotonic() >= next_ask:
                     next_ask += self.hello_timeout_s
                     link.send(GetHello())
-        except (OSError, _serial_exception()):
+        except (OSError, serial.SerialException):
             pass
         try:
             ser.close()
@@ -481,9 +481,3 @@ def serial_timing(s, cfg=None) -> dict:
     return dict(baud=s.baud, hello_timeout_s=s.hello_timeout_s, discovery_timeout_s=s.discovery_timeout_s,
                 link_timeout_s=s.link_timeout_s, reconnect_interval_s=reconnect_interval_s(cfg),
                 low_latency=s.low_latency, baud_switch=s.baud_switch)
-
-
-def _serial_exception():
-    import serial
-
-    return serial.SerialException

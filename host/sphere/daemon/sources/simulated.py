@@ -8,6 +8,7 @@ itself stops when its own parent is gone.
 from __future__ import annotations
 
 import ctypes
+import importlib.util
 import os
 import re
 import signal
@@ -16,10 +17,12 @@ import sys
 import threading
 import time
 
+from sphere.broad import BroadMissing, find_trial
 from sphere.daemon.sources.base import SourceError
 from sphere.daemon.sources.scripted import ScriptedSource
 from sphere.daemon.sources.serial import SerialSource, device_settings, serial_timing
 from sphere.settings import Param, Settings
+from sphere.sim import trace as T
 
 PTY_RE = re.compile(r"(/dev/pts/\d+)")
 #: what --simulate plays when no trace is named: the tour shows the product (pointer, clicks, the three modes)
@@ -29,8 +32,6 @@ PR_SET_PDEATHSIG = 1
 
 def simulator_available() -> bool:
     try:
-        import importlib.util
-
         return importlib.util.find_spec("sphere.commands.sim") is not None
     except Exception:
         return False
@@ -91,16 +92,12 @@ def trace_problem(trace: str) -> str | None:
     starts, so a typo is one clear line, not a fallback to the scripted sphere."""
     if not trace:
         return None
-    from sphere.sim import trace as T
-
     if trace.endswith(".bin"):
         return None if os.path.isfile(trace) else f"--trace {trace}: no such trace file"
     if trace.startswith("synthetic:") or trace in T.SYNTHETIC:
         name = trace.split(":", 2)[1] if trace.startswith("synthetic:") else trace
         return None if name in T.SYNTHETIC else (f"--trace {trace}: no synthetic motion {name!r}; one of "
                                                   f"{', '.join(T.SYNTHETIC)}")
-    from sphere.broad import BroadMissing, find_trial
-
     try:
         find_trial(trace)
     except BroadMissing as e:
