@@ -16,7 +16,7 @@ def test_sphere_mouse_switches_the_virtual_board_to_1m_and_follows_a_reset_back(
     from sphere.daemon.app import SphereMouse
     from sphere.daemon.backends.memory import RecordingBackend
     from sphere.daemon.config import Config
-    from sphere.daemon.sources import SerialSource
+    from sphere.daemon.sources.serial import SerialSource
     from sphere.sim import trace as T
     from sphere.sim.board import board_command
 
@@ -30,7 +30,7 @@ def test_sphere_mouse_switches_the_virtual_board_to_1m_and_follows_a_reset_back(
         pty = next(line.split("UART on ", 1)[1].strip() for line in board.stdout if "UART on " in line)
         src = SerialSource(pty, hello_timeout_s=0.3, discovery_timeout_s=5.0, link_timeout_s=3.0,
                            reconnect_interval_s=0.2, baud_switch=1000000, log=lines.append)
-        cfg = Config().with_overrides({"stream": {"enabled": False}}, "test")
+        cfg = Config().with_overrides({"outputs.page": {"enabled": False}}, "test")
         daemon = SphereMouse(cfg, src, RecordingBackend(), log=lambda m: None)
         t = threading.Thread(target=daemon.run, daemon=True)
         t.start()

@@ -69,7 +69,7 @@ REGISTRIES: tuple[str, ...] = (
     "sphere.fusion.registry:REGISTRY",  # [orientation.NAME] (the filters the daemon can run: LIVE)
     "sphere.smoothing.registry:REGISTRY",  # [smoothing.NAME]
     "sphere.smoothing.registry:POSITION",  # [position_smoothing.NAME]
-    "sphere.daemon.config:PARTS",  # [camera], [paths]
+    "sphere.daemon.config:PARTS",  # [pointer], [tilt], [gyro], [device], [camera], [paths]
 )
 
 #: The sections in the order the reference lists them (by their first part; others follow).

@@ -41,6 +41,12 @@ class Output:
     url = None
     #: the camera's diagnostics, for an output that shows them (the 3-D page), or None
     camera = None
+    #: someone watches the camera's frames through this output (the page's AR view): the daemon then keeps them
+    frames_wanted = False
+
+    def publish_frame(self, frame) -> None:
+        """The camera's newest frame (sphere.camera.daemon_source.CameraPosition.ar_frame), for an output that
+        shows it; most do not."""
     #: the settings of ``[outputs.NAME]`` (each output has ``enabled``); see sphere.settings
     PARAMS: dict = {}
     #: False: the output takes the orientation from :meth:`motion` and needs no smoothed pose (``orientation``

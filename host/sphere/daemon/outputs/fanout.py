@@ -66,6 +66,15 @@ class Outputs:
         if self.stream is not None:
             self.stream.publish_frame(frame)
 
+    @property
+    def frames_wanted(self) -> bool:
+        return any(o.frames_wanted for o in self.outputs)
+
+    def publish_frame(self, frame) -> None:  # the camera's frames, for the page's AR view
+        for out in self.outputs:
+            if out.frames_wanted:
+                out.publish_frame(frame)
+
     def _each(self, call) -> None:
         for out in list(self.outputs):
             try:

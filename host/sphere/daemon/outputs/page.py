@@ -42,6 +42,13 @@ class PageOutput(Output):
         return self.stream.url
 
     @property
+    def frames_wanted(self) -> bool:
+        return self.stream.frames_wanted
+
+    def publish_frame(self, frame) -> None:  # the camera's frames, for the page's AR view
+        self.stream.publish_frame(frame)
+
+    @property
     def camera(self):
         return self.stream.camera
 
