@@ -40,7 +40,6 @@ def _start(trace: str, seconds: float, board: str | None = None, profile: str | 
     """The virtual sphere on a pty (as sphere-mouse --simulate starts it), on ``board`` with the firmware
     told ``profile`` by SET_BOARD at 0.5 s (none: the firmware's default, aligned)."""
     from sphere.daemon.sources.base import SourceError
-    from sphere.daemon.sources import simulated
     from sphere.daemon.sources.simulated import start_simulator
     from sphere.sim.soak import board_profile_command
 

@@ -60,14 +60,6 @@ class Outputs:
 
     @property
     def frames_wanted(self) -> bool:
-        return bool(getattr(self.stream, "frames_wanted", False))
-
-    def publish_frame(self, frame) -> None:  # the camera's frames, for the page's AR view
-        if self.stream is not None:
-            self.stream.publish_frame(frame)
-
-    @property
-    def frames_wanted(self) -> bool:
         return any(o.frames_wanted for o in self.outputs)
 
     def publish_frame(self, frame) -> None:  # the camera's frames, for the page's AR view
