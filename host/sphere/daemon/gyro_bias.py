@@ -134,7 +134,7 @@ class _Window:
 class GyroBias:
     """Gyro bias in °/s (sensor axes): the host's one estimate, learnt lying still and held (module doc)."""
 
-    NAME = "windows"
+    NAME = "gyro_bias"  # its [gyro_bias] section (the PARTS line in daemon/config.py)
     PARAMS = {
         "held_time_s": Param(3.0, "s", 0.0, 60.0, "length of a held window (in the hand, the intent still); 0 = learn only lying still"),
         "held_dps": Param(0.5, "°/s", 0.05, 10.0, "held: the tremor-free rate stays within this of its window's middle"),
