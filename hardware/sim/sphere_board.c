@@ -206,6 +206,8 @@ typedef struct {
 	/* the two ends' baud rates (pty only): the AVR's from UBRR0/U2X0, the host's from the pty's termios */
 	double host_baud;
 	uint64_t garbled_out, garbled_in;
+	struct termios untouched; /* the pty's termios as made: until a host changes it, no host has set a rate */
+	int host_configured;
 } uart_out_t;
 
 static double board_wall0; /* CLOCK_MONOTONIC s at simulated time 0 (--realtime pacing) */
@@ -348,8 +350,12 @@ static double speed_baud(speed_t s)
 static void host_baud_poll(uart_out_t *u)
 {
 	struct termios tio;
-	if (u->pty_fd > 0 && tcgetattr(u->pty_fd, &tio) == 0)
+	if (u->pty_fd > 0 && tcgetattr(u->pty_fd, &tio) == 0) {
+		/* a pty starts at the kernel's 38400 (never the sphere's rate): a host that opens the port sets its own */
+		if (!u->host_configured && cfgetospeed(&tio) != cfgetospeed(&u->untouched))
+			u->host_configured = 1;
 		u->host_baud = speed_baud(cfgetospeed(&tio));
+	}
 }
 
 /* A byte crosses the serial line intact only when both ends run at the same rate: a UART tolerates about
@@ -358,8 +364,8 @@ static void host_baud_poll(uart_out_t *u)
 static int rates_match(uart_out_t *u)
 {
 	host_baud_poll(u);
-	if (u->pty_fd <= 0 || u->host_baud <= 0)
-		return 1;
+	if (u->pty_fd <= 0 || u->host_baud <= 0 || !u->host_configured)
+		return 1; /* nobody has set a rate yet: nothing to disagree with */
 	double avr = avr_uart_baud(u->avr);
 	return fabs(avr - u->host_baud) <= 0.03 * u->host_baud;
 }
@@ -1039,7 +1045,7 @@ int main(int argc, char **argv)
 		avr_unconnect_irq(pty.irq + IRQ_UART_PTY_BYTE_OUT, uart_in_irq);
 		avr_irq_register_notify(pty.irq + IRQ_UART_PTY_BYTE_OUT, pty_to_avr_hook, &uart_out);
 		uart_out.pty_fd = pty.port[0].s;
-
+		tcgetattr(uart_out.pty_fd, &uart_out.untouched);
 		fcntl(uart_out.pty_fd, F_SETFL, fcntl(uart_out.pty_fd, F_GETFL) | O_NONBLOCK);
 		uart_out.realtime = realtime;
 		printf("sphere-board: UART on %s\n", pty.port[0].slavename);
