@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import logging
+import os
 
 from sphere.daemon.actions import Action, EventActions
+from sphere.daemon.backends.pynput_backend import main_screen_size
 from sphere.daemon.config import smoothing_params
 from sphere.daemon.gyro_bias import GyroBias, RestHold
 from sphere.daemon.motion import G_M_S2, MotionTracker
@@ -34,13 +36,9 @@ REQUESTS = ("recentre", "pause", "stop")
 
 def _desktop_size():
     """The X screen's size when an X display is reachable (uinput itself cannot know it); else None."""
-    import os
-
     if not os.environ.get("DISPLAY"):
         return None
     try:
-        from sphere.daemon.backends.pynput_backend import main_screen_size
-
         return main_screen_size()
     except Exception:
         return None

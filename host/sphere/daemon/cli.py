@@ -8,9 +8,21 @@ import os
 import signal
 import sys
 
+from serial.tools import list_ports
+
+from sphere import __version__
+from sphere.camera.daemon_source import CameraPosition, CameraUnavailable
 from sphere.daemon import config as config_mod
+from sphere.daemon import sources
+from sphere.daemon.app import SphereMouse
 from sphere.daemon.backends import REGISTRY as BACKENDS
+from sphere.daemon.backends import BackendUnavailable, open_backend
 from sphere.daemon.config import ConfigError
+from sphere.daemon.outputs.fanout import attach
+from sphere.daemon.print_config import defaults_toml
+from sphere.daemon.sources.base import SourceError
+from sphere.daemon.status import StatusLine
+from sphere.errors import output_failed
 
 DESCRIPTION = """Turn the MARG sphere into a pointer (and a 3-D controller). Small wrist rotations move the
 pointer; a tap clicks; a toss and catch switches mode (pointer → tilt → 3d). Settings come from
@@ -53,8 +65,6 @@ def build_parser() -> argparse.ArgumentParser:
                    help="print every setting with its default and meaning (a config file to start from) and exit")
     p.add_argument("--udev-rule", metavar="PORT", help="print the udev rule that gives /dev/sphere and seat access "
                    "to the sphere on PORT only (its USB IDs and serial number), then exit")
-    from sphere import __version__
-
     p.add_argument("--version", action="version", version=f"sphere-mouse {__version__}")
     return p
 
@@ -67,7 +77,7 @@ def udev_rule(port: str, comports=None) -> str:
     serial number, or, for an adapter without one (CH340), the USB socket it is plugged into; for an FTDI
     adapter a second line that sets its latency timer to 1 ms."""
     if comports is None:
-        from serial.tools.list_ports import comports
+        comports = list_ports.comports
     real = os.path.realpath(port)
     for info in comports():
         if os.path.realpath(info.device) != real:
@@ -126,8 +136,6 @@ def settings_from_args(args) -> config_mod.Config:
 
 def open_source(cfg, log):
     """The source ``[source] kind`` names, from the registry (sphere.daemon.sources.REGISTRY)."""
-    from sphere.daemon import sources
-
     return sources.open_source(cfg, log)
 
 
@@ -177,8 +185,6 @@ def main(argv=None) -> int:
         print("sphere-mouse: interrupted", file=sys.stderr)
         return 130
     except OSError as e:  # --print-config or --udev-rule into a full disk
-        from sphere.errors import output_failed
-
         code = output_failed("sphere-mouse", e)
         if code is None:
             raise
@@ -189,8 +195,6 @@ def _main(argv=None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     if args.print_config:
-        from sphere.daemon.print_config import defaults_toml
-
         sys.stdout.write(defaults_toml())
         return 0
     logger = setup_logging(args.verbose)
@@ -216,18 +220,11 @@ def _main(argv=None) -> int:
         print(f"sphere-mouse: config OK ({cfg.origin})")
         return 0
 
-    from sphere.daemon.app import SphereMouse
-    from sphere.daemon.backends import BackendUnavailable, open_backend
-    from sphere.daemon.sources.base import SourceError
-    from sphere.daemon.status import StatusLine
-
     try:
         source = open_source(cfg, log)
     except (SourceError, ConfigError) as e:
         logger.error(str(e))
         return 2
-    from sphere.camera.daemon_source import CameraPosition, CameraUnavailable
-
     try:
         camera = CameraPosition.from_settings(cfg["camera"], log, source)  # None without [camera] source or a session
     except CameraUnavailable as e:
@@ -242,8 +239,6 @@ def _main(argv=None) -> int:
         if camera is not None:
             camera.close()
         return 2
-    from sphere.daemon.outputs.fanout import attach
-
     stream = attach(cfg, log)  # the 3-D page, OpenTrack, OSC, gamepad: each enabled one gets the pose
     status = None
     if not args.quiet and (args.status or sys.stderr.isatty()):

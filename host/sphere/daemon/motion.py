@@ -13,6 +13,8 @@ import math
 from sphere import chips
 from sphere import quaternion
 from sphere.daemon.gyro_bias import GyroBias, RestHold
+from sphere.fusion import registry
+from sphere.fusion.common import ecompass
 from sphere.protocol.packets import RAW_ACCEL_OK, RAW_GYRO_OK, RAW_GYRO_STALE, RAW_MAG_OK, RAW_TAP_ACTIVE
 
 __all__ = ["GyroBias", "MotionTracker", "body_rate_dps", "host_filter", "up_from_quat"]
@@ -77,12 +79,8 @@ def host_filter(name: str = "auto", settings=None, dt_s: float = 0.005, **overri
     default, ``sphere`` and ``madgwick``), or ``auto`` = the first of them that is installed. Built by the registry
     from its PARAMS, so the daemon runs the same settings as `sphere eval`: ``settings(section)`` gives its
     ``[orientation.NAME]`` values (the daemon passes ``cfg.get``), ``overrides`` replace single ones; ``dt_s`` is
-    the sample step for a filter built for a fixed rate (VQF). None when sphere.fusion is not installed. Returns
+    the sample step for a filter built for a fixed rate (VQF). Returns
     NWU quaternions."""
-    try:
-        from sphere.fusion import registry  # optional: the daemon works without the fusion package
-    except ImportError:  # (device orientation only)
-        return None
     known = registry.live_available()
     if name == "auto":
         name = known[0]
@@ -209,8 +207,6 @@ class MotionTracker:
         """Start the host filter at the accelerometer's tilt (no slow convergence from identity)."""
         self._filter_started = True
         try:
-            from sphere.fusion.common import ecompass  # optional: sphere.fusion (numpy)
-
             self.filter.quat = ecompass(ax, ay, az, None, None, None, frame="NWU")
         except Exception:
             pass

@@ -27,11 +27,15 @@ at most ``rate_hz`` times a second, only when it changed.
 from __future__ import annotations
 
 import asyncio
+import base64
 import collections
 import http
 import json
 import logging
 import threading
+import time
+
+from sphere.daemon.page import PAGE_HTML, static_response
 
 
 class _QuietLog:
@@ -39,8 +43,6 @@ class _QuietLog:
     never a traceback: a hostile page or a connection flood must not fill the journal."""
 
     def __init__(self, log, every_s: float = 10.0):
-        import time
-
         self.log = log or (lambda m: None)
         self.every_s = every_s
         self._clock = time.monotonic
@@ -181,8 +183,6 @@ class OrientationStream:
         return connection.respond(status, text)
 
     def _process_request(self, connection, request):
-        from sphere.daemon.page import PAGE_HTML
-
         if not self.allowed_host(request.headers.get("Host")):
             return self._refuse(connection, http.HTTPStatus.FORBIDDEN,
                                 "forbidden: this server answers only on 127.0.0.1 / localhost\n")
@@ -198,8 +198,6 @@ class OrientationStream:
             response.headers["Content-Type"] = "text/html; charset=utf-8"
             response.headers["Cache-Control"] = "no-store"
             return response
-        from sphere.daemon.page import static_response
-
         found = static_response(path)  # three.js, shipped in the package
         if found is not None:
             response = connection.respond(http.HTTPStatus.OK, found[0])
@@ -223,7 +221,7 @@ class OrientationStream:
             self.frame_clients.discard(ws)
 
     async def _main(self) -> None:
-        from websockets.asyncio.server import ServerConnection, broadcast, serve
+        from websockets.asyncio.server import ServerConnection, broadcast, serve  # optional: websockets (the daemon extra)
 
         self._loop = asyncio.get_running_loop()
         self._loop.set_exception_handler(lambda loop, context: self._quiet(context.get("message", "error")))
@@ -295,9 +293,7 @@ def _subscription(text) -> str | None:
 
 def _frame_message(frame: dict) -> dict:
     """A frame for the page: its image as base64 JPEG (quality 85) beside the pose and outline."""
-    import base64
-
-    import cv2
+    import cv2  # optional: OpenCV (the camera extra); frames come only from a camera
 
     ok, jpeg = (False, None) if frame.get("image") is None else \
         cv2.imencode(".jpg", frame["image"], [cv2.IMWRITE_JPEG_QUALITY, 85])

@@ -51,7 +51,7 @@ def main_screen_size():
             user32 = ctypes.windll.user32
             return (user32.GetSystemMetrics(0), user32.GetSystemMetrics(1))
         if sys.platform == "darwin":
-            import Quartz  # pyobjc, which pynput installs on macOS
+            import Quartz  # optional: pyobjc (pynput installs it on macOS)
 
             d = Quartz.CGMainDisplayID()
             return (Quartz.CGDisplayPixelsWide(d), Quartz.CGDisplayPixelsHigh(d))

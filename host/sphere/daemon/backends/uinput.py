@@ -37,7 +37,7 @@ class UinputBackend(Backend):
         if device is None:
             try:
                 from evdev import UInput  # optional: python-evdev
-                from evdev.uinput import UInputError
+                from evdev.uinput import UInputError  # optional: python-evdev
             except ImportError:
                 raise BackendUnavailable("python-evdev is not installed: pip install evdev") from None
             try:

@@ -20,7 +20,7 @@ class X11Backend(Backend):
             raise BackendUnavailable("no X display: DISPLAY is not set (on Wayland use the uinput backend)")
         try:
             from Xlib import X, display as xdisplay  # optional: python-xlib (the daemon extra)
-            from Xlib.ext import xtest
+            from Xlib.ext import xtest  # optional: python-xlib
         except ImportError:
             raise BackendUnavailable("python-xlib is not installed: pip install python-xlib") from None
         try:

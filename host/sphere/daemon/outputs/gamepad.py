@@ -41,7 +41,7 @@ class GamepadOutput(Output):
         super().__init__(rate_hz, **kw)
         try:
             import evdev  # optional: python-evdev (the daemon extra, Linux)
-            from evdev import AbsInfo, UInput, ecodes
+            from evdev import AbsInfo, UInput, ecodes  # optional: python-evdev
         except ImportError:
             raise OutputUnavailable("python-evdev is not installed: pip install evdev (Linux only)") from None
         self.ecodes = ecodes
