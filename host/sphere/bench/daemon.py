@@ -257,7 +257,7 @@ def work_per_frame_us(frames: int = 12000, passes: int = 3, settings: dict | Non
         def stream():
             return PacketStream().feed
     except ImportError:  # a revision from before PacketStream (--against): its sources' own decoding
-        from sphere.daemon.sources import _Decoding
+        from sphere.daemon.sources import _Decoding  # --against: that revision's own decoding
 
         def stream():
             return _Decoding().decode
@@ -271,7 +271,7 @@ def work_per_frame_us(frames: int = 12000, passes: int = 3, settings: dict | Non
 
     # the outputs a --set switches on (the daemon's fan-out), as sphere-mouse attaches them
     try:
-        from sphere.daemon.outputs.fanout import attach as _attach
+        from sphere.daemon.outputs.fanout import attach as _attach  # --against: an older revision may lack it
     except ImportError:
         try:
             from sphere.daemon.outputs import attach as _attach  # a revision from before issue 25 (--against)

@@ -53,7 +53,7 @@ def add_arguments(p) -> None:
 
 def replay(session, speed: float, home, extra_args=()) -> list[dict]:
     """Every ``orientation`` message of `sphere-mouse --replay SESSION` on its WebSocket, until it ends."""
-    from websockets.asyncio.client import connect
+    from websockets.asyncio.client import connect  # optional: websockets (the daemon extra)
 
     proc = subprocess.Popen([sys.executable, "-m", "sphere.mouse", "--replay", str(session), "--speed", f"{speed:g}",
                              "--backend", "log", "--stream-port", "0", "--quiet", *extra_args],

@@ -86,7 +86,7 @@ class CameraPosition:
             return None
         try:
             from sphere.camera.live import CameraError, CameraSource, LiveTracker  # optional: OpenCV (the camera extra)
-            from sphere.camera.model import Camera, CameraFileError
+            from sphere.camera.model import Camera, CameraFileError  # optional: the camera (numpy, OpenCV)
         except ImportError as e:  # OpenCV missing
             raise CameraUnavailable(f"[camera] source = {s.source!r} needs OpenCV ({e}); install the camera extra: "
                               f"pip install -e '.[camera]'") from None
@@ -105,7 +105,7 @@ class CameraPosition:
     @classmethod
     def _session(cls, s, log, source) -> "CameraPosition":
         from sphere.camera.live import CameraError, LiveTracker, SessionCamera  # optional: OpenCV (the camera extra)
-        from sphere.camera.model import Camera, CameraFileError
+        from sphere.camera.model import Camera, CameraFileError  # optional: the camera (numpy, OpenCV)
 
         session = source.session
         try:

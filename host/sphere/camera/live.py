@@ -226,7 +226,7 @@ class SessionCamera:
 
     def __init__(self, video_path, frame_times, camera: Camera | None = None, hue_deg: float = 120.0,
                  radius_m: float = 0.04, latency_s: float = 0.040):
-        import cv2
+        import cv2  # optional: OpenCV (the camera extra)
 
         self.path = str(video_path)
         self.times = list(frame_times)

@@ -13,6 +13,7 @@ from sphere.argtypes import seconds
 from sphere.link.capture import SIDECAR_SUFFIX, CaptureError, CaptureWriter
 from sphere.protocol import PacketStream
 from sphere.link.port import DEFAULT_BAUD, PortError, open_port
+from sphere.link.session import SessionError, SessionWriter
 
 HELP = "record the sphere's serial stream into a capture file"
 DESCRIPTION = (
@@ -98,8 +99,7 @@ def run(args) -> int:
 def _session(args):
     """(SessionWriter, the camera reading into it) for --camera; CaptureError when either cannot be used."""
     try:
-        from sphere.camera.live import CameraError, CameraSource
-        from sphere.link.session import SessionError, SessionWriter
+        from sphere.camera.live import CameraError, CameraSource  # optional: the camera (OpenCV, the camera extra)
     except ImportError as e:
         raise CaptureError(f"--camera needs OpenCV ({e}); install the camera extra: pip install -e '.[camera]'") from None
     camera = CameraSource(args.camera, realtime=True, detect=False)

@@ -241,10 +241,10 @@ def format_report(doc: dict, quiet: bool = False) -> str:
 
 def write_plots(directory: Path, doc: dict, results: dict) -> list[Path]:
     try:
-        import matplotlib
+        import matplotlib  # optional: matplotlib (the plot extra)
 
         matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
+        import matplotlib.pyplot as plt  # optional: matplotlib (the plot extra)
     except ImportError:
         raise SystemExit("sphere eval --plot needs matplotlib: pip install 'marg-sphere[plot]'")
     directory.mkdir(parents=True, exist_ok=True)

@@ -70,7 +70,7 @@ def refused(prog: str, seconds: float, names=()) -> int | None:
     """The checks every command on rendered trials makes before minutes of rendering (OpenCV installed,
     stretches of at least 9 s, each trial there): None, or the exit code after its one line."""
     try:
-        import cv2  # noqa: F401
+        import cv2  # noqa: F401  (optional: OpenCV, the camera extra)
     except ImportError:
         print(f"{prog}: OpenCV is missing; install the camera extra: pip install -e '.[camera]'", file=sys.stderr)
         return 1
@@ -238,10 +238,10 @@ def _print_summary(doc):
 
 
 def _plots(folder: Path, runs, doc) -> None:
-    import matplotlib
+    import matplotlib  # optional: matplotlib (the plot extra)
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # optional: matplotlib (the plot extra)
 
     folder.mkdir(parents=True, exist_ok=True)
     colours = {"blob": "tab:purple", "camera": "tab:red", "camera-kf": "tab:orange", "imu": "tab:gray",

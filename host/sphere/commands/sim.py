@@ -47,8 +47,6 @@ CHIPS = ("adxl345", "itg3200", "hmc5883l", "qmc5883l")
 
 def _previous(text: str) -> tuple[str, float]:
     """FILE.elf:T: an ELF that exists and a time after 0."""
-    import argparse
-
     path, sep, t = text.rpartition(":")
     try:
         t_s = float(t)

@@ -50,7 +50,7 @@ class SessionWriter:
     each stamped on the same clock when called (or with the time given)."""
 
     def __init__(self, folder, width: int, height: int, fps: float, clock=time.perf_counter, extra=None):
-        import cv2
+        import cv2  # optional: OpenCV (the camera extra)
 
         self.folder = Path(folder)
         self.clock = clock
