@@ -1,12 +1,16 @@
 """The host package's layers hold: no module imports a higher layer, and the imports have no cycle. Read from
 the source (every ``import`` and ``from … import`` of a sphere module, at module level or inside a function), so
 a new upward import fails here before it fails anyone at run time. The order is documented in
-host/docs/where-things-go.md ("Layers")."""
+host/docs/where-things-go.md ("Layers"). Imports sit at a module's top: one inside a function says why on its
+line (an optional dependency, …); ``python tests/host/test_layers.py`` lists them."""
 
 from __future__ import annotations
 
 import ast
 import functools
+import io
+import sys
+import tokenize
 from collections import defaultdict
 from pathlib import Path
 
@@ -142,3 +146,91 @@ def test_the_checks_see_what_they_check():
     assert "sphere.protocol" in graph["sphere.daemon.app"] and layer("sphere.daemon.app") > layer("sphere.protocol")
     assert cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
     assert "sphere.daemon" in _with_packages({"sphere.fusion.x": {"sphere.daemon.config"}})["sphere.fusion.x"]
+
+
+#: What may keep an import inside a function, as its comment says (on the import's line or the line above):
+#: "optional: …" a dependency the package runs without (an extra: OpenCV, matplotlib, the peers, the backends'
+#: X11/evdev/pynput, websockets; the camera), "POSIX only", "heavy: …" (a required but slow import a light path
+#: must not pay for, e.g. numpy under sphere.daemon.config, which imports in ≤ 40 ms), "--against" (the daemon
+#: bench running an older revision's package). `sphere` imports a subcommand with importlib (not a statement here).
+REASONS = ("optional", "POSIX only", "heavy", "--against")
+#: Known, to go (module path, import): bench/drift.py's, which is being edited for issue 28 as this lands.
+KNOWN_BARE = {("sphere/bench/drift.py", t) for t in (
+    "from sphere.bench.pointer import raw_packets", "from sphere.daemon.scripted_sphere import hello_packet",
+    "from sphere.protocol import encode_frame", "from sphere.daemon.gyro_bias import GyroBias", "import itertools")}
+
+
+def _comments(source: str) -> dict[int, str]:
+    """line → the comment on it."""
+    return {tok.start[0]: tok.string for tok in tokenize.generate_tokens(io.StringIO(source).readline)
+            if tok.type == tokenize.COMMENT}
+
+
+def imports_in_functions(source: str, name: str = "<source>") -> list[tuple[int, str, str]]:
+    """(line, the import, its comment) of every import made inside a function (or a method, a nested one)."""
+    comments, lines = _comments(source), source.splitlines()
+    found = []
+
+    class Walk(ast.NodeVisitor):
+        depth = 0
+
+        def visit_FunctionDef(self, node):
+            self.depth += 1
+            self.generic_visit(node)
+            self.depth -= 1
+
+        visit_AsyncFunctionDef = visit_Lambda = visit_FunctionDef
+
+        def visit_Import(self, node):
+            if self.depth:
+                own = " ".join(comments[n] for n in range(node.lineno, node.end_lineno + 1) if n in comments)
+                above = lines[node.lineno - 2].strip() if node.lineno > 1 else ""
+                found.append((node.lineno, lines[node.lineno - 1].split("#")[0].strip(), own or (above if above[:1] == "#" else "")))
+
+        visit_ImportFrom = visit_Import
+
+    Walk().visit(ast.parse(source, name))
+    return found
+
+
+@functools.cache
+def all_imports_in_functions() -> list[tuple[str, int, str, str]]:
+    """(module's path in the package, line, the import, its comment) over every module."""
+    return [(str(path.relative_to(PACKAGE.parent)), *found) for path in sorted(MODULES.values())
+            for found in imports_in_functions(path.read_text(), str(path))]
+
+
+def test_imports_inside_functions_say_why():
+    """0 imports inside functions except for a reason REASONS names, written beside it."""
+    found = all_imports_in_functions()
+    bare = [f"{path}:{line}: {text}" for path, line, text, comment in found
+            if not any(reason in comment for reason in REASONS) and (path, text) not in KNOWN_BARE]
+    assert not bare, ("imports inside functions without a reason (move them to the module's top, or say why: "
+                      f"{', '.join(REASONS)}):\n" + "\n".join(bare))
+    known = sum((path, text) in KNOWN_BARE for path, _, text, _ in found)
+    print(f"{len(found)} imports inside functions in {len({f[0] for f in found})} modules, "
+          f"{len(found) - known} with a reason, {known} known without")
+
+
+def test_the_import_walk_sees_nested_imports_and_their_comments():
+    source = ("import os\n"
+              "def f():\n"
+              "    import json\n"
+              "    # optional: cv2 (the camera extra)\n"
+              "    import cv2\n"
+              "    class C:\n"
+              "        def g(self):\n"
+              "            from x import (a,\n"
+              "                           b)  # heavy: x\n"
+              "    return lambda: __import__('y')\n")
+    assert imports_in_functions(source) == [(3, "import json", ""),
+                                            (5, "import cv2", "# optional: cv2 (the camera extra)"),
+                                            (8, "from x import (a,", "# heavy: x")]
+    assert any("sphere/daemon/backends/x11.py" in f[0] and "Xlib" in f[2] for f in all_imports_in_functions())
+
+
+if __name__ == "__main__":  # the list, by module, with each one's reason
+    for path, line, text, comment in all_imports_in_functions():
+        print(f"{path}:{line}: {text}  {comment}", file=sys.stdout)
+    found = all_imports_in_functions()
+    print(f"{len(found)} imports inside functions in {len({f[0] for f in found})} modules")
