@@ -108,6 +108,7 @@ def test_crc_is_zlibs_over_the_message_with_its_field_zeroed():
     assert m[:4] == b"DSUS" and struct.unpack_from("<HH", m, 4) == (1001, 6) and len(m) == 22
 
 
+@pytest.mark.slow  # a CPU-time figure (needs a quiet core): ~6 s
 @pytest.mark.skipif(libspnav_missing() is not None, reason=str(libspnav_missing()))
 def test_each_output_costs_under_half_a_percent_of_a_core():
     """The daemon's extra CPU per output (its loop's calls and its server thread), a client connected and

@@ -248,6 +248,7 @@ def test_a_running_spacenavd_is_said_in_one_line(tmp_path, monkeypatch):
         held.close()
 
 
+@pytest.mark.slow  # a calm and a hostile replay at the sphere's pace: ~20 s
 @needs_libspnav
 def test_hostile_clients_during_a_replay_leave_the_pointer_and_a_real_client_alone(tmp_path):
     h = run_spnav_hostile(tmp_path)

@@ -80,6 +80,7 @@ def test_the_earth_field_and_dip():
     assert DEG == pytest.approx(np.pi / 180)
 
 
+@pytest.mark.slow  # two runs of the bench: ~9 s
 def test_sphere_bench_stress_prints_each_filter_and_the_ratio_to_vqf():
     pytest.importorskip("vqf")
     r = subprocess.run([sys.executable, "-m", "sphere.cli", "bench", "stress", "--seeds", "2", "--kinds",
@@ -189,6 +190,7 @@ def test_the_recorded_structure_choice_is_todays_filter():
     assert not (set(n["all_trials_structure"]) - chosen) & set(DEFAULTS)  # what it left out is not a setting now
 
 
+@pytest.mark.slow  # 80 s of a BROAD trial through every filter: ~6 s
 def test_the_diagnosis_runs_on_a_real_trial():
     from sphere import broad
 
