@@ -126,3 +126,35 @@ def test_sphere_mouse_streams_the_ball_position_from_a_video(tmp_path):
     err = np.asarray(got[-10:]) - sc.to_camera(truth)
     # MJPG's 4:2:0 chroma moves the colour edge: ~1 % of the distance in depth
     assert np.abs(err[:, :2]).max() < 0.005 and np.abs(err[:, 2]).max() < 0.02, err
+
+
+def test_without_opencv_a_camera_is_one_clear_line(tmp_path):
+    """`sphere capture --camera` and `sphere-mouse --camera` on a machine without the camera extra: one line
+    naming the extra, no traceback (the camera's modules import without OpenCV; it is checked where they are)."""
+    import os
+    import subprocess
+    import sys
+
+    blocked = tmp_path / "blocked"
+    blocked.mkdir()
+    (blocked / "cv2.py").write_text("raise ImportError(\"No module named 'cv2'\")\n")
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(blocked), os.environ.get("PYTHONPATH", "")]))
+    from sphere.daemon.scripted_sphere import script_bytes
+
+    capture = tmp_path / "still.bin"
+    capture.write_bytes(script_bytes([("still", 0.5)]))
+    master, slave = os.openpty()
+    try:
+        runs = [[sys.executable, "-m", "sphere.cli", "capture", "--port", os.ttyname(slave), "--camera", "0",
+                 "--seconds", "1", "--out", str(tmp_path / "session")],
+                [sys.executable, "-m", "sphere.mouse", "--replay", str(capture), "--camera", "0", "--backend", "log",
+                 "--no-stream", "--config", os.devnull]]
+        for argv in runs:
+            r = subprocess.run(argv, capture_output=True, text=True, timeout=60, env=env)
+            lines = [ln for ln in r.stderr.splitlines() if "needs OpenCV" in ln]
+            assert r.returncode == 2 and len(lines) == 1 and "pip install -e '.[camera]'" in lines[0], r.stderr
+            assert "Traceback" not in r.stderr, r.stderr
+    finally:
+        os.close(master)
+        os.close(slave)
+    assert not (tmp_path / "session").exists()  # nothing half-written

@@ -85,6 +85,7 @@ class CameraPosition:
         if not s.source:
             return None
         try:
+            import cv2  # noqa: F401  (optional: OpenCV, the camera extra; camera.live needs it only once it opens)
             from sphere.camera.live import CameraError, CameraSource, LiveTracker  # optional: OpenCV (the camera extra)
             from sphere.camera.model import Camera, CameraFileError  # optional: the camera (numpy, OpenCV)
         except ImportError as e:  # OpenCV missing

@@ -99,6 +99,7 @@ def run(args) -> int:
 def _session(args):
     """(SessionWriter, the camera reading into it) for --camera; CaptureError when either cannot be used."""
     try:
+        import cv2  # noqa: F401  (optional: OpenCV, the camera extra; camera.live needs it only once it opens)
         from sphere.camera.live import CameraError, CameraSource  # optional: the camera (OpenCV, the camera extra)
     except ImportError as e:
         raise CaptureError(f"--camera needs OpenCV ({e}); install the camera extra: pip install -e '.[camera]'") from None
