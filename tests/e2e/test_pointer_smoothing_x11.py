@@ -9,12 +9,12 @@ import math
 import os
 import subprocess
 import sys
-import threading
 import time
 
 import numpy as np
 import pytest
 
+from sphere.bench._xvfb import PointerSampler
 from sphere.daemon.scripted_sphere import hello_packet, script_bytes
 from sphere.protocol import encode_frame
 from sphere.smoothing.registry import FILTERS
@@ -33,34 +33,6 @@ def hold_capture(path, script, seed=3, params=None):
     frames += [encode_frame(p, (i + 1) & 0xFF) for i, (_, p) in enumerate(raw_packets(h.motion))]
     path.write_bytes(b"".join(frames))
     return h
-
-
-class PointerSampler:
-    """The X pointer read with python-xlib as fast as it answers (~1 kHz), with perf_counter times."""
-
-    def __init__(self, display_name: str):
-        from Xlib import display
-
-        self.d = display.Display(display_name)
-        self.root = self.d.screen().root
-        self.samples: list[tuple[float, int, int]] = []
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._loop, daemon=True)
-
-    def _loop(self):
-        while not self._stop.is_set():
-            p = self.root.query_pointer()
-            self.samples.append((time.perf_counter(), p.root_x, p.root_y))
-            time.sleep(0.0008)
-
-    def __enter__(self):
-        self._thread.start()
-        return self
-
-    def __exit__(self, *exc):
-        self._stop.set()
-        self._thread.join(2)
-        self.d.close()
 
 
 @pytest.mark.parametrize("name", list(FILTERS))
@@ -112,7 +84,7 @@ def test_held_in_the_air_tremor_jitter_from_the_x_pointer(xvfb, tmp_path):
     capture = tmp_path / "held.bin"
     h = hold_capture(capture, HELD)
     xdotool(xvfb, "mousemove", "100", "500")
-    with PointerSampler(xvfb) as s:
+    with PointerSampler(xvfb, recentre=False) as s:
         r = run_mouse(xvfb, capture, "--speed", "1", "--set", "output.screen_width_px=1920", timeout=120)
     assert r.returncode == 0, r.stderr
     a = np.array(s.samples)
@@ -217,7 +189,7 @@ def test_steady_turns_travel_overshoot_drift_from_the_x_pointer(xvfb, tmp_path):
     h = hold_capture(capture, CLEAN_TURNS, 4, with_params(tremor_rms_deg=0.0, wander_rms_deg=0.0))
     speed = 2.0
     xdotool(xvfb, "mousemove", "160", "200")
-    with PointerSampler(xvfb) as s:
+    with PointerSampler(xvfb, recentre=False) as s:
         r = run_mouse(xvfb, capture, "--speed", str(speed), "--set", "output.screen_width_px=1920", timeout=120)
     assert r.returncode == 0, r.stderr
     a = np.array(s.samples, dtype=float)
@@ -280,7 +252,7 @@ def test_held_in_the_air_through_the_real_firmware(xvfb, tmp_path):
     capture = tmp_path / "hold.bin"
     capture.write_bytes(run.capture)
     xdotool(xvfb, "mousemove", "640", "512")
-    with PointerSampler(xvfb) as s:
+    with PointerSampler(xvfb, recentre=False) as s:
         r = run_mouse(xvfb, capture, "--speed", "1", "--set", "output.screen_width_px=1920", timeout=120)
     assert r.returncode == 0, r.stderr
     a = np.array(s.samples, dtype=float)

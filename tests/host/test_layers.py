@@ -154,10 +154,6 @@ def test_the_checks_see_what_they_check():
 #: must not pay for, e.g. numpy under sphere.daemon.config, which imports in ≤ 40 ms), "--against" (the daemon
 #: bench running an older revision's package). `sphere` imports a subcommand with importlib (not a statement here).
 REASONS = ("optional", "POSIX only", "heavy", "--against")
-#: Known, to go (module path, import): bench/drift.py's, which is being edited for issue 28 as this lands.
-KNOWN_BARE = {("sphere/bench/drift.py", t) for t in (
-    "from sphere.bench.pointer import raw_packets", "from sphere.daemon.scripted_sphere import hello_packet",
-    "from sphere.protocol import encode_frame", "from sphere.daemon.gyro_bias import GyroBias", "import itertools")}
 
 
 def _comments(source: str) -> dict[int, str]:
@@ -204,12 +200,10 @@ def test_imports_inside_functions_say_why():
     """0 imports inside functions except for a reason REASONS names, written beside it."""
     found = all_imports_in_functions()
     bare = [f"{path}:{line}: {text}" for path, line, text, comment in found
-            if not any(reason in comment for reason in REASONS) and (path, text) not in KNOWN_BARE]
+            if not any(reason in comment for reason in REASONS)]
     assert not bare, ("imports inside functions without a reason (move them to the module's top, or say why: "
                       f"{', '.join(REASONS)}):\n" + "\n".join(bare))
-    known = sum((path, text) in KNOWN_BARE for path, _, text, _ in found)
-    print(f"{len(found)} imports inside functions in {len({f[0] for f in found})} modules, "
-          f"{len(found) - known} with a reason, {known} known without")
+    print(f"{len(found)} imports inside functions in {len({f[0] for f in found})} modules, each with its reason")
 
 
 def test_the_import_walk_sees_nested_imports_and_their_comments():

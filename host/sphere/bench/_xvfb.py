@@ -1,12 +1,15 @@
-"""A private X server (Xvfb) for benchmarks, and the X pointer read at a high rate through Xlib (ctypes)."""
+"""A private X server (Xvfb) for benchmarks, and the X pointer read at a high rate: through libX11 (ctypes) or
+sampled in a thread with python-xlib."""
 
 from __future__ import annotations
 
 import ctypes
 import ctypes.util
+import math
 import os
 import shutil
 import subprocess
+import threading
 import time
 
 from sphere.errors import SphereError
@@ -88,3 +91,72 @@ class PointerReader:
         if self._d:
             self._x.XCloseDisplay(self._d)
             self._d = None
+
+
+class PointerSampler:
+    """The X pointer read as fast as the server answers (~1 kHz), with perf_counter times. A pointer that comes
+    near the screen's edge is put back to the middle under a server grab (no move of the daemon's can fall
+    between the read and the warp) and the offset is added to every later sample, so a runaway is measured
+    whole instead of stopping at the edge. ``recentre=False``: the pointer is neither moved at the start nor
+    put back (it stays where the caller put it; the run must then stay on the screen)."""
+
+    def __init__(self, display_name: str, start=(4096, 4096), margin: int = 200, recentre: bool = True):
+        from Xlib import display  # optional dependency: the daemon extra (python-xlib)
+
+        self.d = display.Display(display_name)
+        self.root = self.d.screen().root
+        self.start = start
+        self.margin = margin
+        self.recentre = recentre
+        self.size = (self.d.screen().width_in_pixels, self.d.screen().height_in_pixels)
+        self.samples: list[tuple[float, int, int]] = []
+        self.warps = 0
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._loop, daemon=True)
+        if recentre:
+            self.root.warp_pointer(*start)
+            self.d.sync()
+
+    def _loop(self):
+        ox = oy = 0
+        m, (w, h) = self.margin, self.size
+        warp = None  # (time, dx, dy) of the last warp
+        last = None
+        while not self._stop.is_set():
+            p = self.root.query_pointer()
+            now = time.perf_counter()
+            x, y = p.root_x, p.root_y
+            if warp is not None and last is not None and now - warp[0] < 0.2:
+                # the x11 backend moves to (its read of the pointer + step): a read made before the warp undoes
+                # it, and the pointer is back near the edge; the offset goes with it
+                jx, jy = x + ox - last[0], y + oy - last[1]
+                if math.hypot(jx - warp[1], jy - warp[2]) < 0.3 * math.hypot(warp[1], warp[2]):
+                    ox -= warp[1]
+                    oy -= warp[2]
+                    warp = None
+            if self.recentre and not (m < x < w - m and m < y < h - m):
+                self.d.grab_server()
+                p = self.root.query_pointer()
+                x, y = p.root_x, p.root_y
+                self.root.warp_pointer(*self.start)
+                self.d.ungrab_server()
+                self.d.sync()
+                last = (x + ox, y + oy)
+                self.samples.append((time.perf_counter(), *last))
+                warp = (time.perf_counter(), x - self.start[0], y - self.start[1])
+                ox += warp[1]
+                oy += warp[2]
+                self.warps += 1
+                continue
+            last = (x + ox, y + oy)
+            self.samples.append((now, *last))
+            time.sleep(0.0008)
+
+    def __enter__(self):
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc):
+        self._stop.set()
+        self._thread.join(2)
+        self.d.close()

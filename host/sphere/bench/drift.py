@@ -35,13 +35,13 @@ drift ≤ 1.0 px/s and overshoot ≤ 1.0 px; creep ≤ 5 px/s in minute 1, ≤ 1
 
 from __future__ import annotations
 
+import itertools
 import json
 import math
 import os
 import subprocess
 import sys
 import tempfile
-import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -49,13 +49,16 @@ from pathlib import Path
 import numpy as np
 
 from sphere import argtypes
+from sphere.bench._xvfb import PointerSampler
 from sphere.bench._xvfb import Xvfb as _Server
 from sphere.bench._xvfb import XvfbUnavailable
-from sphere.bench.pointer import Recording, _low_pass, daemon, ideal_path, turn_figures
+from sphere.bench.pointer import Recording, _low_pass, daemon, ideal_path, raw_packets, turn_figures
 from sphere.daemon.config import Config, ConfigError, parse_set, smoothing_params
+from sphere.daemon.gyro_bias import GyroBias
 from sphere.daemon.motion import up_from_quat
 from sphere.daemon.pointer import PointerMapper
-from sphere.protocol import PacketStream, RawSample
+from sphere.daemon.scripted_sphere import hello_packet
+from sphere.protocol import PacketStream, RawSample, encode_frame
 from sphere.sim import hold as H
 from sphere.sim import trace as T
 from sphere.sim.board import firmware_elf, run_board
@@ -145,10 +148,6 @@ def model_capture(sc: Scenario) -> bytes:
     """The same motion as a capture without the board: the chip models' units at their rates straight into
     RAW_SAMPLE frames (:func:`sphere.bench.pointer.raw_packets`; no DLPF, no firmware). ``--tune`` uses it for
     the 10-minute hold (the board would take about 10 CPU minutes per run)."""
-    from sphere.bench.pointer import raw_packets
-    from sphere.daemon.scripted_sphere import hello_packet
-    from sphere.protocol import encode_frame
-
     frames = [encode_frame(hello_packet(), 0)]
     frames += [encode_frame(p, (i + 1) & 0xFF) for i, (_, p) in enumerate(raw_packets(sc.hold.motion))]
     return b"".join(frames)
@@ -186,72 +185,6 @@ class Xvfb:
 
     def __exit__(self, *exc):
         self.server.close()
-
-
-class PointerSampler:
-    """The X pointer read as fast as the server answers (~1 kHz), with perf_counter times. A pointer that comes
-    near the screen's edge is put back to the middle under a server grab (no move of the daemon's can fall
-    between the read and the warp) and the offset is added to every later sample, so a runaway is measured
-    whole instead of stopping at the edge."""
-
-    def __init__(self, display_name: str, start=(4096, 4096), margin: int = 200):
-        from Xlib import display  # optional dependency: the daemon extra (python-xlib)
-
-        self.d = display.Display(display_name)
-        self.root = self.d.screen().root
-        self.start = start
-        self.margin = margin
-        self.size = (self.d.screen().width_in_pixels, self.d.screen().height_in_pixels)
-        self.samples: list[tuple[float, int, int]] = []
-        self.warps = 0
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._loop, daemon=True)
-        self.root.warp_pointer(*start)
-        self.d.sync()
-
-    def _loop(self):
-        ox = oy = 0
-        m, (w, h) = self.margin, self.size
-        warp = None  # (time, dx, dy) of the last warp
-        last = None
-        while not self._stop.is_set():
-            p = self.root.query_pointer()
-            now = time.perf_counter()
-            x, y = p.root_x, p.root_y
-            if warp is not None and last is not None and now - warp[0] < 0.2:
-                # the x11 backend moves to (its read of the pointer + step): a read made before the warp undoes
-                # it, and the pointer is back near the edge; the offset goes with it
-                jx, jy = x + ox - last[0], y + oy - last[1]
-                if math.hypot(jx - warp[1], jy - warp[2]) < 0.3 * math.hypot(warp[1], warp[2]):
-                    ox -= warp[1]
-                    oy -= warp[2]
-                    warp = None
-            if not (m < x < w - m and m < y < h - m):
-                self.d.grab_server()
-                p = self.root.query_pointer()
-                x, y = p.root_x, p.root_y
-                self.root.warp_pointer(*self.start)
-                self.d.ungrab_server()
-                self.d.sync()
-                last = (x + ox, y + oy)
-                self.samples.append((time.perf_counter(), *last))
-                warp = (time.perf_counter(), x - self.start[0], y - self.start[1])
-                ox += warp[1]
-                oy += warp[2]
-                self.warps += 1
-                continue
-            last = (x + ox, y + oy)
-            self.samples.append((now, *last))
-            time.sleep(0.0008)
-
-    def __enter__(self):
-        self._thread.start()
-        return self
-
-    def __exit__(self, *exc):
-        self._stop.set()
-        self._thread.join(2)
-        self.d.close()
 
 
 def x11_path(capture: bytes, display: str, reference: np.ndarray, speed: float, settings=()) -> np.ndarray:
@@ -451,8 +384,6 @@ def _config(settings):
 
 def grid() -> dict:
     """What --tune tries (every combination): the bias owner's own GRID, as daemon config keys."""
-    from sphere.daemon.gyro_bias import GyroBias
-
     return {f"gyro_bias.{k}": v for k, v in GyroBias.GRID.items()}
 
 
@@ -484,8 +415,6 @@ def score(summary_f: dict) -> tuple:
 
 def tune(names, keep, base_set) -> tuple[list, list]:
     """Every GRID combination on the TRAIN seeds through the daemon; returns (chosen --set items, rows)."""
-    import itertools
-
     captures = {}
     for n in names:
         for seed in TRAIN_SEEDS if n != "long" else TRAIN_SEEDS[:1]:  # one 10-minute hold to tune on
