@@ -55,6 +55,43 @@ def test_one_byte_at_a_time_equals_all_at_once():
     assert len(fast) >= 310
 
 
+def test_bytes_in_counts_every_byte_fed_whenever_it_is_read():
+    """A byte fed alone inside a frame is only kept (the byte-at-a-time path): ``stats`` still counts it when read,
+    and a restart counts the cut frame's bytes."""
+    data = stream_of([Orientation(i, 1, (16384, 0, 0, 0)) for i in range(3)])
+    decoder = FrameDecoder()
+    for i, b in enumerate(data, 1):
+        decoder.feed(bytes([b]))
+        assert decoder.stats.bytes_in == i
+    decoder.feed(data[:5])
+    decoder.restart()
+    decoder.feed(b"\x07")
+    assert decoder.stats.bytes_in == len(data) + 6 and decoder.stats.frames_ok == 3
+
+
+def test_every_packet_type_decodes_as_its_fields_say():
+    """The per-class unpacker written out from the field table (the decoder's hot path) gives what the table
+    says: every field, in order, a tuple for an array; the wrong length is refused."""
+    import struct
+
+    from sphere.protocol.packets import ALL_TYPES, Reply
+
+    for cls in ALL_TYPES:
+        values = list(range(1, sum(f.count for f in cls.FIELDS) + 1))
+        body = cls._struct.pack(*values)
+        p = cls.unpack_body(body, 9)
+        i = 0
+        for f in cls.FIELDS:
+            want = values[i] if f.count == 1 else tuple(values[i : i + f.count])
+            assert getattr(p, f.name) == want, (cls.NAME, f.name)
+            i += f.count
+        assert p.seq == 9 and p.pack_body() == body
+        if cls is Reply:  # data of any length may follow a REPLY's fields
+            continue
+        with pytest.raises(struct.error):
+            cls.unpack_body(body + b"\x00" * 200)
+
+
 def test_sequence_gaps_are_counted():
     pkts = [Orientation(i, 1, (16384, 0, 0, 0)) for i in range(10)]
     data = b"".join(encode_frame(p, s) for p, s in zip(pkts, [250, 251, 252, 255, 0, 1, 5, 6, 7, 8]))

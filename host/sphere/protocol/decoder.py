@@ -6,10 +6,11 @@ from binascii import crc_hqx
 from collections import deque
 from dataclasses import asdict, dataclass
 
-from cobs import cobs
+from cobs.cobs import DecodeError
+from cobs.cobs import decode as cobs_decode
 
 from sphere.protocol.framing import CRC16_INIT, MAX_ENCODED, MIN_PAYLOAD
-from sphere.protocol.packets import BY_TYPE, Hello, Packet, body_sizes
+from sphere.protocol.packets import BY_TYPE, Hello, Packet
 
 
 #: A CRC-good frame whose seq and CRC equal one of the last this many frames' is a duplicate (a link or a
@@ -50,30 +51,46 @@ class FrameDecoder:
     does not depend on how the stream is cut into calls.
     """
 
-    __slots__ = ("direction", "stats", "duplicate_window", "_types", "_buf", "_discarding", "_last_seq", "_recent",
-                 "_recent_set")
+    __slots__ = ("direction", "_stats", "duplicate_window", "_types", "_buf", "_counted", "_room", "_last_seq",
+                 "_recent", "_recent_set")
 
     def __init__(self, direction: str = "device", duplicate_window: int = DUPLICATE_WINDOW):
         if direction not in ("device", "host"):
             raise ValueError("direction is 'device' or 'host'")
         self.direction = direction
         self.duplicate_window = duplicate_window  # 0: every frame is returned, a repeat too (what a soak checks)
-        self.stats = DecoderStats()
-        self._types = {
-            t: (cls, frozenset(body_sizes(cls))) for t, cls in BY_TYPE.items() if cls.DIRECTION == direction
-        }
+        self._stats = DecoderStats()
+        # type -> (class, {body length: function (payload, seq) -> packet})
+        self._types = {t: (cls, cls.payload_decoders()) for t, cls in BY_TYPE.items() if cls.DIRECTION == direction}
         self._buf = bytearray()
-        self._discarding = False  # inside an oversize chunk: drop bytes up to the next delimiter
+        self._counted = 0  # how many of _buf's bytes ``bytes_in`` counts (not those the byte-at-a-time path added)
+        # how long the frame being gathered in _buf may grow before it is oversize; 0 inside an oversize chunk
+        # (its bytes are dropped up to the next delimiter)
+        self._room = MAX_ENCODED
         self._last_seq: int | None = None
         # (seq << 16 | crc) of the last DUPLICATE_WINDOW frames, oldest first; -1: no frame yet (no key is < 0)
         self._recent: deque = deque((-1,) * duplicate_window)
         self._recent_set: set = set()  # the same, for the lookup
 
+    @property
+    def stats(self) -> DecoderStats:
+        """The counters, up to the last byte fed (a byte fed alone inside a frame is counted in ``bytes_in`` here
+        or at the next delimiter, not when it comes: the byte-at-a-time path does nothing but keep it)."""
+        self._count_gathered()
+        return self._stats
+
+    def _count_gathered(self) -> None:
+        n = len(self._buf)
+        self._stats.bytes_in += n - self._counted
+        self._counted = n
+
     def restart(self) -> None:
         """A new link: a frame cut off by the old one is dropped without being counted, and the
         sequence count starts again (the frames missed while unplugged were never in transit)."""
+        self._count_gathered()  # the cut frame's bytes were received
         self._buf.clear()
-        self._discarding = False
+        self._counted = 0
+        self._room = MAX_ENCODED
         self._last_seq = None
         self._forget_recent()
 
@@ -82,22 +99,21 @@ class FrameDecoder:
         self._recent_set.clear()
 
     def feed(self, data: bytes) -> list[Packet]:
-        stats = self.stats
-        stats.bytes_in += len(data)
         buf = self._buf
-        if len(data) == 1 and data[0] and len(buf) < MAX_ENCODED and not self._discarding:
-            buf += data  # the common case when a port is read byte by byte: a byte inside a frame
+        if len(data) == 1 and data[0] and len(buf) < self._room:
+            buf += data  # the common case when a port is read byte by byte: a byte inside a frame (see stats)
             return []
+        stats = self._stats
+        stats.bytes_in += len(data) + len(buf) - self._counted
         out: list[Packet] = []
         start = 0
         n = len(data)
         find = data.find
-        chunk = self._chunk
         while start < n:
             end = find(0, start)
             if end < 0:
                 tail = data[start:]
-                if self._discarding:
+                if not self._room:
                     stats.bytes_skipped += len(tail)
                 else:
                     buf += tail
@@ -105,79 +121,80 @@ class FrameDecoder:
                         stats.oversize += 1
                         stats.bytes_skipped += len(buf)
                         buf.clear()
-                        self._discarding = True
+                        self._room = 0
                 break
-            if self._discarding:
+            if not self._room:
                 stats.bytes_skipped += end - start + 1
-                self._discarding = False
-            elif buf:
+                self._room = MAX_ENCODED
+                start = end + 1
+                continue
+            if buf:
                 buf += data[start:end]
-                chunk(bytes(buf), out)
+                chunk = bytes(buf)
                 buf.clear()
             elif end > start:
-                chunk(data[start:end], out)
+                chunk = data[start:end]
+            else:
+                start = end + 1
+                continue
             start = end + 1
+            # one delimited chunk: every check of spec §2.1 in order, the first that fails counted (a rejected
+            # chunk's bytes and its delimiter are skipped); the order and the counters are the contract, the
+            # shape is the hot path's (written out here, once per frame)
+            if len(chunk) > MAX_ENCODED:
+                stats.oversize += 1
+                stats.bytes_skipped += len(chunk) + 1
+                continue
+            try:
+                payload = cobs_decode(chunk)
+            except DecodeError:
+                stats.framing_errors += 1
+                stats.bytes_skipped += len(chunk) + 1
+                continue
+            if len(payload) < MIN_PAYLOAD:
+                stats.framing_errors += 1
+                stats.bytes_skipped += len(chunk) + 1
+                continue
+            size = len(payload) - 4  # the body's (payload: type, seq, body, CRC)
+            crc = payload[-2] | payload[-1] << 8
+            if crc_hqx(payload[:-2], CRC16_INIT) != crc:
+                stats.crc_errors += 1
+                stats.bytes_skipped += len(chunk) + 1
+                continue
+            seq = payload[1]
+            entry = self._types.get(payload[0])
+            if seq == 0 and entry is not None and entry[0] is Hello and size in entry[1]:
+                if self._last_seq is not None:
+                    stats.restarts += 1
+                self._last_seq = None
+                self._forget_recent()
+            key = seq << 16 | crc
+            recent = self._recent_set
+            if key in recent:
+                stats.duplicates += 1
+                continue
+            recent.add(key)
+            window = self._recent
+            window.append(key)
+            recent.discard(window.popleft())  # the window holds DUPLICATE_WINDOW keys (placeholders at first)
+            last = self._last_seq  # :meth:`_count_seq`, written out
+            if last is not None and (seq - last - 1) & 0xFF:
+                stats.seq_gaps += 1
+                stats.frames_lost += (seq - last - 1) & 0xFF
+            self._last_seq = seq
+            if entry is None:
+                stats.unknown_types += 1
+                stats.bytes_skipped += len(chunk) + 1
+                continue
+            unpack = entry[1].get(size)
+            if unpack is None:
+                stats.bad_lengths += 1
+                stats.bytes_skipped += len(chunk) + 1
+                continue
+            stats.frames_ok += 1
+            out.append(unpack(payload, seq))
+        self._counted = len(buf)
         return out
-
-    def _reject(self, chunk_len: int) -> None:
-        self.stats.bytes_skipped += chunk_len + 1
-
-    def _chunk(self, chunk: bytes, out: list[Packet]) -> None:
-        """One delimited chunk: every check of spec §2.1 in order, the first that fails counted; the order
-        and the counters are the contract, the shape is the hot path's (one call per frame)."""
-        if len(chunk) > MAX_ENCODED:
-            self.stats.oversize += 1
-            self._reject(len(chunk))
-            return
-        try:
-            payload = cobs.decode(chunk)
-        except cobs.DecodeError:
-            self.stats.framing_errors += 1
-            self._reject(len(chunk))
-            return
-        if len(payload) < MIN_PAYLOAD:
-            self.stats.framing_errors += 1
-            self._reject(len(chunk))
-            return
-        crc = payload[-2] | payload[-1] << 8
-        if crc_hqx(payload[:-2], CRC16_INIT) != crc:
-            self.stats.crc_errors += 1
-            self._reject(len(chunk))
-            return
-        type_ = payload[0]
-        seq = payload[1]
-        entry = self._types.get(type_)
-        body = payload[2:-2]
-        if entry is not None and seq == 0 and entry[0] is Hello and len(body) in entry[1]:
-            if self._last_seq is not None:
-                self.stats.restarts += 1
-            self._last_seq = None
-            self._forget_recent()
-        key = seq << 16 | crc
-        recent = self._recent_set
-        if key in recent:
-            self.stats.duplicates += 1
-            return
-        recent.add(key)
-        window = self._recent
-        window.append(key)
-        recent.discard(window.popleft())  # the window holds DUPLICATE_WINDOW keys (placeholders at first)
-        last = self._last_seq  # :meth:`_count_seq`, inlined
-        if last is not None and (seq - last - 1) & 0xFF:
-            self.stats.seq_gaps += 1
-            self.stats.frames_lost += (seq - last - 1) & 0xFF
-        self._last_seq = seq
-        if entry is None:
-            self.stats.unknown_types += 1
-            self._reject(len(chunk))
-            return
-        cls, sizes = entry
-        if len(body) not in sizes:
-            self.stats.bad_lengths += 1
-            self._reject(len(chunk))
-            return
-        self.stats.frames_ok += 1
-        out.append(cls.unpack_body(body, seq))
 
     def account(self, packet: Packet) -> None:
         """Count a good frame decoded by another decoder of the same link (a discovery probe's HELLO and

@@ -102,6 +102,25 @@ class Field:
         return round(value * self.scale, 6)
 
 
+def _unpacker(cls, offset: int):
+    """A function (buffer, seq) → a ``cls`` packet from the current version's body at ``offset`` of the buffer,
+    written out for the class from its FIELDS: one struct unpack, one attribute store per field (a loop over
+    the fields takes twice as long; this is the decoder's hot path, once per frame)."""
+    names, lines, n = [], [], 0
+    for f in cls.FIELDS:
+        values = [f"v{n + k}" for k in range(f.count)]
+        names += values
+        lines.append(f"o.{f.name} = " + (values[0] if f.count == 1 else "(" + ", ".join(values) + ",)"))
+        n += f.count
+    src = "def unpack(buf, seq):\n"
+    if names:
+        src += f"    {', '.join(names)}, = unpack_from(buf, {offset})\n"
+    src += "    o = new(cls)\n" + "".join(f"    {line}\n" for line in lines) + "    o.seq = seq\n    return o\n"
+    namespace = {"unpack_from": cls._struct.unpack_from, "new": cls.__new__, "cls": cls}
+    exec(src, namespace)  # from the class's own field table: names that are Python identifiers, nothing read in
+    return namespace["unpack"]
+
+
 class Packet:
     """Base of every packet type. Subclasses set TYPE, NAME, DIRECTION and FIELDS."""
 
@@ -114,17 +133,18 @@ class Packet:
     _struct: ClassVar[struct.Struct]
     _v1_struct: ClassVar[struct.Struct | None]
     _plan: ClassVar[tuple[tuple[str, int], ...]]
-    _unpack_plan: ClassVar[tuple[tuple[str, int, int], ...]]  # (name, index in the unpacked tuple, count)
+    _from_body: ClassVar  # (body, seq) -> packet, the current version's body (see _unpacker)
+    _from_payload: ClassVar  # (payload, seq) -> packet, the same inside a whole payload
 
     def __init_subclass__(cls, **kwargs):
         super().__init_subclass__(**kwargs)
         cls._struct = struct.Struct("<" + "".join(f"{f.count}{f.code}" for f in cls.FIELDS))
         cls._plan = tuple((f.name, f.count) for f in cls.FIELDS)
-        starts = [sum(f.count for f in cls.FIELDS[:k]) for k in range(len(cls.FIELDS))]
-        cls._unpack_plan = tuple((f.name, i, f.count) for f, i in zip(cls.FIELDS, starts))
         cls._v1_struct = None
         if cls.V1_FIELDS is not None:
             cls._v1_struct = struct.Struct("<" + "".join(f"{f.count}{f.code}" for f in cls.FIELDS[: cls.V1_FIELDS]))
+        cls._from_body = _unpacker(cls, 0)
+        cls._from_payload = _unpacker(cls, 2)
 
     def __init__(self, *args, seq: int = 0, **kwargs):
         names = [f.name for f in self.FIELDS]
@@ -156,6 +176,14 @@ class Packet:
         """Every body length this host decodes: the current one, and version 1's where it differed."""
         return (cls._struct.size,) if cls._v1_struct is None else (cls._struct.size, cls._v1_struct.size)
 
+    @classmethod
+    def payload_decoders(cls) -> dict:
+        """For the frame decoder: each body length of :meth:`body_sizes` → a function (payload, seq) → packet
+        that reads the body inside the whole payload (type, seq, body, CRC), the length already checked."""
+        out = {n: (lambda payload, seq, unpack=cls.unpack_body: unpack(payload[2:-2], seq)) for n in cls.body_sizes()}
+        out[cls._struct.size] = cls._from_payload
+        return out
+
     def pack_body(self) -> bytes:
         flat = []
         for f in self.FIELDS:
@@ -168,22 +196,18 @@ class Packet:
 
     @classmethod
     def unpack_body(cls, body: bytes, seq: int = 0) -> "Packet":
-        v1 = cls._v1_struct is not None and len(body) == cls._v1_struct.size
-        flat = (cls._v1_struct if v1 else cls._struct).unpack(body)
+        if len(body) == cls._struct.size:  # the current version (every frame of a live link)
+            return cls._from_body(body, seq)
+        if cls._v1_struct is None or len(body) != cls._v1_struct.size:
+            raise struct.error(f"{cls.NAME}: a body of {len(body)} bytes, not {' or '.join(map(str, cls.body_sizes()))}")
+        flat = cls._v1_struct.unpack(body)  # version 1's shorter body: the fields appended since take their defaults
         obj = cls.__new__(cls)
-        if not v1:  # the current version (every frame of a live link): one pass over a precomputed plan
-            for name, i, count in cls._unpack_plan:
-                setattr(obj, name, flat[i] if count == 1 else flat[i : i + count])
-            obj.seq = seq
-            return obj
         i = 0
         for k, (name, count) in enumerate(cls._plan):
-            if v1 and k >= cls.V1_FIELDS:
+            if k >= cls.V1_FIELDS:
                 setattr(obj, name, cls.FIELDS[k].default)
-            elif count == 1:
-                setattr(obj, name, flat[i])
             else:
-                setattr(obj, name, flat[i : i + count])
+                setattr(obj, name, flat[i] if count == 1 else flat[i : i + count])
             i += count
         obj.seq = seq
         return obj
@@ -349,6 +373,10 @@ class Reply(Packet):
     @classmethod
     def body_sizes(cls) -> tuple[int, ...]:
         return tuple(cls._struct.size + n for n in cls.DATA_SIZES)
+
+    @classmethod
+    def payload_decoders(cls) -> dict:
+        return {n: (lambda payload, seq: cls.unpack_body(payload[2:-2], seq)) for n in cls.body_sizes()}
 
     @property
     def ok(self) -> bool:
