@@ -53,6 +53,13 @@ def test_a_resent_frame_and_time_going_back_are_stale_a_gap_is_dropped_frames():
     # the same sequence number with the time moving on (the host missed 256 frames): not stale
     items = [(0.0, _hello(), 0), (0.005, _raw(5000), 1), (1.3, _raw(5000 + 257 * 5000), 2)]
     assert S.stream_checks(S.read_frames(*_stream(items)), [])["stale_frames"].count == 0
+    # exactly 256 frames lost (a host stall, seed 106): the same sequence number again, the device's time 850 ms on
+    items = [(0.0, _hello(), 0), (46.97083, _raw(5219728), 218), (47.82082, _raw(6069728), 218)]
+    s = S.stream_checks(S.read_frames(*_stream(items)), [])
+    assert s["stale_frames"].count == 0 and s["frames_dropped"].count == 255
+    # the same sequence number and the same device time: the frame sent twice
+    items = [(0.0, _hello(), 0), (0.005, _raw(5000), 1), (0.010, _raw(5000), 1)]
+    assert S.stream_checks(S.read_frames(*_stream(items)), [])["stale_frames"].count == 1
     # a HELLO starts the sequence and the clock again: not stale
     items = [(0.0, _hello(), 0), (0.005, _raw(5000), 1), (0.5, _hello(), 0), (0.505, _raw(5000), 1)]
     s = S.stream_checks(S.read_frames(*_stream(items)), [])

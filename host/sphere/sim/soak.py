@@ -145,14 +145,16 @@ def stream_checks(frames: list[Frame], line_windows, resets_t=()) -> dict:
             else:
                 stale.add(f.t_s, detail=f"{type(p).__name__} time {t_us} us after {prev} us without a HELLO")
                 continue
-        # 8-bit sequence numbers: a jump of 128 or more is a repeat unless the device's time moved on
-        # (then frames were lost, e.g. while the host did not read)
+        # 8-bit sequence numbers: the same number again, or a jump of 128 or more, is a repeat unless the
+        # device's time moved on (then frames were lost, e.g. while the host did not read: exactly 256 of them
+        # bring the same number back)
         forward_in_time = prev is not None and t_us != prev
         if last_seq is not None:
             d = (f.seq - last_seq) & 0xFF
-            if d == 0 or (d >= 128 and not forward_in_time):
+            if (d == 0 or d >= 128) and not forward_in_time:
                 stale.add(f.t_s, detail=f"seq {f.seq} after {last_seq}")
                 continue
+            d = d or 256
             if d > 1:
                 dropped.add(f.t_s, d - 1)
         last_seq = f.seq
