@@ -41,9 +41,6 @@ def test_a_steady_turn_at_start_up_is_followed_and_the_pointer_then_stays(displa
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(reason="known regression, open under issue 28: with the firmware of 9dde1ac (issue 32: TWBR 15, "
-                   "byte-wise EEPROM, ADXL345 setup, watchdog in interrupt mode) the fine band drifts 2.0 px/s in the "
-                   "second after its stops (0 with the firmware before it); cause not found yet", strict=False)
 def test_after_every_stop_on_a_turntable_the_x_pointer_does_not_drift(display):
     """Turns of every band with hard stops, no hand: in the second from 0.45 s after every stop the X pointer
     moves ≤ 1 px (the rest hold keeps the ITG-3200's noise from creeping it)."""

@@ -72,3 +72,23 @@ def test_long_figures_give_the_creep_per_minute_relative_to_the_hand():
     f = D.measure(sc, _path(t, x, ideal[:, 1]), 0.0)
     assert f["creep_px_s"][0] == pytest.approx(3.0, abs=0.05)
     assert f["creep_px_s"][1] == pytest.approx(0.5, abs=0.05)
+
+
+def test_x_samples_are_timed_by_the_exact_state_so_the_next_turn_is_not_read_as_drift():
+    """The X pointer's samples get the device time of the daemon's own state they equal: the first pixels of a
+    turn back (within 3 px of where the pointer stopped, and of states before the stop) belong to that turn,
+    not to the held second after the stop (the rule "first state within 3 px" put them there: 3 px/s of drift
+    on a pointer that did not move)."""
+    t = 0.5 + np.arange(700) * 0.005  # device time of the daemon's states, 200 Hz
+    x = np.concatenate([-np.arange(11), np.full(400, -10), -10 + np.arange(1, 290)]).astype(float)
+    ref = np.column_stack([t, x, 0 * x])
+    wall = np.arange(0.0, 3.0, 0.001)  # the X pointer read at 1 kHz, the replay at speed 2 from wall 0.2
+    k = np.clip(np.searchsorted(t, (wall - 0.2) * 2 + 0.5, side="right") - 1, 0, len(t) - 1)
+    a = np.column_stack([wall, x[k], 0 * wall])
+    times = D.device_times(a, ref, 2.0)
+    first = np.maximum.accumulate(np.where(np.r_[True, np.diff(x) != 0], np.arange(len(x)), 0))
+    assert np.array_equal(times, t[first[k]])  # each sample at the time its state began
+    stop = 0.5 + 10 * 0.005
+    grid = D.on_grid(np.column_stack([times, a[:, 1:]]), 3.0)
+    held = grid[int((stop + 0.45) * D.RATE_HZ): int((stop + 1.45) * D.RATE_HZ), 0]
+    assert np.all(held == -10)

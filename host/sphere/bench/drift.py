@@ -212,11 +212,15 @@ def device_times(a: np.ndarray, reference: np.ndarray, speed: float, lookahead_s
     """Device time of each X pointer sample ``a`` = (wall s, x, y), by matching the pointer to the daemon's own
     integer path (``reference``: the same code on the same capture, every state in device time) in order: each
     sample takes the first state at or after the last match, up to ``lookahead_s`` past where the wall clock
-    says the replay can be, at the same position within ``tolerance_px`` (X may differ by a pixel or two from
-    the daemon run in this process; none: the last match's time). A state seen first is never
+    says the replay can be, at exactly the same position; only when there is none, the nearest within
+    ``tolerance_px`` (a pixel lost on the way to X), else the last match's time. A state seen first is never
     later than the true one, so a sample is never placed ahead of its time; a loaded machine that makes the
-    replay fall behind and catch up does not matter. A pixel lost on the way to X shows as a mismatch from
-    then on (the positions are X's own)."""
+    replay fall behind and catch up does not matter.
+
+    Exactly first: the nearest-within-tolerance rule alone takes the first pixels of a turn back towards where
+    the pointer came from as the state the pointer stopped at (3 px away and earlier), so the next turn's start
+    was read as drift in the held second after a stop (2-3 px/s in the turntable test, 0 in the daemon's own
+    path; which stop it hit changed with a 0.5 ms shift of the firmware's sample clock)."""
     t_ref = reference[:, 0]
     ref = (reference[:, 1:3] - reference[0, 1:3]).astype(np.int64)
     xy = (a[:, 1:] - a[0, 1:]).astype(np.int64)
@@ -231,9 +235,10 @@ def device_times(a: np.ndarray, reference: np.ndarray, speed: float, lookahead_s
     cur = 0
     for i, (x, y) in enumerate(xy):
         win = ref[cur: max(cur + 1, limit[i])]
-        same = np.flatnonzero(np.abs(win[:, 0] - x) + np.abs(win[:, 1] - y) <= tolerance_px)
-        if len(same):
-            cur += int(same[0])
+        dist = np.abs(win[:, 0] - x) + np.abs(win[:, 1] - y)
+        best = int(dist.min())
+        if best <= tolerance_px:
+            cur += int(np.flatnonzero(dist == best)[0])
         out[i] = t_ref[cur]
     return out
 
