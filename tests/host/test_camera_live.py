@@ -62,3 +62,26 @@ def test_live_tracker_with_the_trials_imu(video):
 def test_a_camera_that_is_not_there(capsys):
     assert main(["camera", "track", "/nonexistent/video.avi"]) == 2
     assert "cannot open video file" in capsys.readouterr().err
+
+
+def test_frame_clock_takes_out_the_arrival_jitter():
+    """The virtual camera's frames arrive 35 ms + an exponential tail (mean 5 ms) after the middle of their
+    exposure; the clock stamps them from the camera's own regular period, frames the camera dropped included,
+    and starts again when the camera pauses."""
+    from sphere.camera.live import FrameClock
+
+    rng = np.random.default_rng(3)
+    period = 1 / 30.0
+    k = np.arange(400)
+    k = k[(k % 37) != 5]  # the camera drops a frame now and then
+    mid = 10.0 + k * period * (1 + 1e-4) + rng.normal(0, 0.0005, len(k))
+    mid[len(k) // 2:] += 2.0  # a pause of 2 s: the frames go on from there
+    arrival = mid + 0.035 + rng.exponential(0.005, len(k))
+    clock = FrameClock(0.040, period)
+    est = np.array([clock(a) for a in arrival])
+    plain = arrival - 0.040 - mid
+    err = est - mid
+    steady = np.r_[60:len(k) // 2, len(k) // 2 + 60:len(k)]  # 2 s after each start of the fit
+    assert np.std(plain) > 0.004 and np.abs(plain).max() > 0.02
+    assert np.abs(err[steady].mean()) < 0.001 and np.std(err[steady]) < 0.0015 and np.abs(err[steady]).max() < 0.005
+    assert np.abs(err).max() < 0.02

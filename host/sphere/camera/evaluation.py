@@ -17,7 +17,7 @@ import numpy as np
 
 from sphere import quaternion as quat
 from sphere.camera.detect import BallDetector, blob_position
-from sphere.camera.live import hint_from
+from sphere.camera.live import FrameClock, hint_from
 from sphere.camera.marker import MarkerDetector
 from sphere.camera.trials import RenderedTrial
 from sphere.chips import STANDARD_GRAVITY_M_S2
@@ -74,6 +74,7 @@ def run(rt: RenderedTrial, hue_deg: float = 120.0) -> Run:
     t_ready = None
     frame_iter = {k: None for k in range(len(start))}
     pending = {}
+    clock = FrameClock(NOMINAL_CAMERA_LATENCY_S, 1.0 / rt.scene.fps)
     for i in range(n):
         # frames that arrived before this IMU sample reaches the host
         while next_frame < len(order) and arrival[order[next_frame]] <= t_imu_host[i]:
@@ -84,7 +85,7 @@ def run(rt: RenderedTrial, hue_deg: float = 120.0) -> Run:
                 pending[f.index] = f
             f = pending.pop(k)
             t0 = time.perf_counter()
-            t_exp = f.t_arrival - NOMINAL_CAMERA_LATENCY_S
+            t_exp = clock(f.t_arrival)
             hint = hint_from(hyb, cam, t_exp, rt.scene.radius_m, hint)
             d = det.detect(f.image, hint)
             t1 = time.perf_counter()
