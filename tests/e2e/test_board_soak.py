@@ -250,6 +250,26 @@ def test_a_difference_that_was_there_before_the_fault_is_not_its_doing():
     assert worst.first_s == 3.0
 
 
+def test_a_fault_while_the_host_does_not_read_is_measured_from_the_last_it_saw():
+    """A glitch during a host stall (seed 104, sen10724: 68.94 s in a stall of 68.88-70.21 s, the runs 5.4° apart
+    since their start-ups after a reset at 64.03 s): the device's ORIENTATION at the fault's start never reached the
+    host, so the difference before it was unknown and the whole 5.7° two seconds later was blamed on the glitch.
+    It is measured from the last ORIENTATION the host got before the fault now (a stall does nothing to the
+    device): the offset that was there before is not the glitch's doing, 3° added to it still is."""
+    ends = [{"kind": "glitch_nack", "t_start": 1.5, "t_end": 1.5, "chips": ["adxl345"]}]
+    ref = _turning(0.5, 4.0, 100.0)
+    stalls = [(1.2, 2.0)]
+
+    def device(offset_after):
+        a, b = _turning(0.5, 1.2, 100.0, offset_deg=5.0), _turning(2.0, 4.0, 100.0, offset_deg=offset_after)
+        return a + [f for f in b if f.type_ != 0x01]
+    worst, rows = S.orientation_excess(device(5.0), ref, ends, [], host_stalls=stalls)
+    assert rows[0]["before_deg"] == pytest.approx(5.0, abs=0.1) and rows[0]["diff_deg"] == pytest.approx(5.0, abs=0.1)
+    assert rows[0]["excess_deg"] < 0.1 and worst.first_s is None
+    worst, rows = S.orientation_excess(device(8.0), ref, ends, [], host_stalls=stalls)
+    assert rows[0]["excess_deg"] == pytest.approx(3.0, abs=0.1) and worst.first_s == 3.5
+
+
 def test_a_fault_that_a_reset_overtakes_is_judged_as_the_reset():
     """A clock stretch (100 ms limit) at the instant of a brown-out: the firmware restarts, so the
     magnetometer's fresh data waits for its start-up, which the reset's own row judges (1000 ms limit); the

@@ -290,7 +290,8 @@ def orientation_excess(frames: list[Frame], ref: list[Frame], ends: list[dict], 
     millisecond in both runs), nor while either run says it is still converging (ORIENTATION ``converging``, its
     start-up gain) between the fault's start and the check: two start-ups are compared then, not the fault's
     doing (rows with ``skipped``). A check that falls while the host is not reading is made when it reads again
-    (nothing the device sent in between reaches it)."""
+    (nothing the device sent in between reaches it); a fault that starts while the host is not reading is
+    measured from the last ORIENTATION the host got before it."""
     ta, qa, fa = _quats(frames)
     tb, qb, fb = _quats(ref)
     worst = Invariant()
@@ -305,7 +306,12 @@ def orientation_excess(frames: list[Frame], ref: list[Frame], ends: list[dict], 
         if any(r - 0.1 <= t <= r + settle_after_reset_s for r in resets_t):
             continue
         row = {"kind": e["kind"], "chips": e["chips"], "t": round(t, 4)}
+        # the fault's start, or when it came while the host was not reading, the last ORIENTATION the host got
+        # before it (a host stall does nothing to the device's estimate)
         t0 = e.get("t_start", e["t_end"])
+        if any(a <= t0 <= b for a, b in host_stalls):
+            i = int(np.searchsorted(ta, t0, side="right")) - 1
+            t0 = float(ta[i]) if i >= 0 else t0
         conv = [bool(np.any(f[(tt >= t0 - 0.1) & (tt <= t + 0.1)] & ORI_CONVERGING)) for tt, f in ((ta, fa), (tb, fb))]
         if any(conv):
             rows.append({**row, "excess_deg": None, "skipped": "converging ("
