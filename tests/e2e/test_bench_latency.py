@@ -28,8 +28,9 @@ def test_bench_latency_rows_and_stages(tmp_path):
         s = row["stages_ms"]
         assert row["moves"] >= 3, row  # onsets after the daemon found the port, each moved the pointer
         assert row["pointer_reads_per_s"] >= 1000
-        # a RAW_SAMPLE frame at 115200 baud (10 bits a byte): its 30-odd bytes take 2.5-2.9 ms
-        assert 2.4 <= s["wire"]["p50"] <= 3.0
+        # a RAW_SAMPLE frame at 115200 baud (10 bits a byte): its 30-odd bytes take 2.5-2.9 ms, and it pauses for
+        # the MARG update (0.59 ms: sent before it, the UART's transmit interrupt held back during it)
+        assert 3.0 <= s["wire"]["p50"] <= 3.6
         assert s["age"]["p50"] > 0 and s["host"]["p50"] > 0
     # without an adapter the pty gets each byte as it leaves the UART; the FT232R at 16 ms holds a frame for
     # up to its latency timer plus a 1 ms USB frame

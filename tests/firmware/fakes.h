@@ -132,8 +132,12 @@ struct FakeHal : sphere::DeviceHal {
         eeprom_busy_until = now + eeprom_write_us;
         return true;
     }
+    std::vector<size_t> wire_at_pin;  // the wire's length each time the timing pin rose (the MARG update began)
     void margPin(bool h) override {
-        if (h) ++pin_pulses;
+        if (h) {
+            ++pin_pulses;
+            wire_at_pin.push_back(wire.size());
+        }
         pin_high = h;
     }
     bool adxlInterrupt(uint32_t& t) override {

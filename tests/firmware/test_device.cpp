@@ -1,4 +1,5 @@
 // Drivers against register-map fakes, and SphereDevice end to end: streams, commands, faults, taps.
+#include <algorithm>
 #include <cmath>
 
 #include "doctest_include.h"
@@ -88,7 +89,7 @@ TEST_CASE("drivers configure the chips as documented") {
     CHECK(bus.adxl.writes.back().first == 0x2D);  // measurement starts last
     REQUIRE(itg.begin());
     CHECK(itg.address() == 0x68);
-    CHECK(bus.itg.regs[0x15] == 4);     // 1 kHz / 5 = 200 Hz
+    CHECK(bus.itg.regs[0x15] == 0);     // every 1 kHz internal sample: the register is at most 1 ms old when read
     CHECK(bus.itg.regs[0x16] == 0x1B);  // FS_SEL 3, DLPF 42 Hz (below the 100 Hz Nyquist limit)
     CHECK(bus.itg.regs[0x3E] == 0x01);
     REQUIRE(hmc.begin());
@@ -215,8 +216,8 @@ TEST_CASE("power-up: a 0x00, HELLO, gyro bias estimated while still, then the de
     CHECK(count(f, PKT_ORIENTATION) == 100);
     CHECK(count(f, PKT_STATUS) == 1);
     for (size_t i = 0; i < f.size(); ++i) CHECK(f[i][1] == (uint8_t)(i + 1));  // no gaps
-    CHECK(f[0][0] == PKT_ORIENTATION);  // orientation first within a period
-    CHECK(f[1][0] == PKT_RAW_SAMPLE);
+    CHECK(f[0][0] == PKT_RAW_SAMPLE);  // the sample first within a period: it is sent before the MARG update
+    CHECK(f[1][0] == PKT_ORIENTATION);
     r.run(10);  // the first window restarts once when the magnetometer's first sample arrives
     f = r.hal.frames();
     CHECK((int)r.dev.calibration().gyro_bias[0] == 5);
@@ -805,4 +806,22 @@ TEST_CASE("an EEPROM write that fails half way answers STORAGE_ERROR and leaves 
     Calibration back;
     CHECK_FALSE(readCalibrationImage(r.hal.eeprom, back));
     CHECK_FALSE((r.dev.calibrationState() & CAL_FROM_EEPROM));
+}
+
+TEST_CASE("RAW_SAMPLE is on the wire before the MARG update starts, ORIENTATION after it") {
+    Rig r;
+    r.dev.begin();
+    r.run(2);
+    r.hal.wire.clear();
+    r.hal.wire_at_pin.clear();
+    r.run(1);  // a period with both (the ORIENTATION every second one)
+    // when the timing pin rose, the wire held the RAW_SAMPLE's frame (up to its delimiter) and nothing else
+    REQUIRE(r.hal.wire_at_pin.size() == 1);
+    size_t raw_len = (size_t)(std::find(r.hal.wire.begin(), r.hal.wire.end(), 0) - r.hal.wire.begin()) + 1;
+    CHECK(r.hal.wire_at_pin.back() == raw_len);
+    CHECK(r.hal.wire.size() > raw_len);
+    auto f = r.hal.frames();
+    REQUIRE(f.size() == 2);
+    CHECK(f[0][0] == PKT_RAW_SAMPLE);
+    CHECK(f[1][0] == PKT_ORIENTATION);
 }

@@ -150,6 +150,7 @@ bool AvrBoard::send(const uint8_t* frame, uint8_t len) {
 void AvrBoard::setBaud(uint32_t baud) {
     Serial.flush();     // the REPLY (and anything before it) leaves at the old rate
     Serial.begin(baud);  // 250k, 500k, 1M: UBRR 7, 3, 1 with U2X, exact on 16 MHz (ATmega328P datasheet, Table 20-7)
+    fast_link_ = baud >= 500000;
 }
 
 uint8_t AvrBoard::txRoom() {
@@ -183,6 +184,13 @@ void AvrBoard::margPin(bool high) {
     // ADXL345's INT0 stay enabled. Both steps are atomic, and the interrupt comes back only when the
     // transmit buffer holds bytes: the core's interrupt switches itself off when the buffer runs empty,
     // and switching it on over an empty buffer would send the whole stale ring again.
+    // On a fast link (500k, 1M) the ring is first let out: it holds the period's RAW_SAMPLE, sent just before
+    // (SphereDevice::tick), which would otherwise stop after its first bytes for the whole update; at 1 Mbaud that
+    // is 0.3 ms of waiting (the ring's 127 bytes at 500k: 2.5 ms, inside the 5 ms period). At 115200 the frame
+    // takes 2.5 ms by itself and the update's 0.6 ms pause in it is left.
+    if (high)
+        while (fast_link_ && Serial.availableForWrite() < SERIAL_TX_BUFFER_SIZE - 1) {
+        }
     ATOMIC_BLOCK(ATOMIC_RESTORESTATE) {
         if (high) {
             UCSR0B &= (uint8_t)~_BV(UDRIE0);

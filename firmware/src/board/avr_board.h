@@ -43,4 +43,5 @@ private:
     uint32_t identify_until_ms_ = 0;
     bool identifying_ = false;
     bool reboot_pending_ = false;
+    bool fast_link_ = false;  // 500k or 1M baud: margPin lets the transmit ring out first
 };

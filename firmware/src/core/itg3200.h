@@ -1,7 +1,9 @@
 // ITG-3200 gyroscope (InvenSense) at 0x68 (AD0 low) or 0x69: FS_SEL = 3 (±2000 °/s,
 // 14.375 LSB per °/s), 1 kHz internal rate with the 42 Hz low-pass (DLPF_CFG = 3, datasheet §8.3:
-// 4.8 ms delay), SMPLRT_DIV = 4 → 200 Hz: the low-pass is below the 100 Hz Nyquist limit of the
-// 200 Hz read, so motion above it does not alias.
+// 4.8 ms delay), SMPLRT_DIV = 0: the output registers take every internal sample (§8.2, register 21:
+// F_sample = F_internal / (SMPLRT_DIV + 1) = 1 kHz), so the 200 Hz read finds a value 0 … 1 ms old
+// instead of 0 … 5 ms. Reading every fifth of them is the decimation the chip's own SMPLRT_DIV = 4 did:
+// the low-pass is below the 100 Hz Nyquist limit of the 200 Hz read either way, so nothing new aliases.
 // Data registers are big-endian.
 #pragma once
 #include <stdint.h>
@@ -15,7 +17,7 @@ public:
     static const uint8_t ADDRESS_AD0_LOW = 0x68, ADDRESS_AD0_HIGH = 0x69;
     enum Reg : uint8_t { WHO_AM_I = 0x00, SMPLRT_DIV = 0x15, DLPF_FS = 0x16, INT_CFG = 0x17, GYRO_XOUT_H = 0x1D,
                          PWR_MGM = 0x3E };
-    static const uint8_t SMPLRT_DIV_200HZ = 4;   // 1 kHz / (4 + 1)
+    static const uint8_t SMPLRT_DIV_1KHZ = 0;    // 1 kHz / (0 + 1)
     static const uint8_t DLPF_FS_2000DPS_42HZ = (3 << 3) | 3;
     static const uint8_t PWR_MGM_PLL_X = 0x01;   // clock from the X gyro's PLL (datasheet advice)
 

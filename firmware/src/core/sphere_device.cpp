@@ -375,6 +375,7 @@ __attribute__((noinline)) void SphereDevice::tick() {
     if (raw_flags_ & RAW_ACCEL_OK) tap_active_ = guard_.update(raw_[0]);
     else tap_active_ = false;
     if (tap_active_) raw_flags_ |= RAW_TAP_ACTIVE;
+    streamRaw(t0);  // the sample leaves now, not after the MARG update (firmware/README.md, "How old a sample is")
     trackBias();
     keepTrackedBias();
     runFilter(dt);
@@ -387,7 +388,24 @@ __attribute__((noinline)) void SphereDevice::tick() {
     if (work > max_work_us_) max_work_us_ = (uint16_t)work;
 }
 
-// ORIENTATION first: the pointer's packet does not wait behind the raw sample.
+// RAW_SAMPLE as soon as the chips are read: the host's pointer moves from its gyroscope reading, and the MARG
+// update (0.6 ms) and the ORIENTATION frame no longer stand between the read and the sample's first byte.
+__attribute__((noinline)) void SphereDevice::streamRaw(uint32_t t_us) {
+    if (!(stream_mode_ & STREAM_RAW) || !raw_rate_hz_ || phase_ % (IMU_RATE_HZ / raw_rate_hz_) != 0) return;
+    RawSample r;
+    r.t_us = t_us;
+    r.flags = (uint8_t)(raw_flags_ | (mag_fresh_since_raw_ ? RAW_MAG_FRESH : 0));
+    for (uint8_t i = 0; i < 3; ++i) {
+        r.accel[i] = raw_[0][i];
+        r.gyro[i] = raw_[1][i];
+        r.mag[i] = raw_[2][i];
+    }
+    mag_fresh_since_raw_ = false;
+    uint8_t body[RAW_SAMPLE_LEN];
+    sendPacket(PKT_RAW_SAMPLE, body, writeRawSample(r, body));
+}
+
+// ORIENTATION after the update, STATUS once a second.
 __attribute__((noinline)) void SphereDevice::stream(uint32_t t_us) {
     uint8_t body[STATUS_LEN];
     if ((stream_mode_ & STREAM_ORIENTATION) && orientation_rate_hz_ &&
@@ -397,18 +415,6 @@ __attribute__((noinline)) void SphereDevice::stream(uint32_t t_us) {
         o.flags = ori_flags_;
         orientationQ14(o.quat);
         sendPacket(PKT_ORIENTATION, body, writeOrientation(o, body));
-    }
-    if ((stream_mode_ & STREAM_RAW) && raw_rate_hz_ && phase_ % (IMU_RATE_HZ / raw_rate_hz_) == 0) {
-        RawSample r;
-        r.t_us = t_us;
-        r.flags = (uint8_t)(raw_flags_ | (mag_fresh_since_raw_ ? RAW_MAG_FRESH : 0));
-        for (uint8_t i = 0; i < 3; ++i) {
-            r.accel[i] = raw_[0][i];
-            r.gyro[i] = raw_[1][i];
-            r.mag[i] = raw_[2][i];
-        }
-        mag_fresh_since_raw_ = false;
-        sendPacket(PKT_RAW_SAMPLE, body, writeRawSample(r, body));
     }
     if ((stream_mode_ & STREAM_STATUS) && phase_ == IMU_RATE_HZ / 2) sendStatus();
 }

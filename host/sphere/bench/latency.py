@@ -14,9 +14,11 @@ Motion: ``synthetic:onsets`` (:mod:`sphere.sim.onsets`): sharp 120 °/s turns st
 at every phase of the 5 ms sample clock. For each onset the pointer's first move after it is found in the
 pointer record, and its latency is split where the path can be split (all from the board's ``--host-log``):
 
-- ``age``: onset → the firmware starts sending the frame that moved the pointer (sampling, the ITG-3200's
-  42 Hz DLPF, waiting for the sample period, the MARG update, queueing behind other frames);
-- ``wire``: that frame's first byte → its delimiter at the UART (its length at the baud rate);
+- ``age``: onset → the firmware starts sending the frame that moved the pointer (waiting for the sample period,
+  the ITG-3200's 42 Hz DLPF and its register refreshed every 1 ms, the reads, queueing behind other frames; and
+  a sample period more when the first moving sample does not add up to a pixel yet);
+- ``wire``: that frame's first byte → its delimiter at the UART (its length at the baud rate; at 115200 with the
+  MARG update's 0.6 ms pause in it: RAW_SAMPLE is sent before the update, firmware/README.md);
 - ``adapter``: the delimiter leaves the UART → the adapter hands the packet to the host (the pty write);
 - ``host``: the pty write → the X pointer moved (the daemon's read, decoding, filters, XTest, the X server,
   and the pointer sampler's own period).
