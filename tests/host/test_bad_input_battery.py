@@ -369,6 +369,9 @@ ROWS = [
     S(["device", "keys"], 1, "no space left", stdout="/dev/full"),
     S(["service", "print"], 1, "no space left", stdout="/dev/full"),
     M(["--print-config"], 1, "no space left", stdout="/dev/full"),
+    C(["--print-stats=yes"], 2, "ignored explicit argument"),
+    M(["--replay", "{tmp}/good.cap", "--speed", "0", "--print-stats"], 1, "no space left", files=CAP,
+      stdout="/dev/full"),
     # every command that writes a file, into a full disk: one line, exit 1, never a hang (sim used to read
     # /dev/full back forever)
     S(["sim", "--trace", "synthetic:tour", "--seconds", "1", "--capture", "/dev/full"], 1, "no space left"),

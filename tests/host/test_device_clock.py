@@ -70,3 +70,23 @@ def test_a_growing_age_is_said_once_and_its_end_once():
     assert "congested" in said[0] and "3.0 ms" in said[0] and "again" in said[1]
     med, p95 = ages.percentiles_ms()
     assert abs(med - 3.2) < 1e-9 and abs(p95 - 3.2) < 1e-9
+
+
+def test_the_runs_ages_are_kept_over_a_reconnect_and_give_nearest_rank_percentiles():
+    import numpy as np
+
+    rng = np.random.default_rng(5)
+    first, second = rng.gamma(4.0, 1.5, 3000), rng.gamma(4.0, 3.0, 2000)  # ms
+    ages = SampleAges()
+    assert ages.run_percentiles_ms() is None
+    for i, a in enumerate(first):
+        ages.add(a / 1e3, i * 0.005)
+    ages.clear()  # a reconnect: the window starts again, the run goes on
+    assert ages.percentiles_ms() is None
+    for i, a in enumerate(second):
+        ages.add(a / 1e3, 100 + i * 0.005)
+    both = np.sort(np.concatenate([first, second]))
+    got = ages.run_percentiles_ms((50, 95, 99, 100))
+    want = [both[min(len(both) - 1, int(p / 100 * len(both)))] for p in (50, 95, 99, 100)]
+    assert ages.run_samples == 5000
+    assert np.allclose(got, want, atol=0.051), (got, want)  # counted in 0.1 ms steps

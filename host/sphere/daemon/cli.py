@@ -7,6 +7,7 @@ import logging
 import os
 import signal
 import sys
+import time
 
 from serial.tools import list_ports
 
@@ -21,7 +22,7 @@ from sphere.daemon.config import ConfigError
 from sphere.daemon.outputs.fanout import attach
 from sphere.daemon.print_config import defaults_toml
 from sphere.daemon.sources.base import SourceError
-from sphere.daemon.status import StatusLine
+from sphere.daemon.status import StatusLine, run_stats
 from sphere.errors import output_failed
 
 DESCRIPTION = """Turn the MARG sphere into a pointer (and a 3-D controller). Small wrist rotations move the
@@ -58,6 +59,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--status", action="store_true", help="print the status line every second even when "
                    "stderr is not a terminal")
     p.add_argument("--quiet", action="store_true", help="no status line")
+    p.add_argument("--print-stats", action="store_true", help="when the daemon stops, print the run's figures on "
+                   "stdout: frames, errors, losses, each sample's age on arrival (median, p95, p99, max), pointer moves")
     p.add_argument("-v", "--verbose", action="store_true", help="also log details: e.g. a serial driver that "
                    "offers no low-latency mode")
     p.add_argument("--check-config", action="store_true", help="validate the config and exit")
@@ -254,6 +257,7 @@ def _main(argv=None) -> int:
         signal.signal(signal.SIGUSR1, lambda s, f: daemon.request("recentre"))
         signal.signal(signal.SIGUSR2, lambda s, f: daemon.request("pause"))
     code = 0
+    started = time.monotonic()
     try:
         daemon.run()
     except SourceError as e:
@@ -269,4 +273,6 @@ def _main(argv=None) -> int:
         if stream is not None:
             stream.stop()
     log(f"stopped: {daemon.moves} pointer moves, {daemon.clicks} clicks, modes {daemon.mode_changes or [daemon.mode]}")
+    if args.print_stats:
+        print(run_stats(daemon, time.monotonic() - started), flush=True)
     return code

@@ -1,4 +1,5 @@
-"""The status line: source, link quality (frames/s, CRC errors, lost frames), mode, battery."""
+"""The status line: source, link quality (frames/s, CRC errors, lost frames), mode, battery; and the run's
+figures ``sphere-mouse --print-stats`` prints when the daemon stops."""
 
 from __future__ import annotations
 
@@ -69,3 +70,30 @@ class StatusLine:
         except (BrokenPipeError, ValueError):
             pass
         return self.last_text
+
+
+def run_stats(daemon, seconds: float) -> str:
+    """What ``--print-stats`` prints when the daemon stops: the link's counters over the run, each sample's age on
+    arrival (a serial link to a protocol-3 sphere: the device clock from ECHO round trips, sphere.link.clock) and
+    what the pointer did."""
+    src = daemon.source
+    s = src.stats
+    rate = f" ({s.frames_ok / seconds:.1f}/s)" if seconds > 0 else ""
+    lines = [f"frames {s.frames_ok}{rate} over {seconds:.1f} s, bad {s.errors} ({_size(s.bytes_skipped)} skipped), "
+             f"gaps {s.seq_gaps} ({s.frames_lost} lost), duplicates {getattr(s, 'duplicates', 0)}, "
+             f"reconnects {getattr(src, 'losses', 0)}"]
+    ages = getattr(src, "ages", None)
+    run = ages.run_percentiles_ms((50, 95, 99, 100)) if ages is not None else None
+    if run is None:
+        why = ("this source has no device clock" if ages is None else
+               "no device clock yet (a protocol-3 sphere answers ECHO; an older one or a short run gives none)")
+        lines.append(f"sample age: not known: {why}")
+    else:
+        clock = getattr(src, "clock", None)
+        unc = getattr(clock, "uncertainty_s", None)
+        lines.append(f"sample age on arrival: median {run[0]:.1f} ms, p95 {run[1]:.1f} ms, p99 {run[2]:.1f} ms, "
+                     f"max {run[3]:.1f} ms ({ages.run_samples} samples"
+                     + (f", device clock ±{unc * 1e3:.2f} ms" if unc is not None else "") + "); "
+                     + (f"grew {ages.growing_spells} times" if ages.growing_spells else "never grew"))
+    lines.append(f"pointer moves {daemon.moves}, clicks {daemon.clicks}, mode {daemon.mode}")
+    return "\n".join("sphere-mouse stats: " + line for line in lines)

@@ -153,9 +153,15 @@ class SampleAges:
     #: a one-second median this far above the best one-second median so far, twice in a row, is "growing"
     GROWING_S = 0.020
 
+    #: the run's ages are counted in steps of this many seconds (bounded memory however long the daemon runs)
+    RUN_STEP_S = 1e-4
+
     def __init__(self, keep_s: float = 2.0):
         self.keep_s = keep_s
         self._ages: collections.deque = collections.deque()  # (host_s, age_s)
+        self._run: collections.Counter = collections.Counter()  # the whole run: age in RUN_STEP_S steps -> samples
+        self.run_samples = 0
+        self.growing_spells = 0  # how often the age started growing over the run
         self._second: list[float] = []
         self._second_start: float | None = None
         self.best_median_s: float | None = None
@@ -166,6 +172,8 @@ class SampleAges:
     def add(self, age_s: float, host_s: float) -> str | None:
         """Note one sample's age; returns a line to log when the age starts or stops growing, else None."""
         self._ages.append((host_s, age_s))
+        self._run[round(age_s / self.RUN_STEP_S)] += 1
+        self.run_samples += 1
         while self._ages and host_s - self._ages[0][0] > self.keep_s:
             self._ages.popleft()
         if self._second_start is None:
@@ -181,6 +189,7 @@ class SampleAges:
         self._high_seconds = self._high_seconds + 1 if high else 0
         if self._high_seconds >= 2 and not self.growing and host_s - self._ended_at >= QUIET_S:
             self.growing = True
+            self.growing_spells += 1
             return (f"the sphere's samples arrive {med * 1e3:.0f} ms old (was {self.best_median_s * 1e3:.1f} ms): "
                     "the link is congested (Bluetooth?) or the adapter stalls")
         if self.growing and not high:
@@ -196,7 +205,24 @@ class SampleAges:
         a = sorted(age for _, age in self._ages)
         return a[len(a) // 2] * 1e3, a[min(len(a) - 1, int(0.95 * len(a)))] * 1e3
 
+    def run_percentiles_ms(self, ps=(50, 95)) -> tuple[float, ...] | None:
+        """The given percentiles (nearest rank, 100 = the largest) of every age noted since this object was made,
+        a reconnect's :meth:`clear` included, in ms (to 0.1 ms); None before any."""
+        if not self.run_samples:
+            return None
+        steps = sorted(self._run.items())
+        out = []
+        for p in ps:
+            rank, seen = min(self.run_samples - 1, int(p / 100 * self.run_samples)), 0
+            for step, n in steps:
+                seen += n
+                if seen > rank:
+                    out.append(step * self.RUN_STEP_S * 1e3)
+                    break
+        return tuple(out)
+
     def clear(self) -> None:
+        """A new link (a reconnect): the recent window and the growth test start again; the run's ages stay."""
         self._ages.clear()
         self._second, self._second_start = [], None
         self.best_median_s = None

@@ -44,22 +44,18 @@ class LinkMonitor:
         self.quat_history: collections.deque = collections.deque(maxlen=2000)
         #: each RAW_SAMPLE's age on arrival (sphere.link.clock), once the device clock is known
         self.ages = SampleAges()
-        self.run_ages: list[float] = []
         self.clock_uncertainty_s: float | None = None
 
     def sample_age(self, age_s: float, wall_s: float) -> str | None:
         """Note a RAW_SAMPLE's age on arrival; a line when it starts or stops growing."""
-        if len(self.run_ages) < 1_000_000:
-            self.run_ages.append(age_s)
         return self.ages.add(age_s, wall_s)
 
     def age_line(self) -> str | None:
         now = self.ages.percentiles_ms()
         if now is None:
             return None
-        a = sorted(self.run_ages)
-        run = (f"; over the run median {a[len(a) // 2] * 1e3:.2f} ms, p95 {a[int(0.95 * (len(a) - 1))] * 1e3:.2f} ms "
-               f"({len(a)} samples)")
+        med, p95 = self.ages.run_percentiles_ms()
+        run = f"; over the run median {med:.2f} ms, p95 {p95:.2f} ms ({self.ages.run_samples} samples)"
         clock = f", device clock ±{self.clock_uncertainty_s * 1e3:.2f} ms" if self.clock_uncertainty_s is not None else ""
         return f"sample age: median {now[0]:.2f} ms, p95 {now[1]:.2f} ms (last {self.ages.keep_s:g} s{clock}){run}"
 
