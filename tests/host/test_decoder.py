@@ -107,6 +107,22 @@ def test_unknown_type_still_counts_its_sequence_number():
     assert len(out) == 2 and stats.unknown_types == 1 and stats.seq_gaps == 0
 
 
+@pytest.mark.parametrize("size", [1, 7, 100, 597])
+def test_a_chunk_too_long_counts_the_same_however_it_comes_and_whenever_it_is_read(size):
+    """Bytes without a delimiter are only kept when they come: a chunk past the longest frame is still counted
+    once, with every byte skipped, when the stats are read before any delimiter, and the next frame survives."""
+    frame = encode_frame(Orientation(9, 0, (16384, 0, 0, 0)), 0)
+    junk = bytes(range(1, 200)) * 3
+    decoder = FrameDecoder()
+    for i in range(0, len(junk), size):
+        assert decoder.feed(junk[i : i + size]) == []
+    stats = decoder.stats
+    assert (stats.oversize, stats.bytes_skipped, stats.bytes_in) == (1, len(junk), len(junk))
+    assert [p.t_us for p in decoder.feed(b"\x00" + frame)] == [9]
+    assert (stats.oversize, stats.bytes_skipped, stats.frames_ok) == (1, len(junk) + 1, 1)
+    assert decoder.stats == decode_all(junk + b"\x00" + frame)[1]
+
+
 def test_device_restart_is_not_a_gap():
     hello = Hello(1, (0, 1, 0), 7, 0xE5, 0x69, b"H43", 200, 75, 7, 200, 100, 0)
     data = encode_frame(hello, 0) + stream_of([Status(0, 7, (0, 0, 0), 0, 0, 0, 0, 0, 0, 0, 0)] * 5, 1)

@@ -74,14 +74,21 @@ class FrameDecoder:
 
     @property
     def stats(self) -> DecoderStats:
-        """The counters, up to the last byte fed (a byte fed alone inside a frame is counted in ``bytes_in`` here
-        or at the next delimiter, not when it comes: the byte-at-a-time path does nothing but keep it)."""
+        """The counters, up to the last byte fed. Bytes without a delimiter are only kept when they come (the
+        byte-at-a-time path): they are counted here or at the next call that brings a delimiter."""
         self._count_gathered()
         return self._stats
 
     def _count_gathered(self) -> None:
-        n = len(self._buf)
+        buf = self._buf
+        n = len(buf)
         self._stats.bytes_in += n - self._counted
+        if n > MAX_ENCODED:  # gathered past the longest frame: dropped as feed's loop drops it
+            self._stats.oversize += 1
+            self._stats.bytes_skipped += n
+            buf.clear()
+            self._room = 0
+            n = 0
         self._counted = n
 
     def restart(self) -> None:
@@ -100,8 +107,10 @@ class FrameDecoder:
 
     def feed(self, data: bytes) -> list[Packet]:
         buf = self._buf
-        if len(data) == 1 and data[0] and len(buf) < self._room:
-            buf += data  # the common case when a port is read byte by byte: a byte inside a frame (see stats)
+        if 0 not in data and len(buf) < self._room:
+            # no delimiter: only kept (see stats; what is too long is found at the next call). The common case
+            # when a port is read byte by byte: a byte inside a frame
+            buf += data
             return []
         stats = self._stats
         stats.bytes_in += len(data) + len(buf) - self._counted
