@@ -9,7 +9,7 @@ count of runs that passed; exit 1 when any failed.
 
 --seeds takes a range A-B and/or a list (201-205,230). Each run is `sphere sim --soak SECONDS --seed N --board
 B` (the faulty and the fault-free board one after the other, about 20-40 CPU s for 120 s); --jobs runs that
-many at once. --json writes every run's report; --keep DIR keeps each run's captures and trace under
+many at once. --json writes every run's report (as each run ends); --keep DIR keeps each run's captures and trace under
 DIR/SEED-BOARD/ for a closer look. Part of the MARG sphere's virtual board (hardware/sim); GPL-3.0-or-later.
 """
 
@@ -61,6 +61,11 @@ def cell(report: dict | None, error: str | None = None) -> str:
     return f"FAIL {ori_s} " + ", ".join(what)
 
 
+def write_json(path: str, runs: list, results: dict) -> None:
+    Path(path).write_text(json.dumps([{"seed": s, "board": b, "report": results[(s, b)]} for s, b in runs
+                                      if (s, b) in results], indent=1) + "\n")
+
+
 def main(argv=None) -> int:
     from sphere.sim.board import BOARD_VARIANTS, firmware_elf
     from sphere.sim.soak import run_soak
@@ -100,6 +105,8 @@ def main(argv=None) -> int:
         with ThreadPoolExecutor(max_workers=a.jobs) as ex:
             for sb, out in ex.map(one, runs):
                 results[sb] = out
+                if a.json:  # rewritten as runs end: an interrupted matrix keeps what it did
+                    write_json(a.json, runs, results)
     print(f"\nsphere sim --soak {a.seconds:g} --seed N --board B, firmware {src}")
     print("| seed | " + " | ".join(boards) + " |")
     print("|---|" + "---|" * len(boards))
@@ -112,9 +119,6 @@ def main(argv=None) -> int:
             passed += isinstance(r, dict) and not r["failed"]
         print(f"| {s} | " + " | ".join(cells) + " |")
     print(f"{passed} of {len(runs)} passed (seeds {','.join(map(str, a.seeds))}; boards {', '.join(boards)})")
-    if a.json:
-        Path(a.json).write_text(json.dumps([{"seed": s, "board": b, "report": results[(s, b)]} for s, b in runs],
-                                           indent=1) + "\n")
     return 0 if passed == len(runs) else 1
 
 
