@@ -286,3 +286,32 @@ def test_a_fault_that_a_reset_overtakes_is_judged_as_the_reset():
     # the same stretch with no reset near it is judged against 100 ms, and fails
     worst, _ = S.recovery(frames, ends[:1])
     assert worst.first_s == pytest.approx(0.999)
+
+
+def test_the_seed_by_board_matrix_prints_a_table_and_fails_when_a_run_does(tmp_path):
+    """hardware/sim/soak_matrix.py, as its user runs it: one seed on one board, a short soak; a line per run, a
+    table row per seed with the verdict, the count of runs that passed, a JSON report per run; the exit status 1
+    exactly when a run failed. Seeds it cannot read are refused with one line and exit 2."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    from simscenarios import need_board, need_firmware
+
+    need_board()
+    elf = need_firmware()
+    script = Path(__file__).resolve().parents[2] / "hardware" / "sim" / "soak_matrix.py"
+    out = tmp_path / "m.json"
+    r = subprocess.run([sys.executable, str(script), "--seeds", "2", "--board", "aligned", "--seconds", "14",
+                        "--jobs", "1", "--firmware", str(elf), "--json", str(out)], capture_output=True, text=True,
+                       timeout=600)
+    lines = r.stdout.strip().splitlines()
+    assert lines[0].startswith("sphere sim --soak 14 s seed 2 board aligned:"), r.stdout + r.stderr
+    assert "| seed | aligned |" in lines and any(x.startswith("| 2 | PASS") or x.startswith("| 2 | FAIL") for x in lines)
+    reports = json.loads(out.read_text())
+    assert [(x["seed"], x["board"]) for x in reports] == [(2, "aligned")]
+    failed = bool(reports[0]["report"]["failed"])
+    assert lines[-1].startswith(f"{0 if failed else 1} of 1 passed") and r.returncode == (1 if failed else 0)
+    for bad in ("5-2", "x", ""):
+        r = subprocess.run([sys.executable, str(script), "--seeds", bad], capture_output=True, text=True, timeout=60)
+        assert r.returncode == 2 and r.stdout == "" and "--seeds" in r.stderr and "Traceback" not in r.stderr
