@@ -243,9 +243,15 @@ def test_signal_storm_while_the_pointer_moves(xvfb, tmp_path):
     env = dict(os.environ, DISPLAY=xvfb, XDG_CONFIG_HOME=str(tmp_path))
     # as fast as it goes: the loop is inside python-xlib nearly all the time, where a handler that called the backend
     # would re-enter it
+    before = pointer(xvfb)
     p = subprocess.Popen([sys.executable, "-m", "sphere.mouse", "--replay", str(cap), "--speed", "0", "--backend", "x11",
                           "--no-stream", "--quiet"], env=env, stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True)
-    time.sleep(1.5)  # started and moving
+    # started and moving: the pointer moves only once the loop runs, after the handlers are in place (a fixed
+    # 1.5 s was too short on a loaded machine: SIGUSR1's default action ended the daemon before it had them)
+    deadline = time.monotonic() + 60.0
+    while p.poll() is None and pointer(xvfb) == before and time.monotonic() < deadline:
+        time.sleep(0.02)
+    assert p.poll() is None and pointer(xvfb) != before, "sphere-mouse never moved the pointer"
     sent = 0
     deadline = time.monotonic() + 8.0
     while p.poll() is None and sent < 5000 and time.monotonic() < deadline:

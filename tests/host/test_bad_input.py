@@ -127,6 +127,23 @@ def test_mouse_replay_of_things_that_are_not_captures(tmp_path, home):
     clear(mouse("--replay", str(fifo), env=home), 2, "not a regular file")
 
 
+def _started(p, until, timeout_s: float = 60.0) -> str:
+    """What sphere-mouse wrote to stderr up to the first line ``until(line)`` is true of (a fixed sleep before a
+    signal could end a daemon still starting, before its handlers were in place)."""
+    seen, got = [], threading.Event()
+
+    def read():
+        for line in p.stderr:
+            seen.append(line)
+            if until(line):
+                got.set()
+                return
+
+    threading.Thread(target=read, daemon=True).start()
+    assert got.wait(timeout_s), "sphere-mouse did not start: " + "".join(seen)
+    return "".join(seen)
+
+
 def test_mouse_replay_stops_at_once_on_sigterm(tmp_path, home):
     """A slow replay (a long pause between packets) still ends within a moment of SIGTERM."""
     cap = tmp_path / "slow.bin"
@@ -134,10 +151,13 @@ def test_mouse_replay_stops_at_once_on_sigterm(tmp_path, home):
     p = subprocess.Popen([sys.executable, "-m", "sphere.mouse", "--no-stream", "--backend", "log", "--quiet",
                           "--replay", str(cap), "--speed", "0.001"], stderr=subprocess.PIPE, stdout=subprocess.DEVNULL,
                          text=True, env={**os.environ, **home})
-    time.sleep(2.0)
+    # its line "source …, backend …" is the last before the handlers go in; the replay waits 5 s for its next packet
+    first = _started(p, lambda line: ", backend log, " in line)
+    time.sleep(0.2)
     p.send_signal(signal.SIGTERM)
     t0 = time.monotonic()
     _, err = p.communicate(timeout=10)
+    err = first + err
     assert time.monotonic() - t0 < 2.0 and p.returncode == 0 and "Traceback" not in err, err
 
 
@@ -145,9 +165,10 @@ def test_mouse_named_port_that_is_missing_waits_and_stops(home):
     p = subprocess.Popen([sys.executable, "-m", "sphere.mouse", "--no-stream", "--backend", "log", "--status",
                           "--port", "/dev/ttyNOPE7"], stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True,
                          env={**os.environ, **home})
-    time.sleep(2.5)
+    first = _started(p, lambda line: line.startswith("waiting for"))  # the status line: the loop runs
     p.send_signal(signal.SIGTERM)
     _, err = p.communicate(timeout=10)
+    err = first + err
     assert p.returncode == 0 and "Traceback" not in err and "waiting for /dev/ttyNOPE7" in err, err
 
 
