@@ -9,6 +9,7 @@ from __future__ import annotations
 import ast
 import functools
 import io
+import re
 import sys
 import tokenize
 from collections import defaultdict
@@ -45,11 +46,16 @@ def _resolve(name: str) -> str:
 
 
 @functools.cache
+def tree(path: Path) -> ast.Module:
+    return ast.parse(path.read_text(), str(path))
+
+
+@functools.cache
 def imports() -> dict[str, set[str]]:
     """module → the sphere modules it imports, anywhere in it."""
     out = defaultdict(set)
     for module, path in MODULES.items():
-        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        for node in ast.walk(tree(path)):
             if isinstance(node, ast.Import):
                 names = [a.name for a in node.names]
             elif isinstance(node, ast.ImportFrom):
@@ -162,10 +168,10 @@ def _comments(source: str) -> dict[int, str]:
             if tok.type == tokenize.COMMENT}
 
 
-def imports_in_functions(source: str, name: str = "<source>") -> list[tuple[int, str, str]]:
+def imports_in_functions(source: str, name: str = "<source>", parsed: ast.Module | None = None
+                         ) -> list[tuple[int, str, str]]:
     """(line, the import, its comment) of every import made inside a function (or a method, a nested one)."""
-    comments, lines = _comments(source), source.splitlines()
-    found = []
+    lines, found = source.splitlines(), []
 
     class Walk(ast.NodeVisitor):
         depth = 0
@@ -179,21 +185,28 @@ def imports_in_functions(source: str, name: str = "<source>") -> list[tuple[int,
 
         def visit_Import(self, node):
             if self.depth:
-                own = " ".join(comments[n] for n in range(node.lineno, node.end_lineno + 1) if n in comments)
-                above = lines[node.lineno - 2].strip() if node.lineno > 1 else ""
-                found.append((node.lineno, lines[node.lineno - 1].split("#")[0].strip(), own or (above if above[:1] == "#" else "")))
+                found.append(node)
 
         visit_ImportFrom = visit_Import
 
-    Walk().visit(ast.parse(source, name))
-    return found
+    Walk().visit(parsed or ast.parse(source, name))
+    comments = _comments(source) if found else {}  # tokenizing is the slow part: only where it is needed
+    out = []
+    for node in found:
+        own = " ".join(comments[n] for n in range(node.lineno, node.end_lineno + 1) if n in comments)
+        above = lines[node.lineno - 2].strip() if node.lineno > 1 else ""
+        text = lines[node.lineno - 1].split("#")[0].strip()
+        out.append((node.lineno, text, own or (above if above[:1] == "#" else "")))
+    return out
 
 
 @functools.cache
 def all_imports_in_functions() -> list[tuple[str, int, str, str]]:
     """(module's path in the package, line, the import, its comment) over every module."""
+    indented = re.compile(r"^[ \t]+(import|from)[ \t]", re.M)  # only a module with one can have one in a function
     return [(str(path.relative_to(PACKAGE.parent)), *found) for path in sorted(MODULES.values())
-            for found in imports_in_functions(path.read_text(), str(path))]
+            if indented.search(source := path.read_text())
+            for found in imports_in_functions(source, str(path), tree(path))]
 
 
 def test_imports_inside_functions_say_why():
