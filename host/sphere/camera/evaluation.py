@@ -46,7 +46,8 @@ class Run:
     fixes: list = field(default_factory=list)  # (t_mid, error of the fix against the truth (m), the gate's verdict)
 
 
-def run(rt: RenderedTrial, hue_deg: float = 120.0) -> Run:
+def run(rt: RenderedTrial, hue_deg: float = 120.0, tracker: dict | None = None) -> Run:
+    """Every method on a rendered trial; ``tracker``: settings of the hybrid's CameraImuTracker (to choose them)."""
     cam = rt.scene.camera
     det = BallDetector(cam, hue_deg=hue_deg, radius_m=rt.scene.radius_m)
     mdet = None
@@ -56,7 +57,7 @@ def run(rt: RenderedTrial, hue_deg: float = 120.0) -> Run:
     n_imu = len(rt.t)
     R_host = np.full((n_imu, 3, 3), np.nan)  # the host filter's orientation through the alignment
     R_hyb = np.full((n_imu, 3, 3), np.nan)  # the same with the marker's heading correction
-    hyb = CameraImuTracker()
+    hyb = CameraImuTracker(**(tracker or {}))
     ckf = CameraImuTracker(use_imu=False)
     tr = rt.trial
     n = len(rt.t)
