@@ -61,7 +61,7 @@ def test_a_one_second_loss_of_the_ball(slow_translation):
     assert imu["rmse_lateral_m"] > 10 * slow_translation["methods"]["hybrid"]["rmse_lateral_m"]  # IMU alone drifts
 
 
-@pytest.mark.parametrize("side", [200.0, 20.0, 110.0])
+@pytest.mark.parametrize("side", [200.0, 20.0, 110.0, 0.0, 270.0])
 def test_first_lock_on_a_ball_behind_a_hand_from_the_start(broad_dir, side):
     """Issue 30: a hand over the ball from the first frame (the palm's edge near the ball's centre: about half
     of the outline hidden, two-thirds of the ball or less seen): the first fix within 0.5 s, and no fix of it

@@ -70,18 +70,20 @@ def test_a_hand_over_a_third_of_the_ball(scene):
     assert np.linalg.norm(d.center_cam - p) < 0.01
 
 
-@pytest.mark.parametrize("cover,side", [(0.37, 200.0), (0.45, 200.0), (0.5, 200.0)])
+@pytest.mark.parametrize("side", [200.0, 0.0, 90.0, 180.0, 270.0])
+@pytest.mark.parametrize("cover", [0.37, 0.45, 0.5])
 def test_a_cold_start_locks_on_a_ball_half_behind_a_hand(scene, cover, side):
     """Issue 30: without a track, half of the outline fitted sharply is enough (the fit's own residual),
-    where 60 % of the rays used to be needed (the old detector finds nothing in these frames). With the
-    hand from the other sides of this still scene (a dark box behind the ball) it still finds nothing."""
+    where 60 % of the rays used to be needed (the old detector finds nothing in these frames). The ball sits in
+    front of a dark box with the wall beyond it: the rays there used to unmix against the wall and end 6-10 px
+    out, on the box's far edge, so with the hand from the right, below, the left or above nothing was found."""
     sc = render.Scene(CAM, scene.R_wc, scene.cam_pos, seed=4, occlusions=[render.Occlusion(0.0, 1.0, cover, side)])
     p = np.array([0.1, 0.05, 0.9])
     det = BallDetector(CAM)
     d = det.detect(_still(sc, p))  # no hint: the whole frame searched
     assert d is not None, "no lock on a ball half behind a hand"
-    assert d.inliers < 0.6 * det.n_rays and d.residual_px <= 0.25
-    assert np.linalg.norm(d.center_cam - p) < 0.03
+    assert d.inliers < 0.7 * det.n_rays and d.residual_px <= 0.25  # the hand's edge left out, the rest sharp
+    assert np.linalg.norm(d.center_cam - p) < 0.01
 
 
 def test_a_hidden_ball_and_a_same_coloured_blob_give_no_cold_start_lock(scene):

@@ -192,7 +192,20 @@ class BallDetector:
             cover = 1.0 - (pg - bg[:, None] * pb) / np.where(unmix, det, 1.0)[:, None]
         val = cover
         use = unmix.copy()
-        fb = np.nonzero(ok & ~unmix)[0]
+        # a dark thing right behind the ball's edge (a box, a shadow) with a lighter background further out unmixes
+        # against the wrong background: its pixels count as ball and the crossing lands on the far side of it
+        # (6-10 px out in front of a dark box). The pixels just inside an unmixed crossing must be of the ball's
+        # colour; where they are not, the ray is measured by the hue projection's local levels instead
+        search = s > 0.5 * r0
+        with np.errstate(invalid="ignore"):
+            above = (cover >= 0.5) & search[None, :] & inside
+        last = n - 1 - np.argmax(above[:, ::-1], axis=1)
+        k_in = np.clip(last[:, None] - np.arange(2, 7)[None, :], 0, n - 1)  # 1-3 px inside the crossing
+        a_k, c_k, b_k = hue_projection(prof[rows[:, None], k_in][..., ::-1], self.hue_deg)
+        ball_inside = ((a_k > 0.45 * b_k) & (np.abs(c_k) < 0.35 * a_k) & (b_k > 30)).mean(axis=1) >= 0.5
+        wrong = unmix & above.any(axis=1) & ~ball_inside
+        use &= ~wrong
+        fb = np.nonzero(ok & (~unmix | wrong))[0]
         if len(fb):  # the fallback, for those rays: hue projection with local levels
             hh = np.radians(self.hue_deg)
             pf = prof[fb]
