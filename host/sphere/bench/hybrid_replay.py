@@ -51,8 +51,9 @@ def add_arguments(p) -> None:
     p.add_argument("--json", metavar="OUT", type=argtypes.out_file, help="write the figures as JSON")
 
 
-def replay(session, speed: float, home, extra_args=()) -> list[dict]:
-    """Every ``orientation`` message of `sphere-mouse --replay SESSION` on its WebSocket, until it ends."""
+def replay(session, speed: float, home, extra_args=(), types=("orientation",)) -> list[dict]:
+    """Every message of those ``types`` of `sphere-mouse --replay SESSION` on its WebSocket, until it ends (with
+    "frame" among them, the client subscribes to the camera's frames as the page's AR view does)."""
     from websockets.asyncio.client import connect  # optional: websockets (the daemon extra)
 
     proc = subprocess.Popen([sys.executable, "-m", "sphere.mouse", "--replay", str(session), "--speed", f"{speed:g}",
@@ -73,12 +74,14 @@ def replay(session, speed: float, home, extra_args=()) -> list[dict]:
         async def receive():
             got = []
             async with connect(f"ws://127.0.0.1:{port}/ws", max_size=None) as ws:
+                if "frame" in types:
+                    await ws.send(json.dumps({"subscribe": "frames"}))
                 while True:
                     try:
                         msg = json.loads(await asyncio.wait_for(ws.recv(), 30))
                     except Exception:
                         return got  # the replay ended and the daemon closed the stream
-                    if msg.get("type") == "orientation":
+                    if msg.get("type") in types:
                         got.append(msg)
 
         return asyncio.run(receive())

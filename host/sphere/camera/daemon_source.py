@@ -63,7 +63,7 @@ class CameraPosition:
         "source": Param("", doc="webcam index (0, 1 ...) or a video file; empty: no camera (position stays null)"),
         "camera_file": Param("", doc="intrinsics from `sphere camera calibrate`; empty: a typical 60° webcam"),
         "hue_deg": Param(120.0, doc="the ball's colour (hue, degrees)", check=_hue),
-        "latency_ms": Param(40.0, doc="from the middle of a frame's exposure to its arrival", lo=0.0, hi=500.0,
+        "latency_ms": Param(40.0, doc="from the middle of a frame's exposure to its arrival, on average", lo=0.0, hi=500.0,
                             unit="ms"),
     }
 
