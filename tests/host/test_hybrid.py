@@ -202,3 +202,33 @@ def test_a_fix_is_applied_at_its_exposure_between_two_imu_samples():
         trk.imu(t, [1, 0, 0, 0], acc(t) + [0, 0, STANDARD_GRAVITY_M_S2])
     assert trk.stats["gated"] == 0
     assert np.median(errs) < 0.0008 and np.percentile(errs, 90) < 0.0015  # at the earlier sample: 1.5 / 2.4 mm
+
+
+def test_a_frame_corrects_its_own_stamp():
+    """A frame's stamp is known to a few ms; the innovation along the motion says how far off it was
+    (exposure_shift_s): the pose at the corrected time is where the ball is in that frame (the AR view's)."""
+    rng = np.random.default_rng(1)
+    trk = hybrid.CameraImuTracker()
+    w = 2 * np.pi * 0.7
+
+    def pos(t):
+        return np.array([0.3 * np.sin(w * t), 0.1 * np.cos(1.3 * w * t), 1.0 + 0.1 * np.sin(0.5 * w * t)])
+
+    def acc(t):
+        return np.array([-0.3 * w * w * np.sin(w * t), -0.1 * (1.3 * w) ** 2 * np.cos(1.3 * w * t),
+                         -0.1 * (0.5 * w) ** 2 * np.sin(0.5 * w * t)])
+
+    frames = np.arange(0.05, 8.0, 1 / 30.0)
+    stamps = frames + rng.normal(0, 0.003, len(frames))
+    k, at_stamp, corrected = 0, [], []
+    for t in np.arange(0, 8.0, 1 / 286.0):
+        while k < len(frames) and frames[k] + 0.04 <= t:
+            verdict = trk.camera(stamps[k], pos(frames[k]) + rng.normal(0, 0.0003, 3), np.diag([1e-7, 1e-7, 1e-6]))
+            if frames[k] > 3.0 and verdict == "accepted":
+                truth = pos(frames[k])[:2]
+                at_stamp.append(np.linalg.norm(trk.position_at(stamps[k])[:2] - truth))
+                corrected.append(np.linalg.norm(trk.position_at(stamps[k] + trk.exposure_shift_s)[:2] - truth))
+            k += 1
+        trk.imu(t, [1, 0, 0, 0], acc(t) + [0, 0, STANDARD_GRAVITY_M_S2])
+    assert len(corrected) > 100
+    assert np.median(corrected) < 0.5 * np.median(at_stamp), (np.median(corrected), np.median(at_stamp))

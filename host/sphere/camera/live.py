@@ -352,6 +352,7 @@ class LiveTracker:
                 status = None
                 if f.fix is not None:
                     status = self.tracker.camera(f.t_exposure, f.fix.center_cam, f.fix.cov)
-                if self.keep_frames:
-                    self.ar_frame = (f, status, *self.tracker.pose_at(f.t_exposure))
+                if self.keep_frames:  # the pose at the frame's exposure, its stamp as the frame itself corrected it
+                    shift = self.tracker.exposure_shift_s if status == "accepted" else 0.0
+                    self.ar_frame = (f, status, *self.tracker.pose_at(f.t_exposure + shift))
         return self.tracker.imu(t, q_sensor_to_earth, acc_sensor, lead_s=self.lead_s)

@@ -402,6 +402,7 @@ class CameraImuTracker:
         self._models: dict = {}
         self.rejected: list = []
         self.stats = {"accepted": 0, "gated": 0, "reacquired": 0, "late": 0}
+        self.exposure_shift_s = 0.0  # the last fix's correction of its exposure time (s)
 
     # -- IMU ---------------------------------------------------------------------------------------------
     def imu(self, t: float, q_sensor_to_earth, acc_sensor, lead_s: float = 0.0):
@@ -511,7 +512,12 @@ class CameraImuTracker:
             self.stats["gated"] += 1
             return "gated"
         self.rejected.clear()
-        K = P[:, :3] @ np.linalg.inv(S)
+        S_inv = np.linalg.inv(S)
+        K = P[:, :3] @ S_inv
+        # the frame's own word on when it was exposed: the innovation along the motion is partly the stamp's error
+        # (its part of S is σ_t² v vᵀ), whose estimate is σ_t² vᵀ S⁻¹ ν
+        self.exposure_shift_s = float(np.clip(self.timing_sigma_s ** 2 * (v @ S_inv @ nu),
+                                              -3.0 * self.timing_sigma_s, 3.0 * self.timing_sigma_s))
         x = x + K @ nu
         P = (np.eye(9) - K[:, :3] @ np.eye(3, 9)) @ P
         P = 0.5 * (P + P.T)
