@@ -175,60 +175,43 @@ def test_a_marker_corrects_the_heading_the_host_filter_lost():
     assert trk.marker(trk.t - 0.04, wild) == "gated"
 
 
+def _swing(stamp_sd_s: float, seed: int):
+    """A fast swing (up to 1.3 m/s) seen at 30 Hz, each frame stamped with an error of sd ``stamp_sd_s``, the IMU at
+    BROAD's 286 Hz; yields (tracker, the fix's verdict, true exposure, stamp, true position) after each fix."""
+    rng = np.random.default_rng(seed)
+    trk = hybrid.CameraImuTracker()
+    w = 2 * np.pi * 0.7
+    amp, mul = np.array([0.3, 0.1, 0.1]), np.array([1.0, 1.3, 0.5])
+
+    def pos(t):
+        return amp * np.sin(mul * w * t + [0.0, np.pi / 2, 0.0]) + [0.0, 0.0, 1.0]
+
+    frames = np.arange(0.05, 8.0, 1 / 30.0)
+    stamps = frames + rng.normal(0, stamp_sd_s, len(frames))
+    k = 0
+    for t in np.arange(0, 8.0, 1 / 286.0):
+        while k < len(frames) and frames[k] + 0.04 <= t:
+            verdict = trk.camera(stamps[k], pos(frames[k]) + rng.normal(0, 0.0003, 3), np.diag([1e-7, 1e-7, 1e-6]))
+            yield trk, verdict, frames[k], stamps[k], pos(frames[k])
+            k += 1
+        acc = -amp * (mul * w) ** 2 * np.sin(mul * w * t + [0.0, np.pi / 2, 0.0])
+        trk.imu(t, [1, 0, 0, 0], acc + [0, 0, STANDARD_GRAVITY_M_S2])
+
+
 def test_a_fix_is_applied_at_its_exposure_between_two_imu_samples():
     """The IMU's samples are 3.5 ms apart (BROAD's 286 Hz): a fix exposed between two of them is applied to the
     state predicted on to its exposure, not to the earlier sample's (1 m/s moves the ball 3.5 mm in that)."""
-    rng = np.random.default_rng(0)
-    trk = hybrid.CameraImuTracker()
-    w = 2 * np.pi * 0.7
-
-    def pos(t):
-        return np.array([0.3 * np.sin(w * t), 0.1 * np.cos(1.3 * w * t), 1.0 + 0.1 * np.sin(0.5 * w * t)])
-
-    def acc(t):
-        return np.array([-0.3 * w * w * np.sin(w * t), -0.1 * (1.3 * w) ** 2 * np.cos(1.3 * w * t),
-                         -0.1 * (0.5 * w) ** 2 * np.sin(0.5 * w * t)])
-
-    frames = np.arange(0.05, 8.0, 1 / 30.0)
-    frames = frames + rng.normal(0, 0.001, len(frames))
-    k, errs = 0, []
-    for t in np.arange(0, 8.0, 1 / 286.0):
-        while k < len(frames) and frames[k] + 0.04 <= t:
-            te = frames[k]
-            trk.camera(te, pos(te) + rng.normal(0, 0.0003, 3), np.diag([1e-7, 1e-7, 1e-6]))
-            if te > 3.0:
-                errs.append(np.linalg.norm(trk.position_at(te)[:2] - pos(te)[:2]))
-            k += 1
-        trk.imu(t, [1, 0, 0, 0], acc(t) + [0, 0, STANDARD_GRAVITY_M_S2])
-    assert trk.stats["gated"] == 0
+    errs = [np.linalg.norm(trk.position_at(te)[:2] - p[:2]) for trk, _, te, _, p in _swing(0.0, 0) if te > 3.0]
     assert np.median(errs) < 0.0008 and np.percentile(errs, 90) < 0.0015  # at the earlier sample: 1.5 / 2.4 mm
 
 
 def test_a_frame_corrects_its_own_stamp():
     """A frame's stamp is known to a few ms; the innovation along the motion says how far off it was
     (exposure_shift_s): the pose at the corrected time is where the ball is in that frame (the AR view's)."""
-    rng = np.random.default_rng(1)
-    trk = hybrid.CameraImuTracker()
-    w = 2 * np.pi * 0.7
-
-    def pos(t):
-        return np.array([0.3 * np.sin(w * t), 0.1 * np.cos(1.3 * w * t), 1.0 + 0.1 * np.sin(0.5 * w * t)])
-
-    def acc(t):
-        return np.array([-0.3 * w * w * np.sin(w * t), -0.1 * (1.3 * w) ** 2 * np.cos(1.3 * w * t),
-                         -0.1 * (0.5 * w) ** 2 * np.sin(0.5 * w * t)])
-
-    frames = np.arange(0.05, 8.0, 1 / 30.0)
-    stamps = frames + rng.normal(0, 0.003, len(frames))
-    k, at_stamp, corrected = 0, [], []
-    for t in np.arange(0, 8.0, 1 / 286.0):
-        while k < len(frames) and frames[k] + 0.04 <= t:
-            verdict = trk.camera(stamps[k], pos(frames[k]) + rng.normal(0, 0.0003, 3), np.diag([1e-7, 1e-7, 1e-6]))
-            if frames[k] > 3.0 and verdict == "accepted":
-                truth = pos(frames[k])[:2]
-                at_stamp.append(np.linalg.norm(trk.position_at(stamps[k])[:2] - truth))
-                corrected.append(np.linalg.norm(trk.position_at(stamps[k] + trk.exposure_shift_s)[:2] - truth))
-            k += 1
-        trk.imu(t, [1, 0, 0, 0], acc(t) + [0, 0, STANDARD_GRAVITY_M_S2])
+    at_stamp, corrected = [], []
+    for trk, verdict, te, stamp, p in _swing(0.003, 1):
+        if te > 3.0 and verdict == "accepted":
+            at_stamp.append(np.linalg.norm(trk.position_at(stamp)[:2] - p[:2]))
+            corrected.append(np.linalg.norm(trk.position_at(stamp + trk.exposure_shift_s)[:2] - p[:2]))
     assert len(corrected) > 100
     assert np.median(corrected) < 0.5 * np.median(at_stamp), (np.median(corrected), np.median(at_stamp))
