@@ -92,11 +92,17 @@ class VqfPeer(_Peer):
 
     earth_frame = "ENU"
 
+    #: a live stream whose step differs from the filter's by more than this share for ``RESTEP_SAMPLES`` samples
+    #: in a row, each within this share of their mean, gets the filter rebuilt at that step (``_restep``)
+    RESTEP_TOL = 0.05
+    RESTEP_SAMPLES = 10
+
     def __init__(self, dt_s: float):
         self._vqf_mod = _need("vqf", "vqf")
         self.dt_s = float(dt_s)
         self._f = self._vqf_mod.VQF(self.dt_s)
         self._mag_used = False  # quat9D once a field was used, quat6D before
+        self._off = []  # the latest steps that differed from dt_s (a rate change in the making)
 
     @property
     def settings(self) -> dict:
@@ -123,16 +129,60 @@ class VqfPeer(_Peer):
         """One sample (VQF's own ``updateGyr``, ``updateAcc``, ``updateMag``: what its ``update`` does in turn).
         ``acc_valid=False`` (a tap in progress) skips the accelerometer, ``mag_valid=False`` or ``mag_uT=None`` the
         magnetometer; the output is ``quat9D`` once a field has been used, ``quat6D`` before (a stream without a
-        magnetometer). The step is VQF's, fixed at construction (``dt_s`` is not used: a live link's jitter of a
-        few µs is below what VQF's fixed-rate filters would notice)."""
+        magnetometer).
+
+        VQF integrates every gyro sample over the step it was built with, so ``dt_s`` (the time since the previous
+        sample) decides how often that step runs: a live link's jitter of a few µs leaves it at once, a lost sample
+        (twice the step) runs it twice with the same rate, so the angle turned is kept; a stream steadily at
+        another rate (the sphere's ``raw_rate_hz`` 100 or 50, a replay at its recording's rate) has VQF rebuilt at
+        that step after ``RESTEP_SAMPLES`` samples, its state carried over."""
         f = self._f
-        f.updateGyr(np.array(gyr_rad_s, dtype=float))
+        ts = self.dt_s
+        n = 1
+        if dt_s is not None and abs(dt_s - ts) > self.RESTEP_TOL * ts:
+            off = self._off
+            off.append(float(dt_s))
+            mean = sum(off) / len(off)
+            if any(abs(d - mean) > self.RESTEP_TOL * mean for d in off):
+                del off[:-1]
+            elif len(off) >= self.RESTEP_SAMPLES:
+                self._restep(mean)
+                f, ts = self._f, self.dt_s
+            n = max(1, int(round(dt_s / ts)))
+        elif self._off:
+            self._off.clear()
+        g = np.array(gyr_rad_s, dtype=float)
+        for _ in range(n):
+            f.updateGyr(g)
         if acc_valid:
             f.updateAcc(np.array(acc_m_s2, dtype=float))
         if mag_uT is not None and mag_valid:
             f.updateMag(np.array(mag_uT, dtype=float))
             self._mag_used = True
         return f.getQuat9D() if self._mag_used else f.getQuat6D()
+
+    def _restep(self, dt_s: float) -> None:
+        """Rebuild VQF for step ``dt_s`` keeping its state: the orientations, bias, rest and field state carry over
+        as they are; each low-pass's state is moved to the new coefficients with VQF's own
+        ``filterAdaptStateForCoeffChange`` (its output does not jump), as VQF's ``setTauAcc`` does for a new time
+        constant (the motion bias estimate's low-passes have no last output in the state: their first state
+        entries stand for it, as there)."""
+        v = self._vqf_mod.VQF
+        old, new = self._f, v(float(dt_s))
+        st, co, cn = old.state, old.coeffs, new.coeffs
+        for last, key, lp in (("lastAccLp", "accLpState", "accLp"), ("restLastGyrLp", "restGyrLpState", "restGyrLp"),
+                              ("restLastAccLp", "restAccLpState", "restAccLp"),
+                              ("magNormDip", "magNormDipLpState", "magNormDipLp"),
+                              (None, "motionBiasEstRLpState", "accLp"), (None, "motionBiasEstBiasLpState", "accLp")):
+            state = np.array(st[key], dtype=float)
+            y = np.array(st[last], dtype=float) if last else state[0::2].copy()
+            v.filterAdaptStateForCoeffChange(y, np.asarray(co[lp + "B"], float), np.asarray(co[lp + "A"], float),
+                                             np.asarray(cn[lp + "B"], float), np.asarray(cn[lp + "A"], float), state)
+            st[key] = state
+        new.state = st
+        self._f = new
+        self.dt_s = float(dt_s)
+        self._off = []
 
     #: ``update_batch(..., diagnostics=True)`` returns VQF's own per-sample rest flag, bias and disturbance flag
     diagnostics = ("rest", "bias_rad_s", "mag_disturbed")
