@@ -153,13 +153,12 @@ def test_daemon_builds_its_filter_from_the_registry():
     assert host_filter("madgwick", cfg.get).beta == 0.3 and host_filter("madgwick").beta == 0.0135
     with pytest.raises(ValueError, match="unknown host filter"):
         host_filter("nope")
-    # auto: the registry's daemon default when its library is installed, else the next live filter
+    # auto: the registry's daemon default (SphereFilter: ours, nothing to install), with the registry's settings
     auto = host_filter("auto")
-    want = registry.live_available()[0]
-    assert want == (registry.DAEMON_DEFAULT if _installed("vqf") else "sphere")
-    assert type(getattr(auto, "inner", auto)) is type(registry.make(want, 0.005))
+    assert registry.live_available()[0] == registry.DAEMON_DEFAULT == "sphere"
+    assert type(auto.inner) is type(registry.make("sphere")) and auto.inner.settings == registry.make("sphere").settings
     if _installed("vqf"):
-        assert auto.inner.settings == registry.make("vqf", 0.005).settings
+        assert host_filter("vqf").inner.settings == registry.make("vqf", 0.005).settings
 
 
 def test_leave_one_out_chooses_on_the_other_trials():
@@ -305,8 +304,9 @@ def test_vqf_per_sample_is_its_batch_and_honours_the_daemons_flags():
     assert not np.array_equal(qb, c.update(tr.gyr_rad_s[401], (80.0, -50.0, 3.0), None, tr.dt_s))
 
 
-def test_the_daemon_extra_installs_its_default_filter():
-    """VQF is the daemon's default filter, so `pip install 'marg-sphere[daemon]'` (and so ./scripts/setup) installs it."""
+def test_the_daemon_extra_installs_its_filters():
+    """The daemon's default filter (SphereFilter) needs nothing beyond the package; VQF, the other filter it offers,
+    comes with `pip install 'marg-sphere[daemon]'` (and so ./scripts/setup)."""
     import sys
     from pathlib import Path
 
@@ -318,9 +318,9 @@ def test_the_daemon_extra_installs_its_default_filter():
 
     meta = tomllib.loads((Path(__file__).parents[2] / "pyproject.toml").read_text())
     daemon = meta["project"]["optional-dependencies"]["daemon"]
-    assert registry.DAEMON_DEFAULT == "vqf" and any(d.split(">")[0].split("=")[0].strip() == "vqf" for d in daemon)
-    assert registry.live_available()[0] == "vqf"  # installed here, as setup installs it
-
+    assert getattr(registry.filter_class(registry.DAEMON_DEFAULT), "NEEDS", None) is None
+    assert any(d.split(">")[0].split("=")[0].strip() == "vqf" for d in daemon)
+    assert set(registry.live_available()) >= {"sphere", "vqf", "madgwick"}  # installed here, as setup installs it
 
 
 @pytest.mark.parametrize("name", ["vqf", "sphere"])

@@ -184,10 +184,10 @@ CORE: dict[str, dict[str, Param]] = {
                                     "installed", choices=("auto", "host", "device")),
         "use_mag": Param(False, doc="let the host filter use the magnetometer (needs a calibrated one; without it yaw "
                                "drifts slowly, which pointing does not mind)"),
-        "filter": Param("auto", doc="host filter: `vqf` (the VQF library, Laidig & Seel 2023: the best on data "
-                                    "nobody tuned on, host/docs/fusion.md), `sphere` (sphere.fusion's SphereFilter), "
-                                    "`madgwick`; `auto` = vqf if installed (the daemon extra installs it), else sphere "
-                                    "(each with its parameters in [orientation.NAME])", choices=_host_filters),
+        "filter": Param("auto", doc="host filter: `sphere` (sphere.fusion's SphereFilter: the best on data nobody "
+                                    "tuned it on, host/docs/fusion.md), `vqf` (the VQF library, Laidig & Seel 2023; "
+                                    "the daemon extra installs it), `madgwick`; `auto` = sphere (each with its "
+                                    "parameters in [orientation.NAME])", choices=_host_filters),
     },
     "stream": {
         "smoothing": Param(_SMOOTHING, doc="smoothing filter of the orientation every output gets (the 3-D page, "

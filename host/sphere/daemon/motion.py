@@ -75,11 +75,11 @@ class _NwuFilter:
 
 
 def host_filter(name: str = "auto", settings=None, dt_s: float = 0.005, **overrides):
-    """The host fusion filter by its name in ``sphere.fusion.registry`` (the filters it marks live: ``vqf``, the
-    default, ``sphere`` and ``madgwick``), or ``auto`` = the first of them that is installed. Built by the registry
+    """The host fusion filter by its name in ``sphere.fusion.registry`` (the filters it marks live: ``sphere``, the
+    default, ``vqf`` and ``madgwick``), or ``auto`` = the first of them that is installed. Built by the registry
     from its PARAMS, so the daemon runs the same settings as `sphere eval`: ``settings(section)`` gives its
     ``[orientation.NAME]`` values (the daemon passes ``cfg.get``), ``overrides`` replace single ones; ``dt_s`` is
-    the sample step for a filter built for a fixed rate (VQF). Returns
+    the sample step for a filter built for a fixed rate (VQF, which then follows the step the samples give). Returns
     NWU quaternions."""
     known = registry.live_available()
     if name == "auto":

@@ -48,9 +48,9 @@ ALL = REGISTRY.names()
 PEERS = tuple(n for n in ALL if REGISTRY[n].startswith("sphere.fusion.peers:"))
 OURS = tuple(n for n in ALL if n not in PEERS)
 #: the daemon's ``[orientation] filter = auto``: the filter that wins on the held-out folds of the shipped BROAD
-#: trials (nested leave-one-trial-out, `sphere eval --cv`) and on the stress seeds (sphere.fusion.stress), see
-#: host/docs/fusion.md
-DAEMON_DEFAULT = "vqf"
+#: trials (nested leave-one-trial-out, `sphere eval --cv`) and on every kind of the stress seeds
+#: (sphere.fusion.stress), see host/docs/fusion.md: SphereFilter since it weighs the field (VQF before)
+DAEMON_DEFAULT = "sphere"
 #: the daemon's order of preference among the filters it can run (``LIVE = True`` on their class): the default
 #: first, then ours (its ``auto`` takes the first one installed)
 LIVE = (DAEMON_DEFAULT, *(n for n in ("sphere", "vqf", "madgwick") if n != DAEMON_DEFAULT))

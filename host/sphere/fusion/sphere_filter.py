@@ -14,7 +14,11 @@ Seel 2023), each corrected by a different sensor:
 3. **Heading** δ about the vertical: from the magnetometer rotated into E′, the azimuth of its horizontal
    part is pulled to north (+y) with time constant ``tau_mag_s``, but only while the field looks like the
    earth's (``mag_reject``): norm within ``mag_norm_th`` (relative) and dip within ``mag_dip_th_deg`` of a
-   reference learned while undisturbed. While disturbed, heading is held on the gyro.
+   reference learned while undisturbed. While disturbed, heading is held on the gyro. A field that passes the
+   test is trusted by how close it is to the reference (``mag_weight``): the gain is multiplied by
+   (1 − |Δnorm|/(``mag_norm_th``·norm)) · (1 − |Δdip|/``mag_dip_th_deg``), 1 for the earth's field as learnt, 0 where
+   the test would reject it, so a field distorted by less than the test catches (a magnet some way off, the
+   gradients of a room) pulls the heading less than the earth's own, and the earth's own can be followed faster.
 
 Gyro bias b: a small Kalman filter (state b, covariance P, 3×3) run every ``bias_step_s``. Its prediction adds
 process noise (``bias_sigma_init_dps``² per ``bias_forget_s``, each diagonal capped at its start value), its
@@ -24,7 +28,7 @@ for ``rest_min_s``, as VQF detects it; noise ``bias_sigma_rest_dps``). b is clip
 That is all: the parts that were here besides (a bias measurement in motion from the inclination corrections and
 from the field's turning, a χ² test on the latter, a change test for bias steps, the acceptance of a new field)
 did not earn their place when the structure was chosen by nested leave-one-trial-out on the shipped BROAD trials
-(host/docs/fusion.md, "Which filter wins where nobody tuned it"). The two parts left are switches (``PARTS``), so
+(host/docs/fusion.md, "Which filter wins where nobody tuned it"). The three parts are switches (``PARTS``), so
 ``sphere eval --cv`` keeps checking that each earns its place; the settings are the point it chose.
 """
 
@@ -65,7 +69,7 @@ def _wrap(a):
 
 DEFAULTS = dict(
     tau_acc_s=3.0,
-    tau_mag_s=15.0,
+    tau_mag_s=6.0,
     mag_norm_th=0.05,
     mag_dip_th_deg=5.0,
     mag_ref_tau_s=20.0,
@@ -81,10 +85,11 @@ DEFAULTS = dict(
     # the parts, each switchable so that `sphere eval --cv` chooses the structure as it chooses parameters
     bias_rest=True,  # the rest measurement of the bias (the low-passed gyro while still)
     mag_reject=True,  # the field's disturbance test (norm and dip against the reference); off: every reading is used
+    mag_weight=True,  # the heading's gain falls as the field's norm and dip move from the reference (0 at the test)
 )
 
 #: the switchable parts (each a boolean of DEFAULTS)
-PARTS = ("bias_rest", "mag_reject")
+PARTS = ("bias_rest", "mag_reject", "mag_weight")
 #: the structure variants `sphere eval --cv` chooses among (nested), simplest first
 STRUCTURES = tuple(sorted((dict(zip(PARTS, v)) for v in itertools.product((False, True), repeat=len(PARTS))),
                           key=lambda p: sum(p.values())))
@@ -100,12 +105,17 @@ class SphereFilter:
     PARAMS = {
         "tau_acc_s": Param(DEFAULTS["tau_acc_s"], "s", 0.1, 60.0, "time constant of the accelerometer's low-pass "
                                                                   "in the gyro frame (two stages of half of it)"),
+        "tau_mag_s": Param(DEFAULTS["tau_mag_s"], "s", 0.5, 300.0, "time constant with which the heading follows "
+                                                                   "an undisturbed field"),
         "bias_rest": Param(DEFAULTS["bias_rest"], doc="the rest measurement of the bias (the low-passed gyro while "
                                                       "still)"),
         "mag_reject": Param(DEFAULTS["mag_reject"], doc="the field's disturbance test (norm and dip against the "
                                                         "reference); off: every reading is used"),
+        "mag_weight": Param(DEFAULTS["mag_weight"], doc="the heading's gain falls linearly as the field's norm and dip "
+                                                        "move from the reference, to 0 where the test would reject "
+                                                        "it; off: the full gain for every field accepted"),
     }
-    GRID = {"tau_acc_s": (3.0, 4.5)}
+    GRID = {"tau_acc_s": (3.0, 4.5), "tau_mag_s": (6.0, 9.0, 15.0)}
     #: the structure variants `sphere eval --cv` chooses among (nested), simplest first
     STRUCTURES = STRUCTURES
     LIVE = True  # the daemon can run it (per-sample update with acc_valid / mag_valid)
@@ -195,6 +205,7 @@ class SphereFilter:
         self._rest_on = bool(c["bias_rest"])
         self._reject_on = bool(c["mag_reject"])
         self._rest_min = c["rest_min_s"]
+        self._weight_on = bool(c["mag_weight"])
 
     def update(self, gyr_rad_s, acc_m_s2, mag_uT, dt_s: float, *, acc_valid: bool = True, mag_valid: bool = True,
                defer_bias: bool = False):
@@ -423,6 +434,13 @@ class SphereFilter:
         # δ* puts the horizontal field on +y (north in ENU); _wrap written out
         err = (0.5 * _PI - _atan2(ey, ex) - self.delta + _PI) % _TWO_PI - _PI
         k = self._k_mag
+        if self._weight_on:
+            # a field that differs from the earth's by part of what the test allows is trusted by that much less:
+            # the gain falls linearly with each relative deviation and is 0 where the test would reject it
+            wn_ = 1.0 - abs(norm - ref[0]) / (self._norm_th * ref[0])
+            wd_ = 1.0 - abs(dip - ref[1]) / self._dip_th
+            w_ = wn_ * wd_ if wn_ > 0.0 and wd_ > 0.0 else 0.0
+            k *= w_
         kn = 1.0 / self.n_mag
         if kn > k:
             k = kn
