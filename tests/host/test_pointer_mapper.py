@@ -138,3 +138,64 @@ def test_tilt_integrates_with_remainders():
     q = quat_axis_angle((0, 0, -1), 10.0)  # right, full speed
     total = sum(t.update(q, DT)[0] for _ in range(200))
     assert total == 100
+
+
+def _noisy(rates, seed=3, noise_dps=0.15, bias_dps=(0.0, 0.0, 0.03), tremor_deg=0.0):
+    """The gyro as the ITG-3200 gives it at 200 Hz: the rates plus white noise, a small bias left over and a
+    hand's tremor (``tremor_deg`` RMS about the yaw axis, at 9–11 Hz)."""
+    import numpy as np
+
+    rng = np.random.default_rng(seed)
+    f = 10.0 + np.cumsum(rng.normal(0.0, 0.05, len(rates)))  # a wandering frequency around 10 Hz
+    tremor = tremor_deg * math.sqrt(2) * 2 * math.pi * np.clip(f, 9.0, 11.0) * np.cos(2 * math.pi * np.cumsum(np.clip(f, 9.0, 11.0)) * DT)
+    return [tuple(r[i] + bias_dps[i] + rng.normal(0.0, noise_dps) + (tremor[k] if i == 2 else 0.0) for i in range(3))
+            for k, r in enumerate(rates)]
+
+
+def _path(mapper, rates):
+    x, out = 0, []
+    for r in rates:
+        x += mapper.update(r, DT)[0]
+        out.append(x)
+    return out
+
+
+def _turn(rate_dps, seconds, before_s=2.0, after_s=3.0):
+    n0, n1, n2 = (int(round(s / DT)) for s in (before_s, seconds, after_s))
+    return [(0.0, 0.0, 0.0)] * n0 + [(0.0, 0.0, rate_dps)] * n1 + [(0.0, 0.0, 0.0)] * n2, n0, n0 + n1
+
+
+def test_held_in_the_hand_the_noise_does_not_creep_the_pointer_after_a_stop():
+    """A 3 °/s aim, then held: in the second from 0.45 s after the stop the pointer stays put with the hand hold
+    (the noise and a 0.05 °/s bias residue crept it without: with the tremor's rest after the smoothing the
+    tightening lets their slow part through)."""
+    rates, a, b = _turn(3.0, 1.0)
+    rates = _noisy(rates, bias_dps=(0.0, 0.0, 0.05), tremor_deg=0.1)
+    held = _path(PointerMapper(PointerSettings(), 1920), rates)
+    free = _path(PointerMapper(PointerSettings(hold_band_dps=0.0), 1920), rates)
+    w0, w1 = b + int(0.45 / DT), b + int(1.45 / DT)
+    assert held[w1] == held[w0]
+    assert abs(free[w1] - free[w0]) >= 2
+
+
+def test_a_move_from_the_hold_keeps_its_travel():
+    """Held for 2 s, then a 3 °/s aim for 1 s: the sample that ends the hold brings the part it held back, so
+    the travel is the same as without the hold (within a pixel of 144)."""
+    rates, a, b = _turn(-3.0, 1.0)
+    rates = _noisy(rates, noise_dps=0.05, bias_dps=(0.0, 0.0, 0.0))
+    held = _path(PointerMapper(PointerSettings(), 1920), rates)
+    free = _path(PointerMapper(PointerSettings(hold_band_dps=0.0), 1920), rates)
+    assert held[a - 1] == 0  # held still before the aim
+    assert abs((held[-1] - held[a - 1]) - (free[-1] - free[a - 1])) <= 1
+    assert abs(held[-1] - held[a - 1] - 144) <= 3
+
+
+@pytest.mark.parametrize("rate", [0.4, 0.6])
+def test_a_slow_steady_aim_below_the_band_ends_the_hold_and_is_followed(rate):
+    """0.4 and 0.6 °/s for 6 s from a held pointer (below the 0.8 °/s band): within about a second the hold
+    lets go with what it held back, and the pointer then goes as far as it does without a hold."""
+    rates, a, b = _turn(rate, 6.0, after_s=0.5)
+    held = _path(PointerMapper(PointerSettings(), 1920), rates)
+    free = _path(PointerMapper(PointerSettings(hold_band_dps=0.0), 1920), rates)
+    assert held[a + int(1.5 / DT)] != 0  # moving within 1.5 s
+    assert abs(held[b] - free[b]) <= 0.05 * abs(free[b]) + 1

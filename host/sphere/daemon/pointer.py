@@ -18,7 +18,11 @@
 4. **Sensitivity in real-world terms** (degrees of rotation per screen width) with optional
    **acceleration**: the slow sensitivity up to ``accel_low_dps``, the fast one from ``accel_high_dps``,
    blended linearly between them.
-5. **Sub-pixel remainders** carry over to the next sample, so slow motion is not lost to rounding.
+5. **Hand hold.** Held in the hand between moves, the pointer stays where it is once the smoothed rate has
+   settled (``hold_*``): the ITG-3200's noise and the hand's slow sway would creep it by several px/s after
+   every stop, which tightening alone does not stop. A move, or a slow steady aim, ends the hold and brings
+   what was held back of it at once.
+6. **Sub-pixel remainders** carry over to the next sample, so slow motion is not lost to rounding.
 
 :class:`TiltMapper` makes the tilt from a recentred pose drive pointer *velocity*.
 """
@@ -26,6 +30,7 @@
 from __future__ import annotations
 
 import math
+from collections import deque
 
 from sphere.settings import Param, Settings
 from sphere.smoothing.registry import DEFAULT as DEFAULT_SMOOTHING
@@ -44,6 +49,18 @@ POINTER_PARAMS = {
                                    "two it is blended linearly", lo=0.001, hi=5000.0),
     "tightening_dps": Param(1.0, doc="rotations slower than this are scaled down in proportion to their speed "
                                    "(soft, instead of a dead zone that swallows them); 0 = off", lo=0.0, hi=100.0),
+    "hold_band_dps": Param(0.8, doc="held in the hand: once the smoothed rate's mean over `hold_window_s` has stayed "
+                                    "within this (°/s) for `hold_after_s`, the pointer stays where it is (the "
+                                    "sensor's noise and the hand's slow sway do not creep it); the move that leaves "
+                                    "the band brings what the window held back at once (0 = off)", lo=0.0, hi=10.0),
+    "hold_window_s": Param(0.1, doc="the short mean's length for `hold_band_dps`", lo=0.005, hi=1.0),
+    "hold_after_s": Param(0.2, doc="how long the short mean must have stayed within `hold_band_dps` before the "
+                                   "pointer is held (the end of a move comes through the smoothing first)",
+        lo=0.0, hi=10.0),
+    "hold_slow_dps": Param(0.3, doc="a slow steady aim ends the hold too: when the held-back turn over the last "
+                                    "`hold_slow_window_s` exceeds this rate (°/s) times that window, it comes at once "
+                                    "and the pointer follows", lo=0.0, hi=10.0),
+    "hold_slow_window_s": Param(1.0, doc="the window of `hold_slow_dps`", lo=0.005, hi=5.0),
     "smoothing": Param(DEFAULT_SMOOTHING, doc="smoothing filter of the pointer, from the smoothing registry (its "
                                               "parameters in [smoothing.NAME]); `tremor` takes out the hand's 8–12 "
                                               "Hz tremor, `none` = off", choices=lambda: tuple(SMOOTHING)),
@@ -102,6 +119,47 @@ def _check_pointer(s):
     return None
 
 
+class _HoldWindow:
+    """The last ``length_s`` of the smoothed rate's displacement (°), and of the pointer's held-back px."""
+
+    __slots__ = ("rows", "sums")
+
+    def __init__(self):
+        self.rows = deque()  # [smoothed x·dt, y·dt, dt, held-back px x, y]
+        self.sums = [0.0, 0.0, 0.0, 0.0, 0.0]
+
+    def add(self, ax: float, ay: float, dt_s: float, length_s: float) -> None:
+        rows, sums = self.rows, self.sums
+        rows.append([ax, ay, dt_s, 0.0, 0.0])
+        sums[0] += ax
+        sums[1] += ay
+        sums[2] += dt_s
+        while len(rows) > 1 and sums[2] - rows[0][2] >= length_s - 1e-9:
+            old = rows.popleft()
+            for i in range(5):
+                sums[i] -= old[i]
+
+    def within(self, band_dps: float) -> bool:
+        """Whether the window's mean rate is within ``band_dps``."""
+        band = band_dps * self.sums[2]
+        return self.sums[0] * self.sums[0] + self.sums[1] * self.sums[1] <= band * band
+
+    def held(self, fx: float, fy: float) -> None:
+        row = self.rows[-1]
+        row[3], row[4] = fx, fy
+        self.sums[3] += fx
+        self.sums[4] += fy
+
+    def clear(self) -> None:
+        self.rows.clear()
+        self.sums[:] = [0.0] * 5
+
+    def release(self) -> None:
+        for row in self.rows:
+            row[3] = row[4] = 0.0
+        self.sums[3] = self.sums[4] = 0.0
+
+
 class PointerMapper:
     """Angular rate → integer pointer steps. Feed every gyro sample to :meth:`update`.
 
@@ -131,6 +189,12 @@ class PointerMapper:
         self._angle = [0.0, 0.0]  # the pointer's angles (°, right and down) fed to the filter
         self._filtered = None
         self.remainder = [0.0, 0.0]
+        self._smoothed = (0.0, 0.0)  # the last sample's smoothed rate (°/s, screen right and down)
+        self._short = _HoldWindow()  # the hand hold's windows (_hand_hold)
+        self._slow = _HoldWindow()
+        self._hand_held = False
+        self._within_s = 0.0
+        self._slow_aim = False  # a slow steady aim ended the hold: followed until its slow mean settles
 
     def rate_px_s(self, gyro_dps, up_body=None, dt_s: float = 0.005):
         """The pointer velocity (px/s, screen x right, y down) for one gyro sample, updating smoothing state."""
@@ -152,6 +216,7 @@ class PointerMapper:
                 last = (a[0] - x * dt_s, a[1] - y * dt_s)
             x, y = (self._filtered[0] - last[0]) / dt_s, (self._filtered[1] - last[1]) / dt_s
             mag = math.hypot(x, y)
+        self._smoothed = (x, y)
         # 3. tightening of the smoothed rate (what is left of noise and tremor at rest)
         if s.tightening_dps > 0 and mag < s.tightening_dps:
             k = mag / s.tightening_dps
@@ -187,7 +252,45 @@ class PointerMapper:
         """One gyro sample (°/s, sensor axes) over ``dt_s`` seconds → whole-pixel steps (dx right, dy down)."""
         self._holding = False
         vx, vy = self.rate_px_s(gyro_dps, up_body, dt_s)
-        return self.emit(vx * dt_s, vy * dt_s)
+        fx, fy = vx * dt_s, vy * dt_s
+        if self.settings.hold_band_dps > 0 and dt_s > 0:
+            fx, fy = self._hand_hold(fx, fy, dt_s)
+        return self.emit(fx, fy)
+
+    def _hand_hold(self, fx: float, fy: float, dt_s: float) -> tuple[float, float]:
+        """The hand hold (the ``hold_*`` settings): no displacement once the smoothed rate's short mean has stayed
+        within ``hold_band_dps`` for ``hold_after_s``, as long as it stays there and the turn held back over the
+        last ``hold_slow_window_s`` stays under ``hold_slow_dps`` × that window. The sample that ends the hold
+        carries what the window it left held back: neither a move's start nor a slow steady aim is lost; a slow
+        aim is then followed until its mean over that window has fallen back under ``hold_slow_dps``."""
+        s = self.settings
+        sx, sy = self._smoothed
+        short, slow = self._short, self._slow
+        short.add(sx * dt_s, sy * dt_s, dt_s, s.hold_window_s)
+        self._within_s = self._within_s + dt_s if short.within(s.hold_band_dps) else 0.0
+        limit = s.hold_slow_dps * s.hold_slow_window_s
+        if self._slow_aim:
+            slow.add(sx * dt_s, sy * dt_s, dt_s, s.hold_slow_window_s)
+            if slow.sums[0] * slow.sums[0] + slow.sums[1] * slow.sums[1] > limit * limit:
+                return fx, fy
+            self._slow_aim = False
+        if self._within_s >= s.hold_after_s:
+            if not self._hand_held:
+                slow.clear()  # the slow aim's test counts from the hold's start, not the move before it
+            slow.add(sx * dt_s, sy * dt_s, dt_s, s.hold_slow_window_s)
+            if slow.sums[0] * slow.sums[0] + slow.sums[1] * slow.sums[1] <= limit * limit:
+                self._hand_held = True
+                short.held(fx, fy)
+                slow.held(fx, fy)
+                return 0.0, 0.0
+            self._slow_aim = True
+        if self._hand_held:
+            self._hand_held = False
+            carry = slow if self._slow_aim else short
+            fx, fy = fx + carry.sums[3], fy + carry.sums[4]
+            short.release()
+            slow.release()
+        return fx, fy
 
     def emit(self, fx: float, fy: float) -> tuple[int, int]:
         """Add a fractional displacement to the remainders and take out whole pixels."""
