@@ -3,7 +3,7 @@
 
 Every shipped BROAD trial is cut as `sphere sim --trace all --accuracy --hold 2 --seconds 60` cuts it
 (from 10 s before its first movement, after a 2 s still lead-in), turned into the chips' samples
-(sphere.sim.trace; the gyroscope through the ITG-3200's 42 Hz DLPF at its 1 kHz internal rate and read
+(sphere.sim.trace; the gyroscope through the ITG-3200's 98 Hz DLPF at its 1 kHz internal rate and read
 0.5 ms after its output register was refreshed (SMPLRT_DIV 0: a new value every 1 ms), the accelerometer 1.25 ms after, as on the board) and replayed through the real SphereDevice natively (firmware/build/device_replay:
 power-up bias, bias tracking, gates, start-up gain, fixed-point Madgwick). Its ORIENTATION stream
 (100 Hz) is scored with the dataset's metric (sphere.broad.orientation_error) for each setting of a grid.
@@ -49,7 +49,7 @@ GRID = {
     "relearn_after": (2000,),
     "hold": (0,),
 }
-ITG_INTERNAL_HZ, ITG_DLPF_HZ = 1000.0, 42.0  # DLPF_CFG 3 (ITG-3200 datasheet §8.3, register 22)
+ITG_INTERNAL_HZ, ITG_DLPF_HZ = 1000.0, 98.0  # DLPF_CFG 2 (ITG-3200 datasheet §8.3, register 22)
 GYRO_AGE_S, ACCEL_AGE_S = 0.0005, 0.00125      # mean age of the output register when read (1 ms, 2.5 ms periods)
 
 

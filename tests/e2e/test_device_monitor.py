@@ -79,7 +79,7 @@ def test_settings_change_what_the_firmware_does(board, capsys, tmp_path):
     assert main(["monitor", "--port", board, "--seconds", "120", "--events", "3", "--plot", "--plot-out", str(png)]) == 0
     out = capsys.readouterr().out
     assert "single_tap (z)" in out and "double_tap (z)" in out, out
-    assert "HELLO seq" in out and "firmware 0.3.1, protocol 3" in out
+    assert "HELLO seq" in out and "firmware 0.3.2, protocol 3" in out
     for expected in ("RAW_SAMPLE", "ORIENTATION", "flags: accel_ok gyro_ok mag_ok", "accel g", "gyro °/s", "mag µT",
                      "orientation  heading", "link: frames ok", "CRC errors", "frames lost"):
         assert expected in out, (expected, out)
@@ -88,7 +88,7 @@ def test_settings_change_what_the_firmware_does(board, capsys, tmp_path):
     assert main(["device", "--port", board, "identify", "2"]) == 0
     assert "blinks for 2 s" in capsys.readouterr().out
     assert main(["device", "--port", board, "reboot"]) == 0
-    assert "rebooted; firmware 0.3.1 is back" in capsys.readouterr().out
+    assert "rebooted; firmware 0.3.2 is back" in capsys.readouterr().out
 
 
 def test_bad_settings_are_one_line_and_touch_nothing(capsys):

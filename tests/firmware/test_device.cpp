@@ -90,7 +90,7 @@ TEST_CASE("drivers configure the chips as documented") {
     REQUIRE(itg.begin());
     CHECK(itg.address() == 0x68);
     CHECK(bus.itg.regs[0x15] == 0);     // every 1 kHz internal sample: the register is at most 1 ms old when read
-    CHECK(bus.itg.regs[0x16] == 0x1B);  // FS_SEL 3, DLPF 42 Hz (below the 100 Hz Nyquist limit)
+    CHECK(bus.itg.regs[0x16] == 0x1A);  // FS_SEL 3, DLPF 98 Hz (at the 100 Hz Nyquist limit of the 200 Hz read)
     CHECK(bus.itg.regs[0x3E] == 0x01);
     REQUIRE(hmc.begin());
     CHECK(bus.hmc.regs[0x00] == 0x18);  // one sample per measurement

@@ -8,12 +8,12 @@ void Itg3200::decode(const uint8_t raw[6], int16_t out[3]) {
     for (uint8_t i = 0; i < 3; ++i) out[i] = (int16_t)(((uint16_t)raw[2 * i] << 8) | raw[2 * i + 1]);
 }
 
-// clock from the X gyro's PLL, every sample of the 1 kHz internal rate, ±2000 °/s with the 42 Hz low-pass,
+// clock from the X gyro's PLL, every sample of the 1 kHz internal rate, ±2000 °/s with the 98 Hz low-pass,
 // no interrupt pin
 static const uint8_t ITG_SETUP[][2] SPHERE_TABLE = {
     {Itg3200::PWR_MGM, Itg3200::PWR_MGM_PLL_X},
     {Itg3200::SMPLRT_DIV, Itg3200::SMPLRT_DIV_1KHZ},
-    {Itg3200::DLPF_FS, Itg3200::DLPF_FS_2000DPS_42HZ},
+    {Itg3200::DLPF_FS, Itg3200::DLPF_FS_2000DPS_98HZ},
     {Itg3200::INT_CFG, 0},
 };
 

@@ -66,9 +66,9 @@ public:
     static const uint16_t TRACK_SAMPLES = 200;           // 1 s still windows for bias tracking
     static const int16_t TRACK_STEP_LSB = 2;             // the most one tracking window moves the bias
     // ORIENTATION is the state predicted this far ahead at the current rate: the ITG-3200's delay at
-    // DLPF_CFG 3 (4.8 ms, datasheet §8.3 register 22) plus half its 1 ms output period (the mean age
-    // of the register when read, SMPLRT_DIV 0: itg3200.h), so the quaternion is the orientation at the packet's t_us
-    static const uint16_t GYRO_DELAY_US = 5300;
+    // DLPF_CFG 2 (2.8 ms: itg3200.h) plus half its 1 ms output period (the mean age of the register when
+    // read, SMPLRT_DIV 0), so the quaternion is the orientation at the packet's t_us
+    static const uint16_t GYRO_DELAY_US = 3300;
     // a gap of up to this many periods without a fresh gyroscope sample (stale or missing) is bridged
     // by the trapezoid rule when the gyroscope is back (SphereDevice::bridgeGap)
     static const uint8_t GAP_BRIDGE_TICKS = 20;

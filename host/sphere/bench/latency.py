@@ -15,7 +15,7 @@ at every phase of the 5 ms sample clock. For each onset the pointer's first move
 pointer record, and its latency is split where the path can be split (all from the board's ``--host-log``):
 
 - ``age``: onset → the firmware starts sending the frame that moved the pointer (waiting for the sample period,
-  the ITG-3200's 42 Hz DLPF and its register refreshed every 1 ms, the reads, queueing behind other frames; and
+  the ITG-3200's 98 Hz DLPF and its register refreshed every 1 ms, the reads, queueing behind other frames; and
   a sample period more when the first moving sample does not add up to a pixel yet);
 - ``wire``: that frame's first byte → its delimiter at the UART (its length at the baud rate; at 115200 with the
   MARG update's 0.6 ms pause in it: RAW_SAMPLE is sent before the update, firmware/README.md);

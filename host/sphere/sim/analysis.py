@@ -127,7 +127,7 @@ STARTUP_BIAS_TRIES = 10
 GYRO_SPAN_LSB, ACCEL_SPAN_LSB, MAG_SPAN_LSB = 58, 24, 96
 MAG_DRIFT_LSB = 4  # the window's second-half magnetometer mean within this of the first half's (gyro_bias.h)
 # ORIENTATION carries the state predicted this far ahead at the update's rate (SphereDevice::GYRO_DELAY_US)
-GYRO_DELAY_S = 0.0053
+GYRO_DELAY_S = 0.0033
 
 
 def _moved_at(raw: list, idx) -> int | None:
