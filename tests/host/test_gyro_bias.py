@@ -199,3 +199,22 @@ def test_lying_still_the_pointer_is_held_and_a_slow_turn_from_rest_is_followed()
     assert np.ptp(a[still, 1]) == 0 and np.ptp(a[still, 2]) == 0
     before, after = a[a[:, 0] < 4.95][-1], a[a[:, 0] < 7.9][-1]
     assert abs((after[1] - before[1]) - (-192.0)) <= 0.05 * 192.0, after[1] - before[1]
+
+
+def test_the_rest_hold_let_go_by_a_failed_still_window_carries_nothing():
+    """Held lying still; then the owner's still time drops to 0 (a still window's trend test failed) while the
+    rate stays in the band: the hold lets go with the sample's own rate, not the short mean's whole displacement
+    (that carry is for a move's start; here it moved a turntable-stopped pointer by a third of a pixel)."""
+    from sphere.daemon.gyro_bias import RestHold
+
+    h = RestHold()
+    for _ in range(40):
+        assert h((0.3, -0.2, 0.1), 0.005, still_s=2.0, still_dps=3.0) == (0.0, 0.0, 0.0)
+    assert h((0.3, -0.2, 0.1), 0.005, still_s=0.0, still_dps=3.0) == (0.3, -0.2, 0.1)
+    assert not h.holding
+    h = RestHold()  # a move from rest still brings the short mean's displacement
+    for _ in range(40):
+        h((0.0, 0.0, 0.0), 0.005, still_s=2.0, still_dps=3.0)
+    out = [h((0.0, 0.0, 2.5), 0.005, still_s=2.0, still_dps=3.0) for _ in range(10)]
+    released = next(o for o in out if o != (0.0, 0.0, 0.0))
+    assert released[2] > 2.5

@@ -199,3 +199,14 @@ def test_a_slow_steady_aim_below_the_band_ends_the_hold_and_is_followed(rate):
     free = _path(PointerMapper(PointerSettings(hold_band_dps=0.0), 1920), rates)
     assert held[a + int(1.5 / DT)] != 0  # moving within 1.5 s
     assert abs(held[b] - free[b]) <= 0.05 * abs(free[b]) + 1
+
+
+def test_the_hand_hold_takes_over_from_the_rest_hold():
+    """Lying still (the daemon's rest hold: hold() every sample), then the rest hold lets go while the rate is
+    quiet: the pointer stays held; a turn then moves it at once."""
+    m = PointerMapper(PointerSettings(), 1920)
+    for _ in range(100):
+        m.hold()
+    quiet = [(0.0, 0.0, 0.5)] * 100  # 0.5 s of a rate within the band (a bias still being learnt, say)
+    assert _path(m, quiet)[-1] == 0
+    assert abs(_path(m, [(0.0, 0.0, 10.0)] * 40)[-1]) >= 5

@@ -446,11 +446,16 @@ class RestHold:
             sm[2] -= r[2] * d
             self._t -= d
         band = self.band_dps * self._t
-        hold = (still_s >= self.after_s and self.band_dps > 0 and abs(sm[0]) <= band and abs(sm[1]) <= band and abs(sm[2]) <= band
-                and abs(rate_dps[0]) <= still_dps and abs(rate_dps[1]) <= still_dps and abs(rate_dps[2]) <= still_dps)
-        if hold:
+        quiet = (self.band_dps > 0 and abs(sm[0]) <= band and abs(sm[1]) <= band and abs(sm[2]) <= band
+                 and abs(rate_dps[0]) <= still_dps and abs(rate_dps[1]) <= still_dps and abs(rate_dps[2]) <= still_dps)
+        if quiet and still_s >= self.after_s:
             self.holding = True
             return (0.0, 0.0, 0.0)
+        if self.holding and quiet:
+            # let go because a still window's trend test failed, not because the rate left the band: no move
+            # began, so nothing held back is carried (the pointer's hand hold takes over from here)
+            self.holding = False
+            return rate_dps
         if self.holding and len(recent) > 1 and dt_s > 0:
             # released: the move began within the short mean, whose earlier samples were held back; they come
             # now, with this one (nothing of a slow aim's start is lost)

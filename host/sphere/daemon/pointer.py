@@ -241,12 +241,17 @@ class PointerMapper:
     def hold(self) -> None:
         """A sample during which the pointer stays where it is (the sphere lies still: the daemon's rest hold):
         no step; the smoothing's history is forgotten once, so the next move starts afresh (no tail of the last
-        move comes after the hold); the sub-pixel remainder stays (it is where the pointer is)."""
+        move comes after the hold); the sub-pixel remainder stays (it is where the pointer is). The hand hold
+        takes over from it: when the rest hold lets go while the rate is still within the hand hold's band (its
+        still test failing on the window with the stop in it), the pointer stays held."""
         if not self._holding:
             remainder = self.remainder
             self.reset()
             self.remainder = remainder
             self._holding = True
+            if self.settings.hold_band_dps > 0:
+                self._hand_held = True
+                self._within_s = self.settings.hold_after_s
 
     def update(self, gyro_dps, dt_s: float, up_body=None) -> tuple[int, int]:
         """One gyro sample (°/s, sensor axes) over ``dt_s`` seconds → whole-pixel steps (dx right, dy down)."""
