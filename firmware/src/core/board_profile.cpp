@@ -25,8 +25,9 @@ void mapAxes(uint8_t profile, uint8_t chip, int16_t v[3]) {
     int16_t in[3] = {v[0], v[1], v[2]};
     for (uint8_t i = 0; i < 3; ++i) {
         int16_t x = in[m[i] & 3];
-        // negating −32768 saturates; the overflow mark −4096 keeps its meaning
-        if ((m[i] & AXIS_NEG) && x != -4096) x = x == -32768 ? 32767 : (int16_t)-x;
+        // negating −32768 saturates; the magnetometer's overflow mark −4096 keeps its meaning (the gyroscope's
+        // and the accelerometer's −4096 is a reading like any other: kept, it turned 285 °/s into −285 °/s)
+        if ((m[i] & AXIS_NEG) && !(chip == CHIP_MAG && x == -4096)) x = x == -32768 ? 32767 : (int16_t)-x;
         v[i] = x;
     }
 }

@@ -17,7 +17,8 @@ const uint8_t CHIP_ACCEL = 0, CHIP_GYRO = 1, CHIP_MAG = 2;
 const uint8_t AXIS_NEG = 4;
 
 // Body-frame vector from the chip's x, y, z in place, for `chip` on board `profile` (< BOARD_PROFILE_COUNT).
-// −4096 (the HMC5883L's overflow mark) stays −4096 whatever the sign.
+// The magnetometer's −4096 (the HMC5883L's overflow mark) stays −4096 whatever the sign; any other chip's
+// −4096 is a reading and is negated like any other.
 void mapAxes(uint8_t profile, uint8_t chip, int16_t v[3]);
 // The map itself: three bytes as above.
 void axisMap(uint8_t profile, uint8_t chip, uint8_t out[3]);
