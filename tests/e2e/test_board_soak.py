@@ -351,3 +351,18 @@ def test_both_runs_are_the_same_until_the_first_fault(tmp_path):
         frames = S.read_frames((tmp_path / f"{name}.cap").read_bytes(), (tmp_path / f"{name}.times").read_bytes())
         runs.append([(f.packet.t_us, f.packet.quat) for f in frames if isinstance(f.packet, Orientation) and f.t_s < first])
     assert len(runs[0]) >= 20 and runs[0] == runs[1][: len(runs[0])], first  # the first glitch comes at 0.5 s
+
+
+def test_the_check_is_also_made_where_nothing_was_injected():
+    """The orientation check's own noise: made from every instant with nothing in the fault log, by the same
+    rules, it finds nothing between two runs that agree, and a difference that came with no fault when one
+    does (a firmware bug, or two runs reading the chips at different phases); it is reported, not judged."""
+    ref = _turning(0.5, 12.0, 100.0)
+    same = S.fault_free_checks(_turning(0.5, 12.0, 100.0), ref, [{"t": 8.0, "kind": "glitch_nack"}], [])
+    assert same["windows"] > 10 and same["max_deg"] < 0.1 and same["over_limit"] == 0
+    a, b = _turning(0.5, 6.0, 100.0), _turning(6.0, 12.0, 100.0, offset_deg=3.0)  # 3 deg at 6 s, nothing logged
+    stepped = S.fault_free_checks(a + [f for f in b if f.type_ != 0x01], ref, [], [])
+    assert stepped["max_deg"] == pytest.approx(3.0, abs=0.1) and stepped["over_limit"] >= 1
+    # nothing is checked from 0.5 s before a logged event to 0.1 s after its check
+    near = S.fault_free_checks(a + [f for f in b if f.type_ != 0x01], ref, [{"t": 6.0, "kind": "glitch_nack"}], [])
+    assert near["over_limit"] == 0

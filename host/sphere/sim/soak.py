@@ -336,6 +336,32 @@ def orientation_excess(frames: list[Frame], ref: list[Frame], ends: list[dict], 
     return worst, rows
 
 
+def fault_free_checks(frames: list[Frame], ref: list[Frame], log: list[dict], resets_t: list[float], host_stalls=(),
+                      step_s: float = 0.25, after_s: float = 2.0) -> dict:
+    """The orientation check made where nothing was injected: from every ``step_s`` instant with nothing in the
+    board's fault log (glitches, host stalls and resets too) from 0.5 s before it to its check ``after_s`` later,
+    by the rules of :func:`orientation_excess`. What it finds is the difference two runs of the same firmware show
+    with no fault to blame: the check's own noise, reported beside the faults' (not judged)."""
+    t = np.array([f.t_s for f in frames if isinstance(f.packet, Orientation)])
+    logged = sorted(e["t"] for e in log)
+    ends = []
+    for t0 in np.arange(LEAD_IN_S, (t[-1] - after_s) if len(t) else 0.0, step_s):
+        t0 = float(t0)
+        i = bisect.bisect_left(logged, t0 - 0.5)
+        if i < len(logged) and logged[i] <= t0 + after_s + 0.1:
+            continue
+        if any(a - 0.5 <= t0 + after_s + 0.1 and t0 - 0.5 <= b for a, b in host_stalls):
+            continue
+        ends.append({"kind": "none", "t_start": t0, "t_end": t0, "chips": []})
+    _, rows = orientation_excess(frames, ref, ends, resets_t, host_stalls, after_s=after_s)
+    judged = [(r["excess_deg"], r["t"]) for r in rows if r.get("excess_deg") is not None]
+    v = np.array([x for x, _ in judged if math.isfinite(x)])
+    worst = max(judged) if judged else (None, None)
+    return {"windows": len(v), "p95_deg": round(float(np.percentile(v, 95)), 2) if len(v) else None,
+            "max_deg": worst[0], "max_t": worst[1],
+            "over_limit": int(np.sum(v > LIMITS["orientation_excess_deg"])) if len(v) else 0}
+
+
 def start_ups(frames: list[Frame], resets_t) -> list[dict]:
     """How long the firmware says it is converging after power-up and after each reset: from the reset to its
     first ORIENTATION without ``converging`` ({t, seconds}; seconds None when the next reset or the run's end
@@ -530,6 +556,7 @@ def run_soak(elf, seconds: float, seed: int, board: str | None = None, kinds=FAU
         "frames_dropped": s["frames_dropped"].as_dict(),
         "start_up_s": {"longest": max(ended) if ended else None, "median": float(np.median(ended)) if ended else None,
                        "unfinished": sum(1 for u in ups if u["seconds"] is None), "count": len(ups)},
+        "orientation_without_fault_deg": fault_free_checks(frames, ref, log, resets_t, host_stalls),
     }
     failed = [k for k in ("stale_frames", "crc_errors") if inv[k]["count"] > 0]
     if rec.first_s is not None or not rec_rows and ends:
