@@ -90,3 +90,42 @@ def test_the_runs_ages_are_kept_over_a_reconnect_and_give_nearest_rank_percentil
     want = [both[min(len(both) - 1, int(p / 100 * len(both)))] for p in (50, 95, 99, 100)]
     assert ages.run_samples == 5000
     assert np.allclose(got, want, atol=0.051), (got, want)  # counted in 0.1 ms steps
+
+
+def test_an_echo_whose_writer_is_preempted_after_the_write_does_not_move_the_clock():
+    """DeviceClock.echo reads the host's time before the write: a writer preempted for 0.9 ms after one write (a
+    loaded machine) leaves the bounds true. Noted after the write instead, that trip's lower bound lies 0.9 ms after
+    the device's true time and, as the tightest of the window, moves the clock by about half of it. (The way back
+    here always waits at least 1 ms, a REPLY queued behind a frame: the bounds then allow both.)"""
+    baud, offset = 115200, 500.0
+    up_wire, down_wire = 6 * 10 / baud, 13 * 10 / baud
+    results = {}
+    for how in ("echo", "after the write"):
+        rng = random.Random(3)
+        clock = DeviceClock(baud)
+        host = [10.0]
+        for k in range(40):
+            written = host[0] = 10.0 + 0.5 * k
+            preempted = 0.0009 if k == 20 else 0.0
+
+            def send(seq=k & 0xFF, preempted=preempted):
+                host[0] += preempted  # the write is done; the writer runs again this much later
+                return seq
+
+            if how == "echo":
+                clock.echo(send, lambda: host[0])
+            else:
+                clock.sent(send(), host[0])
+            up = up_wire + rng.uniform(0, 0.0005) * (k != 20)  # the preempted trip went up without a wait
+            down = down_wire + 0.001 + rng.uniform(0, 0.001)
+            t_dev = offset + written + up
+            reply = Reply(k & 0xFF, Echo.TYPE, 0, data=(int(t_dev * 1e6) % (1 << 32)).to_bytes(4, "little"))
+            assert clock.reply(reply, written + up + down)
+        probe = 10.0 + 0.5 * 39 + 0.1
+        t_us = int((offset + probe) * 1e6)
+        clock.note_sample(t_us)
+        results[how] = clock.host_s(t_us) - probe  # > 0: the clock maps the sample later, its age shows smaller
+    # the waits' floor (1 ms back, ~0 up) puts the middle of the bounds 0.5 ms late either way; the preempted
+    # trip adds to it only when noted after the write
+    assert abs(results["echo"] - 0.0005) < 0.0002, results
+    assert results["after the write"] - results["echo"] > 0.0003, results  # by half the 0.9 ms

@@ -132,7 +132,7 @@ def run(args) -> int:
             now = time.monotonic()
             if mon.hello is not None and mon.hello.protocol_version >= 3 and now >= next_echo:
                 next_echo = now + ECHO_EVERY_S  # the device's clock on ours (spec §5.4): each sample's age
-                clock.sent(link.send(Echo()), time.monotonic())
+                clock.echo(lambda: link.send(Echo()), time.monotonic)
             if mon.hello is None and not asked:
                 link.send(GetHello())  # the version and sensors (a USB Nano also sends HELLO when the open resets it)
                 asked = True

@@ -1,7 +1,7 @@
 """The sphere's clock on the host's clock, from ECHO round trips (protocol/spec.md §5.4), and each sample's age.
 
     clock = DeviceClock()
-    seq = link.send(Echo()); clock.sent(seq, time.monotonic())          # every 0.5 s
+    clock.echo(lambda: link.send(Echo()), time.monotonic)                # every 0.5 s
     clock.reply(reply, time.monotonic())                               # its REPLY (data: device_t_us)
     clock.host_s(dp.t_us)                                              # a sample's device time, in host seconds
     ages.add(arrival_s - clock.host_s(dp.t_us), arrival_s)             # its age on arrival
@@ -48,6 +48,17 @@ class DeviceClock:
         self.uncertainty_s: float | None = None
 
     # -- the round trips --
+    def echo(self, send, now) -> int:
+        """Send an ECHO (``send()`` writes it and returns its sequence number) and note when: the host's time is
+        read *before* the write. Read after it, a writer that was preempted between the write and the clock read
+        would give a lower bound (h0 + up) later than the device's true time, and since the fit keeps the
+        tightest bound of 32 trips, that one trip would shift every age by the preemption (a loaded machine
+        showed ages 1-2 ms below the truth)."""
+        h0 = now()
+        seq = send()
+        self.sent(seq, h0)
+        return seq
+
     def sent(self, seq: int, host_s: float) -> None:
         self._sent[seq] = host_s
         if len(self._sent) > 16:  # replies that never came

@@ -459,7 +459,7 @@ class SerialSource(Source):
             now = time.perf_counter()
             if now >= self._next_echo:
                 self._next_echo = now + ECHO_EVERY_S
-                self.clock.sent(self.link.send(Echo()), time.perf_counter())
+                self.clock.echo(lambda: self.link.send(Echo()), time.perf_counter)
         return batch
 
     def sample_age_ms(self) -> tuple[float, float] | None:
