@@ -366,3 +366,66 @@ def test_the_check_is_also_made_where_nothing_was_injected():
     # nothing is checked from 0.5 s before a logged event to 0.1 s after its check
     near = S.fault_free_checks(a + [f for f in b if f.type_ != 0x01], ref, [{"t": 6.0, "kind": "glitch_nack"}], [])
     assert near["over_limit"] == 0
+
+
+def _sine_turn(seconds=4.0, rate_hz=1000.0, t_gap=2.0):
+    """A body turning about z at 500 deg/s * sin(2 pi 10 (t - t_gap)) from t_gap for one 100 ms cycle, still
+    otherwise: across the 50 ms from t_gap the rate starts and ends at 0 but turns the body by
+    500 (1 - cos pi) / (20 pi) = 15.9 deg."""
+    import math
+
+    from sphere.sim import trace as T
+    t = np.arange(int(seconds * rate_hz)) / rate_hz
+    wz = np.where((t >= t_gap) & (t < t_gap + 0.1), np.radians(500.0) * np.sin(2 * math.pi * 10 * (t - t_gap)), 0.0)
+    gyr = np.stack([np.zeros_like(t), np.zeros_like(t), wz], axis=1)
+    acc = np.tile([0.0, 0.0, 9.81], (len(t), 1))
+    mag = np.tile([20.0, 0.0, -45.0], (len(t), 1))
+    return T.Motion(rate_hz, acc, gyr, mag, "sine")
+
+
+def test_a_perfect_filter_loses_what_a_gyro_gap_hides():
+    """What no filter can know: across a gap in the gyroscope's samples the best guess from the samples on either
+    side is the rate going linearly between them; a turn that starts and ends inside the gap is invisible. A
+    50 ms gap over one half-cycle of a 10 Hz shake at 500 deg/s hides 15.9 deg; a steady turn hides nothing."""
+    m = _sine_turn()
+    assert S.unavoidable_deg(m, 2.0, 2.05) == pytest.approx(15.9, abs=0.2)
+    assert S.unavoidable_deg(m, 0.5, 0.55) == pytest.approx(0.0, abs=1e-6)
+    steady = _sine_turn()
+    steady.gyr_rad_s[:, 2] = np.radians(300.0)
+    assert S.unavoidable_deg(steady, 1.0, 1.06) == pytest.approx(0.0, abs=1e-3)
+
+
+def test_in_broad_fast_turns_a_gyro_nack_costs_a_perfect_filter_more_than_the_limit():
+    """The soak's motion (BROAD) with a 50 ms gyro NACK (the schedule's longest) and a sample period either side:
+    at many instants even a perfect filter ends the gap more than 2 deg from the truth (the shakes of the
+    disturbed trials; 21.6 % of instants, up to 24 deg, when measured every 10 ms of the 120 s soak), and in those
+    turns the accelerometer is rejected and the magnetometer cannot see a turn about the field: the 2 deg limit
+    2 s after such a fault is not physics. The check judges the rest (the firmware's doing beyond it), limit
+    unchanged: the next test."""
+    from sphere.broad import BroadMissing, trial_paths
+
+    try:
+        if not trial_paths():
+            pytest.fail("no BROAD trials")
+    except BroadMissing as e:
+        pytest.fail(str(e))
+    m, _ = S.soak_motion(120.0)
+    lost = np.array([S.unavoidable_deg(m, t - 0.005, t + 0.055) for t in np.arange(3.0, 119.9, 0.05)])
+    assert lost.max() > 10.0 and np.mean(lost > S.LIMITS["orientation_excess_deg"]) > 0.05, (lost.max(), np.mean(lost > 2))
+
+
+def test_a_gyro_gaps_unavoidable_turn_is_not_the_firmwares_doing():
+    """A gyro NACK across the hidden half-cycle: the device ends 15.9 deg off the reference and stays so (a perfect
+    filter would too); only what it is off beyond that counts against the 2 deg limit, and a device 19.9 deg off
+    still fails."""
+    m = _sine_turn()
+    ends = [{"kind": "nack", "t_start": 2.005, "t_end": 2.045, "chips": ["itg3200"]}]
+    ref = _turning(0.5, 4.5, 0.0)
+    for off, fails in ((15.9, False), (19.9, True)):
+        a, b = _turning(0.5, 2.05, 0.0), _turning(2.05, 4.5, 0.0, offset_deg=off)
+        dev = a + [f for f in b if f.type_ != 0x01]
+        worst, rows = S.orientation_excess(dev, ref, ends, [])
+        assert rows[0]["excess_deg"] == pytest.approx(off, abs=0.1)  # without the motion: all of it
+        worst, rows = S.orientation_excess(dev, ref, ends, [], motion=m)
+        assert rows[0]["unavoidable_deg"] == pytest.approx(15.9, abs=0.2)
+        assert rows[0]["excess_deg"] == pytest.approx(off - 15.9, abs=0.2) and (worst.first_s is not None) == fails
