@@ -34,6 +34,26 @@ def _stream(items):
     return bytes(cap), bytes(times)
 
 
+def _need_broad() -> None:
+    from sphere.broad import BroadMissing, trial_paths
+
+    try:
+        if not trial_paths():
+            pytest.fail("no BROAD trials")
+    except BroadMissing as e:
+        pytest.fail(str(e))
+
+
+def _need_soak():
+    """The board, the firmware image and BROAD's trials (the soak's motion): the image's path."""
+    from simscenarios import need_board, need_firmware
+
+    need_board()
+    elf = need_firmware()
+    _need_broad()
+    return elf
+
+
 def test_frames_are_placed_in_simulated_time_and_bad_ones_kept():
     cap, times = _stream([(0.1, _hello(), 0), (0.105, _raw(5000), 1), (0.11, b"\x05\x01\x02\x03\x04\x00"),
                           (0.115, _raw(15000), 2)])
@@ -113,17 +133,9 @@ def test_schedule_is_seeded_and_has_every_kind():
 def test_a_short_soak_of_the_firmware(tmp_path, capsys):
     """`sphere sim --soak`: one summary line, a JSON report with every invariant's count and first time, and
     exit 1 exactly when the report lists a failed invariant."""
-    from simscenarios import need_board, need_firmware
-    from sphere.broad import BroadMissing, trial_paths
     from sphere.cli import main
 
-    need_board()
-    elf = need_firmware()
-    try:
-        if not trial_paths():
-            pytest.fail("no BROAD trials")
-    except BroadMissing as e:
-        pytest.fail(str(e))
+    elf = _need_soak()
     out = tmp_path / "soak.json"
     rc = main(["sim", "--soak", "14", "--seed", "2", "--firmware", str(elf), "--json", str(out)])
     lines = capsys.readouterr().out.strip().splitlines()
@@ -296,10 +308,7 @@ def test_the_seed_by_board_matrix_prints_a_table_and_fails_when_a_run_does(tmp_p
     import sys
     from pathlib import Path
 
-    from simscenarios import need_board, need_firmware
-
-    need_board()
-    elf = need_firmware()
+    elf = _need_soak()
     script = Path(__file__).resolve().parents[2] / "hardware" / "sim" / "soak_matrix.py"
     out = tmp_path / "m.json"
     r = subprocess.run([sys.executable, str(script), "--seeds", "2", "--board", "aligned", "--seconds", "14",
@@ -334,16 +343,7 @@ def test_both_runs_are_the_same_until_the_first_fault(tmp_path):
     that reset plainly, without the held SDA, read the gyro at another phase: with the chips' clocks off the Nano's
     it read a sample twice or missed one at other instants, and in fast turns the runs drifted up to 3.8 degrees
     apart within 2 s with no fault at all: seed 108 on sen10724, 8 of 94 fault-free windows over 2 degrees.)"""
-    from simscenarios import need_board, need_firmware
-    from sphere.broad import BroadMissing, trial_paths
-
-    need_board()
-    elf = need_firmware()
-    try:
-        if not trial_paths():
-            pytest.fail("no BROAD trials")
-    except BroadMissing as e:
-        pytest.fail(str(e))
+    elf = _need_soak()
     res = S.run_soak(elf, 14, 2, keep=tmp_path)
     first = min(e["t"] for e in res.report["faults"] if e["kind"] not in ("sda_held_at_power_up", "sda_released"))
     runs = []
@@ -402,13 +402,7 @@ def test_in_broad_fast_turns_a_gyro_nack_costs_a_perfect_filter_more_than_the_li
     turns the accelerometer is rejected and the magnetometer cannot see a turn about the field: the 2 deg limit
     2 s after such a fault is not physics. The check judges the rest (the firmware's doing beyond it), limit
     unchanged: the next test."""
-    from sphere.broad import BroadMissing, trial_paths
-
-    try:
-        if not trial_paths():
-            pytest.fail("no BROAD trials")
-    except BroadMissing as e:
-        pytest.fail(str(e))
+    _need_broad()
     m, _ = S.soak_motion(120.0)
     lost = np.array([S.unavoidable_deg(m, t - 0.005, t + 0.055) for t in np.arange(3.0, 119.9, 0.05)])
     assert lost.max() > 10.0 and np.mean(lost > S.LIMITS["orientation_excess_deg"]) > 0.05, (lost.max(), np.mean(lost > 2))
