@@ -111,6 +111,7 @@ ROWS = [
     C(["--set", "pointer.invert_x=maybe"], 2, "invert_x"),
     C(["--set", "pointer.hold_band_dps=-0.5"], 2, "hold_band_dps"),
     C(["--set", "pointer.hold_slow_window_s=0"], 2, "hold_slow_window_s"),
+    C(["--set", "pointer.gyro_lowpass_hz=-42"], 2, "gyro_lowpass_hz"),
     C(["--set", 'mode.cycle=["pointer", "sideways"]'], 2, "sideways"),
     C(["--set", "mode.start=sideways"], 2, "must be one of"),
     C(["--set", "events.single_tap=explode"], 2, "must be one of"),

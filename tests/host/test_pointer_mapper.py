@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import pytest
@@ -210,3 +211,54 @@ def test_the_hand_hold_takes_over_from_the_rest_hold():
     quiet = [(0.0, 0.0, 0.5)] * 100  # 0.5 s of a rate within the band (a bias still being learnt, say)
     assert _path(m, quiet)[-1] == 0
     assert abs(_path(m, [(0.0, 0.0, 10.0)] * 40)[-1]) >= 5
+
+
+def _chip_lowpass(rates_1khz, corner_hz):
+    """The ITG-3200's low-pass as the virtual board models it (hardware/sim/sensors.c): a second-order
+    Butterworth by the bilinear transform at the chip's 1 kHz, every 5th output read (200 Hz)."""
+    k = math.tan(math.pi * corner_hz / 1000.0)
+    n = 1.0 / (1.0 + math.sqrt(2.0) * k + k * k)
+    b0, a1, a2 = k * k * n, 2.0 * (k * k - 1.0) * n, (1.0 - math.sqrt(2.0) * k + k * k) * n
+    x0 = rates_1khz[0]
+    z1, z2, out = x0 - b0 * x0, b0 * x0 - a2 * x0, []
+    for x in rates_1khz:
+        y = b0 * x + z1
+        z1, z2 = 2 * b0 * x - a1 * y + z2, b0 * x - a2 * y
+        out.append(y)
+    return out[4::5]
+
+
+@pytest.mark.parametrize("corner, rate, without", [(42.0, 60.0, 0.6), (42.0, 200.0, 2.0), (98.0, 200.0, 0.5)])
+def test_a_hard_stop_through_the_chips_low_pass_does_not_overshoot(corner, rate, without):
+    """A yaw turn stopped within 10 ms, read through the chip's low-pass at 42 Hz (firmware up to 0.3.1) or 98 Hz
+    (0.3.2), whose rate swings 4 % the other way after the stop: the pointer ends where it is going and never
+    passes it (without the equalizer it did by ``without`` px and more), and it goes as far."""
+    ms = [0.0] * 100 + [rate] * 300 + [rate * (1 - i / 10) for i in range(10)] + [0.0] * 700
+    gyro = [(0.0, 0.0, v) for v in _chip_lowpass(ms, corner)]
+    ends = []
+    for lowpass, most in ((corner, 0.05), (0.0, None)):
+        m = PointerMapper(PointerSettings(gyro_lowpass_hz=lowpass, hold_band_dps=0.0), 1920)
+        x, path = 0.0, []
+        for g in gyro:
+            x += m.update(g, DT)[0]
+            path.append(x + m.remainder[0])
+        past = path[-1] - min(path)  # the turn goes left (negative x): past the end = below the final x
+        ends.append(path[-1])
+        if most is not None:
+            assert past <= most
+        else:
+            assert past >= without
+    assert ends[0] == pytest.approx(ends[1], abs=0.2)  # the same travel (unit gain at 0 Hz)
+
+
+def test_the_equalizer_never_amplifies():
+    """Its gain is at most 1 at every frequency up to the 100 Hz Nyquist (noise is not made louder) and 1 at
+    0 Hz (a steady turn is followed exactly)."""
+    from sphere.daemon.pointer import LowpassEqualizer
+
+    for f, corner in itertools.product((0.0, 1.0, 10.0, 30.0, 42.0, 60.0, 98.0), (42.0, 98.0)):
+        eq = LowpassEqualizer(corner)
+        xs = [math.cos(2 * math.pi * f * i * DT) for i in range(4000)]
+        ys = [eq((0.0, 0.0, x), DT)[2] for x in xs]
+        gain = max(abs(y) for y in ys[2000:])
+        assert gain <= 1.0 + 1e-6 and (f > 0 or gain == pytest.approx(1.0))

@@ -54,13 +54,17 @@ POINTER_PARAMS = {
                                     "sensor's noise and the hand's slow sway do not creep it); the move that leaves "
                                     "the band brings what the window held back at once (0 = off)", lo=0.0, hi=10.0),
     "hold_window_s": Param(0.1, doc="the short mean's length for `hold_band_dps`", lo=0.005, hi=1.0),
-    "hold_after_s": Param(0.2, doc="how long the short mean must have stayed within `hold_band_dps` before the "
+    "hold_after_s": Param(0.15, doc="how long the short mean must have stayed within `hold_band_dps` before the "
                                    "pointer is held (the end of a move comes through the smoothing first)",
         lo=0.0, hi=10.0),
     "hold_slow_dps": Param(0.3, doc="a slow steady aim ends the hold too: when the held-back turn over the last "
                                     "`hold_slow_window_s` exceeds this rate (°/s) times that window, it comes at once "
                                     "and the pointer follows", lo=0.0, hi=10.0),
     "hold_slow_window_s": Param(1.0, doc="the window of `hold_slow_dps`", lo=0.005, hi=5.0),
+    "gyro_lowpass_hz": Param(98.0, doc="the gyro chip's own low-pass as the firmware sets it (ITG-3200 DLPF_CFG 2: "
+                                       "98 Hz at its 1 kHz internal rate, firmware 0.3.2; 42 before): its ringing "
+                                       "after a hard stop is turned into a critically damped response before the "
+                                       "pointer sees it, so a stop does not overshoot (0 = off)", lo=0.0, hi=256.0),
     "smoothing": Param(DEFAULT_SMOOTHING, doc="smoothing filter of the pointer, from the smoothing registry (its "
                                               "parameters in [smoothing.NAME]); `tremor` takes out the hand's 8–12 "
                                               "Hz tremor, `none` = off", choices=lambda: tuple(SMOOTHING)),
@@ -160,6 +164,62 @@ class _HoldWindow:
         self.sums[3] = self.sums[4] = 0.0
 
 
+class LowpassEqualizer:
+    """Per axis, the gyro chip's low-pass turned into a critically damped one at the same corner.
+
+    The ITG-3200 filters its rate at 1 kHz with the DLPF_CFG bandwidth (datasheet §8.3, register 22 gives the
+    bandwidth only; InvenSense's MPU-6000/6050 register map gives the same filter's delays, register 26); the
+    virtual board models it as a second-order Butterworth (bilinear, prewarped), whose step response overshoots
+    by 4 %: after a hard stop at 200 °/s the rate swings the other way for a few ms (at 42 Hz 4–6 °/s for about
+    10 ms, 2–3 px back at 48 px/°; at 98 Hz about half that). The samples the host reads (every ``dt_s``) follow the same two poles, raised
+    to the power ``dt_s`` × 1 kHz; this filter has zeros on them and a double real pole at exp(−2π·f·``dt_s``),
+    with unit gain at 0 Hz: the chip and it together are critically damped (no overshoot), and its own gain is
+    at most 1 at every frequency (it never amplifies the noise). Lag added: about 2 ms at 42 Hz, 1 ms at 98."""
+
+    INTERNAL_HZ = 1000.0  # the ITG-3200's internal sample rate with the DLPF on (DLPF_CFG 1-6)
+
+    def __init__(self, corner_hz: float):
+        self.corner_hz = corner_hz
+        self._coeffs = {}
+        self.reset()
+
+    def reset(self) -> None:
+        self._state = None  # per axis [x1, x2, y1, y2]
+
+    def _design(self, dt_s: float):
+        key = round(dt_s, 4)
+        c = self._coeffs.get(key)
+        if c is None:
+            f, fi = self.corner_hz, self.INTERNAL_HZ
+            k = math.tan(math.pi * f / fi)
+            norm = 1.0 / (1.0 + math.sqrt(2.0) * k + k * k)
+            a1, a2 = 2.0 * (k * k - 1.0) * norm, (1.0 - math.sqrt(2.0) * k + k * k) * norm
+            disc = complex(a1 * a1 - 4.0 * a2)
+            pole = (-a1 + disc ** 0.5) / 2.0  # one of the conjugate pair
+            p = pole ** (key * fi)
+            n1, n2 = -2.0 * p.real, abs(p) ** 2
+            r = math.exp(-2.0 * math.pi * f * key)
+            d1, d2 = -2.0 * r, r * r
+            g = (1.0 + d1 + d2) / (1.0 + n1 + n2)
+            c = self._coeffs[key] = (g, g * n1, g * n2, d1, d2)
+        return c
+
+    def __call__(self, rate, dt_s: float):
+        if dt_s <= 0.0 or dt_s > 0.05:  # no steady sample period: start again from this sample
+            self._state = None
+            return rate
+        b0, b1, b2, d1, d2 = self._design(dt_s)
+        st = self._state
+        if st is None:
+            st = self._state = [[v, v, v, v] for v in rate]
+        out = []
+        for v, s in zip(rate, st):
+            y = b0 * v + b1 * s[0] + b2 * s[1] - d1 * s[2] - d2 * s[3]
+            s[1], s[0], s[3], s[2] = s[0], v, s[2], y
+            out.append(y)
+        return tuple(out)
+
+
 class PointerMapper:
     """Angular rate → integer pointer steps. Feed every gyro sample to :meth:`update`.
 
@@ -177,6 +237,8 @@ class PointerMapper:
         self.settings = settings or PointerSettings()
         self.screen_width_px = int(screen_width_px)
         self.filter = make_filter(self.settings.smoothing, **(smoothing_params or {}))
+        lp = self.settings.gyro_lowpass_hz
+        self.equalizer = LowpassEqualizer(lp) if lp > 0 else None
         self._forward = None
         self._holding = False
         self.reset()
@@ -186,6 +248,8 @@ class PointerMapper:
     def reset(self) -> None:
         """Forget smoothing history and sub-pixel remainders (after a pause, a freeze, a mode switch)."""
         self.filter.reset()
+        if getattr(self, "equalizer", None) is not None:
+            self.equalizer.reset()
         self._angle = [0.0, 0.0]  # the pointer's angles (°, right and down) fed to the filter
         self._filtered = None
         self.remainder = [0.0, 0.0]
@@ -256,6 +320,8 @@ class PointerMapper:
     def update(self, gyro_dps, dt_s: float, up_body=None) -> tuple[int, int]:
         """One gyro sample (°/s, sensor axes) over ``dt_s`` seconds → whole-pixel steps (dx right, dy down)."""
         self._holding = False
+        if self.equalizer is not None:
+            gyro_dps = self.equalizer(gyro_dps, dt_s)
         vx, vy = self.rate_px_s(gyro_dps, up_body, dt_s)
         fx, fy = vx * dt_s, vy * dt_s
         if self.settings.hold_band_dps > 0 and dt_s > 0:
