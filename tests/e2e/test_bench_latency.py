@@ -52,3 +52,32 @@ def test_bench_latency_checks_sphere_monitor_against_the_board(tmp_path):
     assert age["truth_ms"]["n"] >= 100 and age["monitor_ms"]["p50"] is not None
     assert 0 < age["truth_ms"]["p50"] < 50  # a sample period, the firmware's work, the wire: a few ms
     assert "sample age (ftdi, 115200), sphere monitor's last 2 s" in r.stdout
+
+
+def test_a_row_that_cannot_be_measured_is_reported_and_the_others_kept(tmp_path, capsys, monkeypatch):
+    """One row's daemon never reporting its link (a baud switch that fell back on a loaded machine did this) used
+    to end the whole run with nothing printed; now that row is named as failed, the rest measured, exit 1."""
+    from simscenarios import need_board
+
+    from sphere.bench import latency
+    from sphere.cli import main
+
+    need_board()
+    real = latency.run_row
+
+    def flaky(name, baud, *args):
+        if name == "ftdi-16ms":
+            raise latency.RowFailed("sphere-mouse did not find the virtual board: (injected by the test)")
+        return real(name, baud, *args)
+
+    monkeypatch.setattr(latency, "run_row", flaky)
+    out = tmp_path / "latency.json"
+    rc = main(["bench", "latency", "--seconds", "9", "--adapters", "none,ftdi-16ms", "--bauds", "115200",
+               "--no-monitor", "--json", str(out)])
+    printed = capsys.readouterr().out
+    assert rc == 1
+    assert "ftdi-16ms at 115200: FAILED, not measured: sphere-mouse did not find the virtual board" in printed
+    result = json.loads(out.read_text())
+    assert [r["row"] for r in result["rows"]] == ["none"] and result["rows"][0]["moves"] >= 3
+    assert result["failed_rows"] == [{"row": "ftdi-16ms", "baud": 115200,
+                                      "error": "sphere-mouse did not find the virtual board: (injected by the test)"}]

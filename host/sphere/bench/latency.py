@@ -49,6 +49,7 @@ import numpy as np
 
 from sphere import argtypes
 from sphere.bench._xvfb import PointerReader, Xvfb, XvfbUnavailable
+from sphere.errors import SphereError
 from sphere.protocol import FrameDecoder, RawSample
 from sphere.protocol.packets import FAST_BAUDS
 from sphere.sim import onsets as O
@@ -62,6 +63,11 @@ HELP = ("motion onset -> X pointer move through the virtual board: each USB adap
 ADAPTERS = {"none": (None, True), "ch340": ("ch340", True), "ftdi": ("ftdi", True), "ftdi-16ms": ("ftdi", False)}
 BASELINE = "ftdi-16ms"
 STAGES = ("age", "wire", "adapter", "host")
+class RowFailed(SphereError, RuntimeError):
+    """One row could not be measured (its daemon never reported the link, e.g. a baud switch that fell back on a
+    loaded machine): the run goes on with the other rows and says which one failed."""
+
+
 #: a move this long after its onset is not this onset's (the next comes PERIOD_S later)
 MOVE_WINDOW_S = 0.25
 
@@ -282,7 +288,7 @@ def run_row(name: str, baud: int, trace: Path, onsets_s, seconds: float, display
                 except subprocess.TimeoutExpired:
                     proc.kill()
     if "ns" not in connected:
-        raise RuntimeError("sphere-mouse did not find the virtual board: " + " | ".join(connected.get("lines", [])[-3:]))
+        raise RowFailed("sphere-mouse did not find the virtual board: " + " | ".join(connected.get("lines", [])[-3:]))
     log = HostLog.read(log_path)
     frames = frames_of(cap_path.read_bytes(), log)
     samples = np.array(recorder.changes, dtype=np.int64)
@@ -359,7 +365,7 @@ def run(args) -> int:
     except (XvfbUnavailable, RuntimeError, OSError) as e:
         print(f"sphere bench latency: {e}", file=sys.stderr)
         return 1
-    rows = []
+    rows, failed = [], []
     monitor = None
     load_before = os.getloadavg()[0]
     try:
@@ -369,7 +375,10 @@ def run(args) -> int:
             for baud in args.bauds:
                 for name in args.adapters:
                     print(f"  {name} at {baud} baud: {args.seconds:g} s ...", file=sys.stderr, flush=True)
-                    rows.append(run_row(name, baud, trace, onsets_s, args.seconds, xvfb.display, tmp, elf))
+                    try:
+                        rows.append(run_row(name, baud, trace, onsets_s, args.seconds, xvfb.display, tmp, elf))
+                    except RowFailed as e:
+                        failed.append({"row": name, "baud": baud, "error": str(e)})
             if not args.no_monitor:
                 print(f"  sphere monitor's sample age against the board's truth: {args.seconds:g} s ...",
                       file=sys.stderr, flush=True)
@@ -380,12 +389,12 @@ def run(args) -> int:
     finally:
         xvfb.close()
     result = {"seconds_per_row": args.seconds, "seed": args.seed, "load_average": [load_before, os.getloadavg()[0]],
-              "rows": rows, "sample_age": monitor}
+              "rows": rows, "failed_rows": failed, "sample_age": monitor}
     report(result)
     if args.json:
         with open(args.json, "w") as f:
             json.dump(result, f, indent=2)
-    return 0
+    return 1 if failed else 0
 
 
 def report(result: dict) -> None:
@@ -416,6 +425,7 @@ def report(result: dict) -> None:
              for r in rows if r["missed"] or r["unattributed"]]
     notes += [f"{r['row']} at {r['baud']}: the daemon fell back to 115200 during the row"
               for r in rows if r.get("fell_back_to_115200")]
+    notes += [f"{r['row']} at {r['baud']}: FAILED, not measured: {r['error']}" for r in result.get("failed_rows", ())]
     if notes:
         print("; ".join(notes))
     age = result.get("sample_age")
