@@ -1093,12 +1093,22 @@ static void twi_hook(struct avr_irq_t *irq, uint32_t value, void *param)
 				b->cur_chip >= 0 ? "ACK" : "NACK");
 		return;
 	}
-	if (b->cur_chip < 0)
+	/* A byte the master reads while no chip drives SDA (the chip went away in the middle of a read): SDA stays
+	 * released and the pull-ups make every bit 1, so the master reads 0xFF (I2C-bus specification UM10204,
+	 * 3.1.3 "Data validity" and 3.1.6 "Acknowledge": the receiver, here the master, drives the acknowledge, so its
+	 * TWI reports "data received" all the same). Not answering at all left simavr's TWDR holding the last byte the
+	 * chip sent: a gyro read cut by a NACK in the soak read 0x4F4F (1412 deg/s) on two axes. */
+	if (b->cur_chip < 0) {
+		if (msg & TWI_COND_READ)
+			twi_send(b, TWI_COND_READ, v.u.twi.addr, 0xFF);
 		return;
+	}
 	chip_t *c = &b->chip[b->cur_chip];
 	if (c->nack) { /* went away in the middle of a transaction */
 		b->i2c_errors++;
 		b->cur_chip = -1;
+		if (msg & TWI_COND_READ)
+			twi_send(b, TWI_COND_READ, v.u.twi.addr, 0xFF);
 		return;
 	}
 	if (msg & TWI_COND_WRITE) {

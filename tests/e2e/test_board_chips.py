@@ -266,6 +266,27 @@ def test_adxl_noise_at_100_hz():
     assert 0.75 * 0.7 <= sd[0] <= 0.75 * 1.3 and 0.75 * 0.7 <= sd[1] <= 0.75 * 1.3 and 1.1 * 0.7 <= sd[2] <= 1.1 * 1.3, sd
 
 
+def test_a_chip_that_goes_away_in_the_middle_of_a_read_leaves_sda_to_the_pull_ups():
+    """A chip that stops answering in the middle of a burst read drives SDA no more: the master reads 1s, 0xFF,
+    for the rest of the burst (its own TWI reports each byte received: it drives the acknowledge itself), never
+    the chip's last byte again (the model did that before: a firmware's gyro read cut so read 0x4F4F, 1412 deg/s).
+    The ITG-3200 turning steadily is read 16 bytes at a time, 20 times, each time going away about 1 ms after the
+    command at a phase that moves by 0.13 ms from read to read: the reads it cuts read the same data as the
+    others up to the cut, then 0xFF to the end."""
+    ts = [0.15 + 0.02 * i + 0.00013 * i for i in range(20)]
+    cmds = [(0.05, "w 68 3e 01"), (0.06, "w 68 16 1b")] + [(t, "r 68 1d 16") for t in ts]
+    nacks = [f"itg3200:{t + 0.0012:.5f}:{t + 0.0042:.5f}" for t in ts]
+    r = probe(cmds, T.rotation(0.6, rate_dps=300.0, axis=(0.6, 0.0, 0.8), still_s=0.1), 0.6, board="aligned",
+              nack=nacks)
+    reads = [x.data for x in r.tagged("r") if x.data]
+    whole = [d for d in reads if 0xFF not in d]
+    cut = [d for d in reads if 0xFF in d]
+    assert len(whole) >= 5 and len(cut) >= 3, reads
+    for d in cut:
+        k = d.index(0xFF)
+        assert k >= 1 and d[k:] == [0xFF] * (16 - k) and d[:k] == whole[0][:k], d
+
+
 # ---------------------------------------------------------------- QMC5883L
 
 def test_qmc5883l_variant_register_map():
