@@ -282,6 +282,20 @@ def test_a_fault_while_the_host_does_not_read_is_measured_from_the_last_it_saw()
     assert rows[0]["excess_deg"] == pytest.approx(3.0, abs=0.1) and worst.first_s == 3.5
 
 
+def test_a_fault_at_the_end_of_the_run_is_not_judged():
+    """A magnetometer glitch 0.2 ms before the run ends (seed 209 at 119.9998 s): no RAW_SAMPLE comes after it, so
+    its recovery cannot be judged (it was 'never', failing the soak on every board); a fault whose allowance ends
+    inside the run and has no fresh sample still fails."""
+    items = [(0.0, _hello(), 0)] + [(1.0 + 0.005 * i, _raw(1000000 + 5000 * i, 0x0F), i + 1) for i in range(200)]
+    frames = S.read_frames(*_stream(items))
+    end = [{"kind": "glitch_nack", "t_start": 1.9998, "t_end": 1.9998, "chips": ["hmc5883l"]}]
+    worst, rows = S.recovery(frames, end)
+    assert worst.first_s is None and rows[0]["skipped"] == "the run ended first"
+    stale = [(0.0, _hello(), 0)] + [(1.0 + 0.005 * i, _raw(1000000 + 5000 * i, 0x03), i + 1) for i in range(200)]
+    worst, rows = S.recovery(S.read_frames(*_stream(stale)), [{**end[0], "t_start": 1.5, "t_end": 1.5}])
+    assert worst.first_s == 1.5 and "skipped" not in rows[0]
+
+
 def test_a_fault_that_a_reset_overtakes_is_judged_as_the_reset():
     """A clock stretch (100 ms limit) at the instant of a brown-out: the firmware restarts, so the
     magnetometer's fresh data waits for its start-up, which the reset's own row judges (1000 ms limit); the

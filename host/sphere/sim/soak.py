@@ -214,8 +214,11 @@ def recovery(frames: list[Frame], ends: list[dict], host_stalls=()) -> tuple[Inv
             if overtaken:
                 rows.append({**row, "overtaken_by": overtaken})
                 continue
-            rows.append(row)
             limit = LIMITS["recovery_after_reset_ms" if resetting else "recovery_ms"]
+            if not len(ok) and (not len(raw_t) or raw_t[-1] < t0 + limit / 1e3):
+                rows.append({**row, "recovery_ms": None, "skipped": "the run ended first"})
+                continue  # a fault in the run's last moments: no RAW_SAMPLE after it to judge by
+            rows.append(row)
             if ms > limit:
                 worst.add(e["t_end"], 0, f"{chip} after {e['kind']} at {e['t_end']:.3f} s: {ms:.1f} ms")
             worst.count = max(worst.count, ms)
