@@ -262,3 +262,17 @@ def test_the_equalizer_never_amplifies():
         ys = [eq((0.0, 0.0, x), DT)[2] for x in xs]
         gain = max(abs(y) for y in ys[2000:])
         assert gain <= 1.0 + 1e-6 and (f > 0 or gain == pytest.approx(1.0))
+
+
+def test_the_equalizer_from_rest_keeps_a_release_carry_whole():
+    """Lying still (hold() each sample), then the rest hold's release sends the short mean's displacement in one
+    sample and the turn goes on: the pointer goes exactly as far with the equalizer as without it (it starts
+    from a history of zeros after a hold, not from the first sample's rate as if that had lasted forever)."""
+    ends = []
+    for lowpass in (98.0, 0.0):
+        m = PointerMapper(PointerSettings(gyro_lowpass_hz=lowpass, hold_band_dps=0.0, tightening_dps=0.0), 1920)
+        for _ in range(50):
+            m.hold()
+        rates = [(0.0, 0.0, -100.0)] + [(0.0, 0.0, -10.0)] * 200 + [(0.0, 0.0, 0.0)] * 100
+        ends.append(_path(m, rates)[-1] + m.remainder[0])
+    assert ends[0] == pytest.approx(ends[1], abs=0.05)

@@ -183,8 +183,11 @@ class LowpassEqualizer:
         self._coeffs = {}
         self.reset()
 
-    def reset(self) -> None:
+    def reset(self, at_rest: bool = False) -> None:
+        """Start again: from the next sample as if it had always been so, or (``at_rest``: after lying still) from
+        a history of zeros, so that what comes out adds up to what goes in (a rest hold's release carry too)."""
         self._state = None  # per axis [x1, x2, y1, y2]
+        self._at_rest = at_rest
 
     def _design(self, dt_s: float):
         key = round(dt_s, 4)
@@ -211,7 +214,7 @@ class LowpassEqualizer:
         b0, b1, b2, d1, d2 = self._design(dt_s)
         st = self._state
         if st is None:
-            st = self._state = [[v, v, v, v] for v in rate]
+            st = self._state = [[0.0] * 4 if self._at_rest else [v, v, v, v] for v in rate]
         out = []
         for v, s in zip(rate, st):
             y = b0 * v + b1 * s[0] + b2 * s[1] - d1 * s[2] - d2 * s[3]
@@ -313,6 +316,8 @@ class PointerMapper:
             self.reset()
             self.remainder = remainder
             self._holding = True
+            if self.equalizer is not None:
+                self.equalizer.reset(at_rest=True)
             if self.settings.hold_band_dps > 0:
                 self._hand_held = True
                 self._within_s = self.settings.hold_after_s
