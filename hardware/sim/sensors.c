@@ -1093,17 +1093,15 @@ static void twi_hook(struct avr_irq_t *irq, uint32_t value, void *param)
 				b->cur_chip >= 0 ? "ACK" : "NACK");
 		return;
 	}
-	/* A byte the master reads while no chip drives SDA (the chip went away in the middle of a read): SDA stays
-	 * released and the pull-ups make every bit 1, so the master reads 0xFF (I2C-bus specification UM10204,
-	 * 3.1.3 "Data validity" and 3.1.6 "Acknowledge": the receiver, here the master, drives the acknowledge, so its
-	 * TWI reports "data received" all the same). Not answering at all left simavr's TWDR holding the last byte the
-	 * chip sent: a gyro read cut by a NACK in the soak read 0x4F4F (1412 deg/s) on two axes. */
-	if (b->cur_chip < 0) {
-		if (msg & TWI_COND_READ)
-			twi_send(b, TWI_COND_READ, v.u.twi.addr, 0xFF);
+	if (b->cur_chip < 0)
 		return;
-	}
 	chip_t *c = &b->chip[b->cur_chip];
+	/* A chip that goes away in the middle of a read drives SDA no more: the pull-ups make every bit 1, so the
+	 * master reads 0xFF (I2C-bus specification UM10204, 3.1.3 "Data validity" and 3.1.6 "Acknowledge": the
+	 * receiver, here the master, drives the acknowledge, so its TWI reports "data received" all the same). The
+	 * first byte it misses is answered 0xFF here; simavr's TWDR then holds 0xFF for the rest of the read (not
+	 * answering at all left it holding the last byte the chip sent: a gyro read cut by a NACK in the soak read
+	 * 0x4F4F, 1412 deg/s, on two axes). */
 	if (c->nack) { /* went away in the middle of a transaction */
 		b->i2c_errors++;
 		b->cur_chip = -1;
