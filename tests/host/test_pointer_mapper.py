@@ -276,3 +276,15 @@ def test_the_equalizer_from_rest_keeps_a_release_carry_whole():
         rates = [(0.0, 0.0, -100.0)] + [(0.0, 0.0, -10.0)] * 200 + [(0.0, 0.0, 0.0)] * 100
         ends.append(_path(m, rates)[-1] + m.remainder[0])
     assert ends[0] == pytest.approx(ends[1], abs=0.05)
+
+
+def test_the_equalizer_takes_samples_stamped_microseconds_apart():
+    """A sender that fell behind writes a burst whose stamps are 1 µs apart (seen from a loaded pty in CI): at a
+    step of 0 the design would divide 0 by 0 and stop the daemon; the steps are taken as half a chip period, and a
+    steady turn still comes out as it went in."""
+    from sphere.daemon.pointer import LowpassEqualizer
+
+    eq = LowpassEqualizer(98.0)
+    out = [eq((0.0, 0.0, 50.0), dt)[2] for dt in [DT] * 20 + [1e-6, 0.0, 2e-5] * 5 + [DT] * 20]
+    assert all(math.isfinite(v) for v in out)
+    assert out[-1] == pytest.approx(50.0)

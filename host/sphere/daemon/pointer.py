@@ -189,8 +189,12 @@ class LowpassEqualizer:
         self._state = None  # per axis [x1, x2, y1, y2]
         self._at_rest = at_rest
 
+    MIN_DT_S = 0.0005  # a shorter step (two samples stamped within half a chip period) is designed as this one
+
     def _design(self, dt_s: float):
-        key = round(dt_s, 4)
+        # at a step of 0 both the zeros and the poles sit at 1 and the 0 Hz gain is 0/0: a burst of samples stamped
+        # microseconds apart (a sender that fell behind) must not stop the daemon
+        key = max(round(dt_s, 4), self.MIN_DT_S)
         c = self._coeffs.get(key)
         if c is None:
             f, fi = self.corner_hz, self.INTERNAL_HZ
