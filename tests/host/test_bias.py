@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from sphere.fusion import bias_scenarios, registry
+from sphere.fusion import bias_scenarios, factory
 
 DEG = np.pi / 180.0
 SECONDS = 31.0
@@ -17,7 +17,7 @@ SECONDS = 31.0
 
 def _run(scenario, seconds, **kw):
     tr = bias_scenarios.trace(scenario, seconds=seconds, **kw)
-    f = registry.make("sphere", tr.dt_s)
+    f = factory.make("sphere", tr.dt_s)
     d = f.update_batch(tr.gyr_rad_s, tr.acc_m_s2, tr.mag_uT, tr.dt_s, diagnostics=True)
     return tr, d
 
@@ -50,7 +50,7 @@ def test_the_bias_is_learned_at_rest_and_held_in_motion():
     assert moving.sum() > 0.6 * len(moving)
     assert np.array_equal(d["bias_rad_s"][moving], np.broadcast_to(d["bias_rad_s"][moving][0], (moving.sum(), 3)))
     # without the rest measurement (a structure --cv may choose) b stays zero
-    f = registry.make("sphere", tr.dt_s, bias_rest=False)
+    f = factory.make("sphere", tr.dt_s, bias_rest=False)
     off = f.update_batch(tr.gyr_rad_s, tr.acc_m_s2, tr.mag_uT, tr.dt_s, diagnostics=True)
     assert not off["bias_rad_s"].any()
 
@@ -66,8 +66,8 @@ def test_magnet_from_the_start_is_flagged(run):
 
 def test_batch_diagnostics_are_the_per_sample_state():
     tr = bias_scenarios.trace("step", seconds=6.0, seed=3)  # rest 2 s, then motion
-    d = registry.make("sphere", tr.dt_s).update_batch(tr.gyr_rad_s, tr.acc_m_s2, tr.mag_uT, tr.dt_s, diagnostics=True)
-    f = registry.make("sphere", tr.dt_s)
+    d = factory.make("sphere", tr.dt_s).update_batch(tr.gyr_rad_s, tr.acc_m_s2, tr.mag_uT, tr.dt_s, diagnostics=True)
+    f = factory.make("sphere", tr.dt_s)
     q = np.array([f.update(g, a, m, tr.dt_s) for g, a, m in zip(tr.gyr_rad_s, tr.acc_m_s2, tr.mag_uT)])
     assert np.array_equal(q, d["quat"])
     assert np.array_equal(np.array(f.bias), d["bias_rad_s"][-1])

@@ -114,7 +114,7 @@ def test_report_has_a_mean_table_and_us_column():
 # -- one registry, leave-one-trial-out ------------------------------------------------------------------
 
 def test_registry_is_one_table_with_defaults_inside_their_grids():
-    from sphere.fusion import registry
+    from sphere.fusion import factory, registry
 
     assert registry.ALL == registry.REGISTRY.names() and set(registry.OURS) | set(registry.PEERS) == set(registry.ALL)
     for name, spec in registry.FILTERS.items():
@@ -131,23 +131,23 @@ def test_registry_is_one_table_with_defaults_inside_their_grids():
 
     sp = registry.FILTERS["sphere"]
     assert {k: DEFAULTS[k] for k in set(sp.grid) | set(sp.structures[0])} in sp.grid_points()
-    f = registry.make("madgwick", 0.01, beta=0.05)
-    assert f.beta == 0.05 and registry.make("madgwick", 0.01).beta == registry.defaults("madgwick")["beta"]
-    kf = registry.make("dissertation-kf", 0.01).settings
+    f = factory.make("madgwick", 0.01, beta=0.05)
+    assert f.beta == 0.05 and factory.make("madgwick", 0.01).beta == registry.defaults("madgwick")["beta"]
+    kf = factory.make("dissertation-kf", 0.01).settings
     assert (kf["R"], kf["P0"], kf["H"]) == ("0.01*I", "I", "I")  # the dissertation's, not tuned
     with pytest.raises(TypeError):
-        registry.make("sphere", 0.01, no_such_setting=1)
+        factory.make("sphere", 0.01, no_such_setting=1)
     with pytest.raises(KeyError, match="unknown filter"):
-        registry.make("nope", 0.01)
+        factory.make("nope", 0.01)
 
 
 def test_daemon_builds_its_filter_from_the_registry():
     from sphere.daemon.config import Config, parse_set
     from sphere.daemon.motion import host_filter
-    from sphere.fusion import registry
+    from sphere.fusion import factory, registry
 
     f = host_filter("sphere")
-    assert type(f.inner) is type(registry.make("sphere")) and f.inner.settings == registry.make("sphere").settings
+    assert type(f.inner) is type(factory.make("sphere")) and f.inner.settings == factory.make("sphere").settings
     assert host_filter("madgwick", beta=0.2).beta == 0.2
     cfg = Config().with_overrides(parse_set(["orientation.madgwick.beta=0.3"]), "--set")
     assert host_filter("madgwick", cfg.get).beta == 0.3 and host_filter("madgwick").beta == 0.0135
@@ -156,9 +156,9 @@ def test_daemon_builds_its_filter_from_the_registry():
     # auto: the registry's daemon default (SphereFilter: ours, nothing to install), with the registry's settings
     auto = host_filter("auto")
     assert registry.live_available()[0] == registry.DAEMON_DEFAULT == "sphere"
-    assert type(auto.inner) is type(registry.make("sphere")) and auto.inner.settings == registry.make("sphere").settings
+    assert type(auto.inner) is type(factory.make("sphere")) and auto.inner.settings == factory.make("sphere").settings
     if _installed("vqf"):
-        assert host_filter("vqf").inner.settings == registry.make("vqf", 0.005).settings
+        assert host_filter("vqf").inner.settings == factory.make("vqf", 0.005).settings
 
 
 def test_leave_one_out_chooses_on_the_other_trials():
@@ -215,7 +215,7 @@ def test_the_recorded_cv_run_matches_the_registry():
     and the choice on all trials = today's defaults (else re-run `sphere eval --cv --json tests/host/eval_cv.json`)."""
     from pathlib import Path
 
-    from sphere.fusion import registry
+    from sphere.fusion import factory, registry
 
     doc = json.loads(Path(__file__).with_name("eval_cv.json").read_text())
     assert set(registry.OURS) <= set(doc["cv"])
@@ -224,7 +224,7 @@ def test_the_recorded_cv_run_matches_the_registry():
         points = spec.grid_points()
         assert rec["grid"] == {k: list(v) for k, v in spec.grid.items()}, name
         assert all(f["choice"] in points for f in rec["folds"]), name
-        settings = registry.make(name, 0.01).settings
+        settings = factory.make(name, 0.01).settings
         keys = set(spec.grid) | (set(spec.structures[0]) if spec.structures else set())
         assert {k: settings[k] for k in keys} == rec["all_trials_choice"], name
         assert len(rec["folds"]) == len(doc["trials"]) >= 12
@@ -281,20 +281,21 @@ def test_vqf_per_sample_is_its_batch_and_honours_the_daemons_flags():
     """The daemon runs VQF sample by sample (peers.VqfPeer.update): the same as VQF's own batch, the accelerometer
     skipped while a tap is in progress (acc_valid=False), quat6D until a field is used."""
     pytest.importorskip("vqf")
-    from sphere.fusion import bias_scenarios as synthetic, registry
+    from sphere.fusion import bias_scenarios as synthetic
+    from sphere.fusion import factory
 
     tr = synthetic.trace("motion", seconds=6.0)
-    batch = registry.make("vqf", tr.dt_s).update_batch(tr.gyr_rad_s, tr.acc_m_s2, tr.mag_uT, tr.dt_s)
-    f = registry.make("vqf", tr.dt_s)
+    batch = factory.make("vqf", tr.dt_s).update_batch(tr.gyr_rad_s, tr.acc_m_s2, tr.mag_uT, tr.dt_s)
+    f = factory.make("vqf", tr.dt_s)
     per = np.array([f.update(g, a, m, tr.dt_s) for g, a, m in zip(tr.gyr_rad_s, tr.acc_m_s2, tr.mag_uT)])
     assert np.array_equal(per, batch)
     # without a field: 6D (no heading correction), the same as the batch without one
-    f6 = registry.make("vqf", tr.dt_s)
+    f6 = factory.make("vqf", tr.dt_s)
     q6 = [f6.update(g, a, None, tr.dt_s) for g, a in zip(tr.gyr_rad_s, tr.acc_m_s2)]
-    assert np.array_equal(np.array(q6), registry.make("vqf", tr.dt_s).update_batch(tr.gyr_rad_s, tr.acc_m_s2, None,
+    assert np.array_equal(np.array(q6), factory.make("vqf", tr.dt_s).update_batch(tr.gyr_rad_s, tr.acc_m_s2, None,
                                                                                    tr.dt_s))
     # acc_valid=False: the accelerometer is not used (a false reading changes nothing: gyro alone, as VQF's updateGyr)
-    b, c = registry.make("vqf", tr.dt_s), registry.make("vqf", tr.dt_s)
+    b, c = factory.make("vqf", tr.dt_s), factory.make("vqf", tr.dt_s)
     for g, acc in zip(tr.gyr_rad_s[:400], tr.acc_m_s2[:400]):
         b.update(g, acc, None, tr.dt_s)
         c.update(g, acc, None, tr.dt_s)
@@ -336,7 +337,7 @@ def test_the_daemon_runs_its_filter_at_the_streams_own_rate(name, every):
     from sphere import chips, quaternion
     from sphere.daemon.gyro_bias import GyroBias
     from sphere.daemon.motion import MotionTracker
-    from sphere.fusion import peers, registry, stress
+    from sphere.fusion import factory, peers, stress
     from sphere.protocol.packets import RAW_ACCEL_OK, RAW_GYRO_OK, RAW_MAG_OK, RawSample
 
     tr = stress.trace("fast_combined", 5, seconds=12.0)
@@ -361,7 +362,7 @@ def test_the_daemon_runs_its_filter_at_the_streams_own_rate(name, every):
     a = np.round(tr.acc_m_s2[hold] / chips.STANDARD_GRAVITY_M_S2 * chips.ADXL345_LSB_PER_G) \
         / chips.ADXL345_LSB_PER_G * chips.STANDARD_GRAVITY_M_S2
     m = np.round(tr.mag_uT[hold] * chips.HMC5883L_LSB_PER_UT) / chips.HMC5883L_LSB_PER_UT
-    f = registry.make_for_trial(name, g, a, m, dt)
+    f = factory.make_for_trial(name, g, a, m, dt)
     want = peers.to_enu(f.update_batch(g, a, m, dt), f.earth_frame)
     want = want[np.r_[True, np.diff(hold) != 0]]  # the held repeat is one sample on the link
     err = broad.error_angles_deg(got, want)[0]

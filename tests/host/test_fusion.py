@@ -175,9 +175,9 @@ def _err(f, t, q0=True):
 
 
 def _run(name, t, trial):
-    from sphere.fusion import registry
+    from sphere.fusion import factory
 
-    return _err(registry.make_for_trial(name, t.gyr_rad_s, t.acc_m_s2, t.mag_uT, t.dt_s, **held_out(name, trial)), t)
+    return _err(factory.make_for_trial(name, t.gyr_rad_s, t.acc_m_s2, t.mag_uT, t.dt_s, **held_out(name, trial)), t)
 
 
 @pytest.mark.slow
@@ -203,9 +203,9 @@ def test_sphere_filter_holds_heading_through_a_magnet():
 
 def _deferred_equals_plain(gyr, acc, mag, dt, every=1):
     """update(defer_bias=True), with run_deferred after every ``every``-th sample, against plain update."""
-    from sphere.fusion import registry
+    from sphere.fusion import factory
 
-    plain, split = registry.make("sphere", dt), registry.make("sphere", dt)
+    plain, split = factory.make("sphere", dt), factory.make("sphere", dt)
     ran = 0
     for i, (g, a, m) in enumerate(zip(gyr.tolist(), acc.tolist(), mag.tolist())):
         q = plain.update(g, a, m, dt)

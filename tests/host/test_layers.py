@@ -10,6 +10,7 @@ import ast
 import functools
 import io
 import re
+import subprocess
 import sys
 import tokenize
 from collections import defaultdict
@@ -156,10 +157,12 @@ def test_the_checks_see_what_they_check():
 
 #: What may keep an import inside a function, as its comment says (on the import's line or the line above):
 #: "optional: …" a dependency the package runs without (an extra: OpenCV, matplotlib, the peers, the backends'
-#: X11/evdev/pynput, websockets; the camera), "POSIX only", "heavy: …" (a required but slow import a light path
-#: must not pay for, e.g. numpy under sphere.daemon.config, which imports in ≤ 40 ms), "--against" (the daemon
-#: bench running an older revision's package). `sphere` imports a subcommand with importlib (not a statement here).
-REASONS = ("optional", "POSIX only", "heavy", "--against")
+#: X11/evdev/pynput, websockets; the camera), "POSIX only" (fcntl, termios), "--against" (the daemon bench running
+#: an older revision's package, whose modules may not exist). A required import is made at the top even where it
+#: is slow: a light path stays light by what its modules import (sphere.daemon.config reads the orientation
+#: filters' names from sphere.fusion.registry, which builds none; sphere.fusion.factory builds them, with numpy).
+#: `sphere` imports a subcommand with importlib (not a statement here).
+REASONS = ("optional", "POSIX only", "--against")
 
 
 def _comments(source: str) -> dict[int, str]:
@@ -228,13 +231,22 @@ def test_the_import_walk_sees_nested_imports_and_their_comments():
               "    class C:\n"
               "        def g(self):\n"
               "            from x import (a,\n"
-              "                           b)  # heavy: x\n"
+              "                           b)  # --against: x\n"
               "    return lambda: __import__('y')\n")
     assert imports_in_functions(source) == [(3, "import json", ""),
                                             (5, "import cv2", "# optional: cv2 (the camera extra)"),
-                                            (8, "from x import (a,", "# heavy: x")]
+                                            (8, "from x import (a,", "# --against: x")]
     assert any("sphere/daemon/backends/x11.py" in f[0] and "Xlib" in f[2] for f in all_imports_in_functions())
 
+
+
+def test_the_config_imports_without_numpy():
+    """Importing sphere.daemon.config (and with it the registries' names: sources, backends, smoothing filters, the
+    orientation filters the daemon can run) loads no numpy: the ≤ 40 ms import of issue 25 rests on that, and the
+    registries are read without importing their entries until a section is composed."""
+    code = "import sys, sphere.daemon.config; print(sorted(m for m in sys.modules if m.split('.')[0] == 'numpy'))"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60, check=True).stdout
+    assert out.strip() == "[]", out
 
 if __name__ == "__main__":  # the list, by module, with each one's reason
     for path, line, text, comment in all_imports_in_functions():

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from sphere import quaternion as quat
-from sphere.fusion import crossval, registry, stress
+from sphere.fusion import crossval, factory, registry, stress
 from sphere.fusion.sphere_filter import DEFAULTS, PARTS, STRUCTURES
 from sphere.fusion.bias_scenarios import DEG, DIP_DEG, EARTH_FIELD_UT, G, earth_field
 
@@ -119,8 +119,8 @@ def test_every_part_is_a_switch_and_the_structures_are_simplest_first():
 @pytest.mark.parametrize("part", PARTS)
 def test_switching_a_part_off_changes_the_filter_where_it_acts(part):
     tr = stress.trace("magnet_pass", 0)  # rests at the start, magnets passing
-    on = registry.make("sphere", tr.dt_s).update_batch(tr.gyr_rad_s, tr.acc_m_s2, tr.mag_uT, tr.dt_s)
-    off = registry.make("sphere", tr.dt_s, **{part: False}).update_batch(tr.gyr_rad_s, tr.acc_m_s2, tr.mag_uT,
+    on = factory.make("sphere", tr.dt_s).update_batch(tr.gyr_rad_s, tr.acc_m_s2, tr.mag_uT, tr.dt_s)
+    off = factory.make("sphere", tr.dt_s, **{part: False}).update_batch(tr.gyr_rad_s, tr.acc_m_s2, tr.mag_uT,
                                                                         tr.dt_s)
     assert not np.array_equal(on, off), part
 

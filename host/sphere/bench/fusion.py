@@ -18,7 +18,7 @@ import time
 import numpy as np
 
 from sphere import argtypes
-from sphere.fusion import bias_scenarios, registry
+from sphere.fusion import bias_scenarios, factory, registry
 
 DEG = np.pi / 180.0
 TARGET_DPS = 0.05  # issue 13: the bias estimate within 0.05 °/s of the truth 30 s in
@@ -27,11 +27,11 @@ TARGET_DPS = 0.05  # issue 13: the bias estimate within 0.05 °/s of the truth 3
 def bias_errors(scenario: str, seed: int, at_s: float, rest_s: float = bias_scenarios.REST_S) -> dict:
     tr = bias_scenarios.trace(scenario, seconds=at_s + 1.0, seed=seed, rest_s=rest_s)
     i = int(round(at_s / tr.dt_s)) - 1
-    f = registry.make("sphere", tr.dt_s)
+    f = factory.make("sphere", tr.dt_s)
     d = f.update_batch(tr.gyr_rad_s, tr.acc_m_s2, tr.mag_uT, tr.dt_s, diagnostics=True)
     out = {"sphere": float(np.linalg.norm(d["bias_rad_s"][i] - tr.bias_rad_s[i]) / DEG)}
     try:
-        v = registry.make("vqf", tr.dt_s).update_batch(tr.gyr_rad_s, tr.acc_m_s2, tr.mag_uT, tr.dt_s, diagnostics=True)
+        v = factory.make("vqf", tr.dt_s).update_batch(tr.gyr_rad_s, tr.acc_m_s2, tr.mag_uT, tr.dt_s, diagnostics=True)
         out["vqf"] = float(np.linalg.norm(v["bias_rad_s"][i] - tr.bias_rad_s[i]) / DEG)
     except ImportError:
         pass
@@ -48,7 +48,7 @@ def us_per_sample(seconds: float = 20.0) -> dict:
     for name in registry.live_available():
         best = best_cpu = np.inf
         for _ in range(3):
-            f = registry.make(name, tr.dt_s)
+            f = factory.make(name, tr.dt_s)
             t0, c0 = time.perf_counter(), time.process_time()
             for i in range(len(g)):
                 f.update(g[i], a[i], m[i], tr.dt_s)

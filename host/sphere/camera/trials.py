@@ -17,7 +17,7 @@ from scipy.io import loadmat
 from sphere import broad
 from sphere.camera import render
 from sphere.camera.model import Camera
-from sphere.fusion import registry
+from sphere.fusion import factory
 from sphere.fusion.hybrid import _rot
 from sphere.link import session
 from sphere.protocol.framing import encode_frame
@@ -109,7 +109,7 @@ def rendered_trial(name: str, start_s: float, seconds: float, distance_m: float 
     pos = load_positions(path)
     a = int(round(start_s * full.rate_hz))
     b = a + int(round(seconds * full.rate_hz))
-    f = registry.make("sphere", full.dt_s, full.acc_m_s2[0], full.mag_uT[0])
+    f = factory.make("sphere", full.dt_s, full.acc_m_s2[0], full.mag_uT[0])
     q = f.update_batch(full.gyr_rad_s[:b], full.acc_m_s2[:b], full.mag_uT[:b], full.dt_s)[a:b]
     sl = full.seconds(start_s, seconds)
     p = pos[a:b]

@@ -16,7 +16,7 @@ import numpy as np
 
 from sphere import argtypes, broad, quaternion
 from sphere import quaternion as quat
-from sphere.fusion import common, crossval, peers, registry
+from sphere.fusion import common, crossval, factory, peers, registry
 from sphere.paths import broad_dir
 from sphere.progress import bar
 
@@ -59,7 +59,7 @@ def run_filter(name: str, trial, keep_errors: bool = False, diagnostics: bool = 
 
     ``params`` replace the registry's defaults (``--cv`` grid points). ``diagnostics`` keeps the filter's
     per-sample diagnostics (rest, bias, magnetic disturbance) where it has them."""
-    f = registry.make_for_trial(name, trial.gyr_rad_s, trial.acc_m_s2, trial.mag_uT, trial.dt_s, **params)
+    f = factory.make_for_trial(name, trial.gyr_rad_s, trial.acc_m_s2, trial.mag_uT, trial.dt_s, **params)
     diag = None
     t0 = time.perf_counter()
     if diagnostics and getattr(f, "diagnostics", None):
@@ -394,7 +394,7 @@ def cross_validate(paths, names, seconds=None, jobs=1, cache=None, progress=None
         scores = [[rows[t][i]["errors"] for i in idx] for t in trials]
         us = [[rows[t][i]["us_per_sample"] for i in idx] for t in trials]
         res = crossval.leave_one_out(trials, scores)
-        defaults = ({k: v for k, v in registry.make(name, 1.0 / RATE_HZ).settings.items() if k in points[0]}
+        defaults = ({k: v for k, v in factory.make(name, 1.0 / RATE_HZ).settings.items() if k in points[0]}
                     if registry.grid(name) else {})
         doc["cv"][name] = {
             "mean": res.mean,

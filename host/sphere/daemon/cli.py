@@ -16,9 +16,12 @@ from sphere.camera.daemon_source import CameraPosition, CameraUnavailable
 from sphere.daemon import config as config_mod
 from sphere.daemon import sources
 from sphere.daemon.backends import REGISTRY as BACKENDS
+from sphere.daemon.app import SphereMouse
 from sphere.daemon.backends import BackendUnavailable, open_backend
 from sphere.daemon.config import ConfigError
+from sphere.daemon.outputs.fanout import attach
 from sphere.daemon.print_config import defaults_toml
+from sphere.daemon.sources.base import SourceError
 from sphere.daemon.status import StatusLine, run_stats
 from sphere.errors import output_failed
 
@@ -219,11 +222,6 @@ def _main(argv=None) -> int:
     if args.check_config:
         print(f"sphere-mouse: config OK ({cfg.origin})")
         return 0
-
-    # heavy: numpy (the protocol, motion, quaternions); --help, --check-config, --print-config exit without it
-    from sphere.daemon.app import SphereMouse
-    from sphere.daemon.outputs.fanout import attach  # heavy: numpy (as above)
-    from sphere.daemon.sources.base import SourceError  # heavy: numpy (as above)
 
     try:
         source = open_source(cfg, log)

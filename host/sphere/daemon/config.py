@@ -25,6 +25,7 @@ from sphere import paths
 from sphere.daemon.backends import REGISTRY as _BACKENDS
 from sphere.daemon.sources import PARAMS as _SOURCE_PARAMS
 from sphere.errors import SphereError
+from sphere.fusion.registry import live_available
 from sphere.settings import Param, ParamError, Registry, Settings
 from sphere.settings import load as load_object
 from sphere.smoothing.registry import DEFAULT as _SMOOTHING
@@ -129,11 +130,7 @@ def _backends():
 
 
 def _host_filters():
-    """``auto`` and the filters the fusion registry marks live (only ``auto`` without sphere.fusion)."""
-    try:
-        from sphere.fusion.registry import live_available  # heavy: numpy; this module imports in ≤ 40 ms without
-    except ImportError:
-        return ("auto",)
+    """``auto`` and the filters the fusion registry marks live (read when asked: it imports their modules)."""
     return ("auto", *live_available())
 
 

@@ -14,6 +14,7 @@ from sphere import chips
 from sphere import quaternion
 from sphere.daemon.gyro_bias import GyroBias, RestHold
 from sphere.fusion import registry
+from sphere.fusion import factory
 from sphere.fusion.common import ecompass
 from sphere.protocol.packets import RAW_ACCEL_OK, RAW_GYRO_OK, RAW_GYRO_STALE, RAW_MAG_OK, RAW_TAP_ACTIVE
 
@@ -88,7 +89,7 @@ def host_filter(name: str = "auto", settings=None, dt_s: float = 0.005, **overri
         missing = " (its package is not installed: pip install 'marg-sphere[daemon]')" if name in registry.LIVE else ""
         raise ValueError(f"unknown host filter {name!r}{missing}; known: auto, {', '.join(known)}")
     given = settings(registry.REGISTRY.section(name)) if settings is not None else None
-    f = registry.make(name, dt_s, **{**(given.as_dict() if given is not None else {}), **overrides})
+    f = factory.make(name, dt_s, **{**(given.as_dict() if given is not None else {}), **overrides})
     return f if f.earth_frame == "NWU" else _NwuFilter(f)
 
 

@@ -34,7 +34,7 @@ import numpy as np
 
 from sphere import broad
 from sphere.chips import STANDARD_GRAVITY_M_S2
-from sphere.fusion import peers, registry, stress
+from sphere.fusion import factory, peers, stress
 from sphere.fusion.sphere_filter import PARTS
 
 DEG = np.pi / 180.0
@@ -47,7 +47,7 @@ def _rms(x) -> float:
 
 
 def _run(name: str, trial, **params):
-    f = registry.make_for_trial(name, trial.gyr_rad_s, trial.acc_m_s2, trial.mag_uT, trial.dt_s, **params)
+    f = factory.make_for_trial(name, trial.gyr_rad_s, trial.acc_m_s2, trial.mag_uT, trial.dt_s, **params)
     d = f.update_batch(trial.gyr_rad_s, trial.acc_m_s2, trial.mag_uT, trial.dt_s, diagnostics=True)
     d["quat"] = peers.to_enu(d["quat"], f.earth_frame)
     return d

@@ -45,7 +45,7 @@ import numpy as np
 
 from sphere import broad
 from sphere import quaternion as quat
-from sphere.fusion import peers, registry
+from sphere.fusion import factory, peers
 from sphere.fusion.bias_scenarios import (
     ACC_NOISE_M_S2,
     DEG,
@@ -202,7 +202,7 @@ def score(tr: StressTrace, name: str, mag: bool = True, **params) -> dict:
     ``mag=False`` runs it without the magnetometer (as the daemon does by default, ``[orientation] use_mag``): its
     heading then only integrates the gyro, and the inclination is the figure that counts."""
     m = tr.mag_uT if mag else None
-    f = registry.make_for_trial(name, tr.gyr_rad_s, tr.acc_m_s2, m, tr.dt_s, **params)
+    f = factory.make_for_trial(name, tr.gyr_rad_s, tr.acc_m_s2, m, tr.dt_s, **params)
     q = peers.to_enu(f.update_batch(tr.gyr_rad_s, tr.acc_m_s2, m, tr.dt_s), f.earth_frame)
     tot, hd, inc = broad.error_angles_deg(q[tr.scored], tr.quat[tr.scored])
     rms = lambda x: float(np.sqrt(np.mean(x * x)))  # noqa: E731
