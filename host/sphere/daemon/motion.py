@@ -207,10 +207,8 @@ class MotionTracker:
     def _start_filter(self, ax, ay, az, sample) -> None:
         """Start the host filter at the accelerometer's tilt (no slow convergence from identity)."""
         self._filter_started = True
-        try:
+        if ax or ay or az:  # a reading of 0 has no tilt: the filter starts level and finds it
             self.filter.quat = ecompass(ax, ay, az, None, None, None, frame="NWU")
-        except Exception:
-            pass
 
     def orientation(self, packet, t_us) -> float:
         """Take an ORIENTATION packet; returns its dt in seconds. Ignored while the host filter runs."""
