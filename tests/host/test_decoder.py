@@ -115,7 +115,7 @@ def test_a_chunk_too_long_counts_the_same_however_it_comes_and_whenever_it_is_re
     junk = bytes(range(1, 200)) * 3
     decoder = FrameDecoder()
     for i in range(0, len(junk), size):
-        assert decoder.feed(junk[i : i + size]) == []
+        assert not decoder.feed(junk[i : i + size])
     stats = decoder.stats
     assert (stats.oversize, stats.bytes_skipped, stats.bytes_in) == (1, len(junk), len(junk))
     assert [p.t_us for p in decoder.feed(b"\x00" + frame)] == [9]

@@ -4,12 +4,13 @@ from __future__ import annotations
 
 from binascii import crc_hqx
 from collections import deque
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 
 from cobs.cobs import DecodeError
 from cobs.cobs import decode as cobs_decode
 
-from sphere.protocol.framing import CRC16_INIT, MAX_ENCODED, MIN_PAYLOAD
+from sphere.protocol.framing import CRC16_INIT, MAX_ENCODED, MAX_PAYLOAD, MIN_PAYLOAD
 from sphere.protocol.packets import BY_TYPE, Hello, Packet
 
 
@@ -43,6 +44,25 @@ class DecoderStats:
         return self.oversize + self.framing_errors + self.crc_errors + self.unknown_types + self.bad_lengths
 
 
+#: What :meth:`FrameDecoder.feed` returns for bytes that complete no frame without looking further.
+NOTHING: tuple = ()
+DELIMITER = b"\x00"
+
+
+def _types_of(direction: str) -> tuple:
+    """For each type byte, ``(class, unpackers)`` of the packet type sent in ``direction`` (None: no such type);
+    ``unpackers[n]`` decodes a payload whose body is ``n`` bytes long (None: not a length of that type). Tuples
+    indexed by the byte: the hot path's lookups without a method call."""
+    types: list = [None] * 256
+    for t, cls in BY_TYPE.items():
+        if cls.DIRECTION == direction:
+            unpackers: list = [None] * (MAX_PAYLOAD - MIN_PAYLOAD + 1)
+            for n, unpack in cls.payload_decoders().items():
+                unpackers[n] = unpack
+            types[t] = (cls, tuple(unpackers))
+    return tuple(types)
+
+
 class FrameDecoder:
     """Decode one direction of the link.
 
@@ -60,8 +80,8 @@ class FrameDecoder:
         self.direction = direction
         self.duplicate_window = duplicate_window  # 0: every frame is returned, a repeat too (what a soak checks)
         self._stats = DecoderStats()
-        # type -> (class, {body length: function (payload, seq) -> packet})
-        self._types = {t: (cls, cls.payload_decoders()) for t, cls in BY_TYPE.items() if cls.DIRECTION == direction}
+        # by type byte: (class, by body length: function (payload, seq) -> packet, or None), or None
+        self._types = _types_of(direction)
         self._buf = bytearray()
         self._counted = 0  # how many of _buf's bytes ``bytes_in`` counts (not those the byte-at-a-time path added)
         # how long the frame being gathered in _buf may grow before it is oversize; 0 inside an oversize chunk
@@ -105,23 +125,34 @@ class FrameDecoder:
         self._recent = deque((-1,) * self.duplicate_window)
         self._recent_set.clear()
 
-    def feed(self, data: bytes) -> list[Packet]:
+    def feed(self, data: bytes) -> Sequence[Packet]:
+        """The packets the bytes in ``data`` complete, in order: a list, or :data:`NOTHING` (an empty tuple) when
+        ``data`` brings no delimiter (a port read a byte at a time gets one per byte: no list is built for it)."""
         buf = self._buf
         if 0 not in data and len(buf) < self._room:
             # no delimiter: only kept (see stats; what is too long is found at the next call). The common case
             # when a port is read byte by byte: a byte inside a frame
             buf += data
-            return []
+            return NOTHING
         stats = self._stats
         stats.bytes_in += len(data) + len(buf) - self._counted
-        out: list[Packet] = []
-        start = 0
-        n = len(data)
-        find = data.find
-        while start < n:
-            end = find(0, start)
-            if end < 0:
-                tail = data[start:]
+        if buf and data == DELIMITER:  # a frame's last byte, fed alone (buf is never kept while _room is 0)
+            chunks = (bytes(buf),)
+            buf.clear()
+        else:
+            # the delimited chunks; the last piece has no delimiter after it yet (b"" when data ends with one)
+            chunks = data.split(DELIMITER)
+            tail = chunks.pop()
+            if chunks:
+                if not self._room:  # the end of a chunk already dropped as oversize: its bytes and delimiter
+                    stats.bytes_skipped += len(chunks[0]) + 1
+                    self._room = MAX_ENCODED
+                    chunks[0] = b""
+                elif buf:
+                    buf += chunks[0]
+                    chunks[0] = bytes(buf)
+                    buf.clear()
+            if tail:
                 if not self._room:
                     stats.bytes_skipped += len(tail)
                 else:
@@ -131,22 +162,12 @@ class FrameDecoder:
                         stats.bytes_skipped += len(buf)
                         buf.clear()
                         self._room = 0
-                break
-            if not self._room:
-                stats.bytes_skipped += end - start + 1
-                self._room = MAX_ENCODED
-                start = end + 1
+        self._counted = len(buf)
+        out: list[Packet] = []
+        types = self._types
+        for chunk in chunks:
+            if not chunk:  # two delimiters in a row: nothing between them to count
                 continue
-            if buf:
-                buf += data[start:end]
-                chunk = bytes(buf)
-                buf.clear()
-            elif end > start:
-                chunk = data[start:end]
-            else:
-                start = end + 1
-                continue
-            start = end + 1
             # one delimited chunk: every check of spec §2.1 in order, the first that fails counted (a rejected
             # chunk's bytes and its delimiter are skipped); the order and the counters are the contract, the
             # shape is the hot path's (written out here, once per frame)
@@ -160,19 +181,19 @@ class FrameDecoder:
                 stats.framing_errors += 1
                 stats.bytes_skipped += len(chunk) + 1
                 continue
-            if len(payload) < MIN_PAYLOAD:
+            size = len(payload) - 4  # the body's (payload: type, seq, body, CRC)
+            if size < 0:
                 stats.framing_errors += 1
                 stats.bytes_skipped += len(chunk) + 1
                 continue
-            size = len(payload) - 4  # the body's (payload: type, seq, body, CRC)
             crc = payload[-2] | payload[-1] << 8
             if crc_hqx(payload[:-2], CRC16_INIT) != crc:
                 stats.crc_errors += 1
                 stats.bytes_skipped += len(chunk) + 1
                 continue
             seq = payload[1]
-            entry = self._types.get(payload[0])
-            if seq == 0 and entry is not None and entry[0] is Hello and size in entry[1]:
+            entry = types[payload[0]]  # (class, unpackers by body length) or None
+            if seq == 0 and entry is not None and entry[0] is Hello and entry[1][size] is not None:
                 if self._last_seq is not None:
                     stats.restarts += 1
                 self._last_seq = None
@@ -195,14 +216,13 @@ class FrameDecoder:
                 stats.unknown_types += 1
                 stats.bytes_skipped += len(chunk) + 1
                 continue
-            unpack = entry[1].get(size)
+            unpack = entry[1][size]
             if unpack is None:
                 stats.bad_lengths += 1
                 stats.bytes_skipped += len(chunk) + 1
                 continue
             stats.frames_ok += 1
             out.append(unpack(payload, seq))
-        self._counted = len(buf)
         return out
 
     def account(self, packet: Packet) -> None:
