@@ -326,6 +326,8 @@ ROWS = [
     S(["bench", "decode", "--seconds", "-1"], 2, "seconds"),
     S(["bench", "decode", "--repeat", "0"], 2, "repeat"),
     S(["bench", "decode", "--json", "{tmp}"], 2, "is a folder"),
+    S(["bench", "decode", "--against", "no-such-revision"], 2, "not a commit"),
+    S(["bench", "decode", "--against", "HEAD", "--pairs", "0"], 2, "pairs"),
     S(["bench", "pointer", "--json", "{tmp}"], 2, "is a folder"),
     S(["bench", "fusion", "--scenarios", "wobble"], 2, "wobble"),
     S(["bench", "fusion", "--seeds", "0"], 2, "seeds"),

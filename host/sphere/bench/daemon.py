@@ -49,10 +49,6 @@ try:
     from sphere.daemon.scripted_sphere import ScriptedSphere, hello_packet
 except ImportError:  # --against a revision from before the module's rename (it was sphere.daemon.synthetic)
     from sphere.daemon.synthetic import ScriptedSphere, hello_packet
-try:
-    from sphere.errors import SphereError
-except ImportError:  # --against a revision from before sphere.errors
-    SphereError = Exception
 from sphere.daemon.app import SphereMouse
 from sphere.daemon.backends.memory import RecordingBackend
 from sphere.daemon.config import Config, ConfigError, parse_set
@@ -352,29 +348,6 @@ COMPARED = (("p50_us", "latency p50 µs"), ("p99_us", "latency p99 µs"),
             ("work_us", "work per frame µs CPU"))
 
 
-class UsageError(SphereError):
-    pass
-
-
-def tree_of(rev: str, into: str) -> str:
-    """``host/`` of revision ``rev`` of the repository this file is in, extracted into ``into``."""
-    repo = os.path.dirname(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))))
-    git = ["git", "-C", repo]
-    try:
-        ok = subprocess.run(git + ["rev-parse", "--verify", "--quiet", f"{rev}^{{commit}}"],
-                            capture_output=True, text=True)
-    except FileNotFoundError:
-        raise UsageError("--against needs git on PATH") from None
-    if ok.returncode != 0:
-        raise UsageError(f"--against {rev}: not a commit of the repository at {repo} (this needs a git checkout "
-                         "of the project; `git log --oneline` lists the revisions)")
-    archive = subprocess.run(git + ["archive", "--format=tar", ok.stdout.strip(), "host"], capture_output=True)
-    if archive.returncode != 0:
-        raise UsageError(f"--against {rev}: git archive failed: {archive.stderr.decode(errors='replace').strip()}")
-    subprocess.run(["tar", "-x", "-C", into], input=archive.stdout, check=True)
-    return os.path.join(into, "host")
-
-
 def run_side(host_dir: str, args, set_items=None) -> dict:
     """One measurement in a fresh process: this file, with ``host_dir``'s ``sphere`` package imported."""
     env = dict(os.environ, PYTHONPATH=host_dir)
@@ -391,6 +364,8 @@ DEFAULT_SIDE = "default"
 
 
 def against(args) -> int:
+    from sphere.bench._revision import tree_of  # --against: not in the older sphere a side runs with
+
     here = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))  # .../host
     with tempfile.TemporaryDirectory(prefix="sphere-bench-") as tmp:
         # "default": this tree without the --set settings (what a setting, say an output switched on, costs)
@@ -444,9 +419,11 @@ def run(args, prog: str = "sphere bench daemon") -> int:
         print(f"sphere-mouse benchmark, side by side: {args.rate:g} RAW_SAMPLE frames/s, {args.seconds:g} s per run, "
               f"{os.cpu_count()} CPUs, Python {sys.version.split()[0]}, load average before {os.getloadavg()[0]:.2f}",
               flush=True)
+        from sphere.bench._revision import RevisionError  # --against: not in the older sphere a side runs with
+
         try:
             return against(args)
-        except UsageError as e:
+        except RevisionError as e:
             print(f"{prog}: {e}", file=sys.stderr)
             return 2
     if not args.json:
