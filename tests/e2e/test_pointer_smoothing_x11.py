@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 
 from sphere.bench._xvfb import PointerSampler
+from sphere.bench.drift import anchored_times, daemon_path, on_grid
 from sphere.daemon.scripted_sphere import hello_packet, script_bytes
 from sphere.protocol import encode_frame
 from sphere.smoothing.registry import FILTERS
@@ -193,17 +194,14 @@ def test_steady_turns_travel_overshoot_drift_from_the_x_pointer(xvfb, tmp_path):
         r = run_mouse(xvfb, capture, "--speed", str(speed), "--set", "output.screen_width_px=1920", timeout=120)
     assert r.returncode == 0, r.stderr
     a = np.array(s.samples, dtype=float)
-    t, xy = a[:, 0], a[:, 1:]
     turns = [p for p in h.phases if p.kind == "turn"]
-    # device time 0 in the X trace: the first turn (10 °/s = 480 px/s) is 48 px along 0.1 s after it starts
-    # (plus half its 20-ms ramp); the bias learnt at start-up may move the pointer a pixel or two before
-    first = np.flatnonzero(np.abs(xy - xy[0]).max(axis=1) >= 48)[0]
-    t0 = t[first] - (turns[0].start_s + 0.11) / speed
-    # on a regular grid of device time (the pointer's last sampled position: the sampler slows when the
-    # machine is busy, and a short window must not come out empty)
-    measured = (t - t0) * speed
-    dev = np.arange(0.0, measured[-1], 0.005)
-    xy = xy[np.clip(np.searchsorted(measured, dev, side="right") - 1, 0, len(xy) - 1)]
+    # each X sample in device time, anchored at every step to the daemon's own path on the same capture: a
+    # wall-clock mapping fixed at the first turn put the next turn's start into a held second (0.05 s before it)
+    # when a loaded machine made the replay fall behind (jitter 0.39 px at load 7)
+    ref = daemon_path(capture.read_bytes())
+    path = np.column_stack([anchored_times(a, ref, speed) - ref[0, 0], a[:, 1:]])  # motion time = device − 1 s
+    dev = np.arange(int(round(sum(step[1] for step in CLEAN_TURNS) * 200))) * 0.005
+    xy = on_grid(path, dev[-1] + 0.005)
     rests = [(1.5, turns[0].start_s - 0.05)] + [(p.end_s + 0.45, p.end_s + 1.45) for p in turns]
     sq, n = 0.0, 0
     for a_s, b_s in rests:  # jitter lying still: RMS distance from a line fit over each rest

@@ -92,3 +92,32 @@ def test_x_samples_are_timed_by_the_exact_state_so_the_next_turn_is_not_read_as_
     grid = D.on_grid(np.column_stack([times, a[:, 1:]]), 3.0)
     held = grid[int((stop + 0.45) * D.RATE_HZ): int((stop + 1.45) * D.RATE_HZ), 0]
     assert np.all(held == -10)
+
+
+def test_anchored_times_keep_an_x_only_move_at_its_time_and_a_late_replay_out_of_the_held_second():
+    """anchored_times: every step of the X pointer onto the daemon's state takes that state's time (a replay
+    that fell behind 0.2 s at the first stop does not shift the later ones), and a pixel the X pointer moves
+    while the daemon's pointer stands still is placed at its own time, inside the held second, where
+    device_times folds it back onto the state before it (and the drift would not be seen)."""
+    t = 0.5 + np.arange(1000) * 0.005  # device time of the daemon's states, 200 Hz
+    # a 10-px move, held 2 s, a 10-px move back, held
+    x = np.concatenate([-np.arange(11), np.full(400, -10), -10 + np.arange(1, 11), np.full(579, 0)]).astype(float)
+    ref = np.column_stack([t, x, 0 * x])
+    wall = np.arange(0.0, 4.0, 0.001)
+    dev = (wall - 0.2) * 2 + 0.5
+    dev = np.where(wall > 0.21, np.maximum(0.5 + 0.02, dev - 0.4), dev)  # the replay stalls 0.2 s after its start
+    k = np.clip(np.searchsorted(t, dev, side="right") - 1, 0, len(t) - 1)
+    a = np.column_stack([wall, x[k], 0 * wall])
+    stop = 0.5 + 10 * 0.005
+    own = (dev > stop + 0.9) & (dev < 0.5 + 410 * 0.005)  # the X pointer alone 1 px down in the held second
+    a[own, 2] = 1.0
+    times = D.anchored_times(a, ref, 2.0)
+    assert np.all(np.diff(times) >= -1e-9)
+    steps = np.r_[True, np.diff(x[k]) != 0] & ~own
+    assert np.array_equal(times[steps], t[k][steps])  # every step at the time its state began
+    grid = D.on_grid(np.column_stack([times, a[:, 1:]]), 5.0)
+    held = grid[int((stop + 0.45) * D.RATE_HZ): int((stop + 1.45) * D.RATE_HZ)]
+    assert np.all(held[:, 0] == -10)
+    assert held[0, 1] == 0 and held[-1, 1] == 1  # the X-only pixel shows inside the held second
+    folded = D.on_grid(np.column_stack([D.device_times(a, ref, 2.0), a[:, 1:]]), 5.0)
+    assert np.ptp(folded[int((stop + 0.45) * D.RATE_HZ): int((stop + 1.45) * D.RATE_HZ), 1]) == 0  # not seen there

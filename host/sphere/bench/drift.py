@@ -243,6 +243,31 @@ def device_times(a: np.ndarray, reference: np.ndarray, speed: float, lookahead_s
     return out
 
 
+def anchored_times(a: np.ndarray, reference: np.ndarray, speed: float) -> np.ndarray:
+    """Device time of each X pointer sample ``a`` = (wall s, x, y) where the X pointer's own moves between the
+    daemon's states stay visible: a sample where the pointer has just stepped to exactly the daemon's next state
+    (:func:`device_times`) is an anchor and takes that state's time; every other sample (the pointer standing,
+    or at a place the daemon never was) takes the last anchor's time plus the wall time since it × ``speed``,
+    at most the next anchor's. The replay's falling behind then shifts a sample by no more than what it lost
+    since the last step (not since the start), and a pixel the X pointer moves on its own while the daemon's
+    stands still is placed at its own time, not folded back onto the state before it."""
+    d = device_times(a, reference, speed)
+    ref = (reference[:, 1:3] - reference[0, 1:3]).astype(np.int64)
+    xy = (a[:, 1:] - a[0, 1:]).astype(np.int64)
+    k = np.clip(np.searchsorted(reference[:, 0], d), 0, len(ref) - 1)
+    stepped = np.r_[True, (xy[1:] != xy[:-1]).any(axis=1)]
+    idx = np.flatnonzero(stepped & (ref[k] == xy).all(axis=1))
+    idx = idx[np.r_[True, np.diff(d[idx]) > 0]]  # a state the daemon stepped to, not the X pointer stepping back
+    if not len(idx):
+        return d
+    last = np.clip(np.searchsorted(idx, np.arange(len(a)), side="right") - 1, 0, None)
+    out = d[idx[last]] + (a[:, 0] - a[idx[last], 0]) * speed
+    nxt = last + 1 < len(idx)
+    out[nxt] = np.minimum(out[nxt], d[idx[last[nxt] + 1]])
+    out[idx] = d[idx]
+    return out
+
+
 def on_grid(path: np.ndarray, seconds: float, cols=(1, 2)) -> np.ndarray:
     """The pointer at RATE_HZ from device time 0 (the last position at or before each grid time)."""
     g = np.arange(int(round(seconds * RATE_HZ))) / RATE_HZ
