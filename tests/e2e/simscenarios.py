@@ -21,7 +21,7 @@ import pytest
 
 from sphere.sim import trace as T
 from sphere.sim.analysis import CaptureSummary, summarise
-from sphere.sim.board import FIRMWARE_ELF, BoardUnavailable, board_path, run_board, testfw_elf
+from sphere.sim.board import BoardUnavailable, board_path, firmware_elf, run_board, testfw_elf
 
 TAPPING_TRIAL = "24_disturbed_tapping_A"
 TAPPING_START_S = 48.0  # taps at 50.05, 52.99 and 56.50 s of the trial (still before the first)
@@ -47,9 +47,11 @@ def need_board() -> Path:
 
 
 def need_firmware() -> Path:
-    if not FIRMWARE_ELF.exists():
-        pytest.skip(f"no firmware image at {FIRMWARE_ELF}: `make -C firmware` makes it")
-    return FIRMWARE_ELF
+    """The firmware image, made first when it is missing or older than firmware/src (sphere.sim.board.firmware_elf)."""
+    try:
+        return firmware_elf(build=True)
+    except BoardUnavailable as e:
+        pytest.skip(f"no firmware image to run: {e}")
 
 
 def _need_sketch(what: str, make) -> Path:

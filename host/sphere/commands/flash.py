@@ -65,9 +65,12 @@ def find_image(given: str | None) -> Path:
             raise FlashError(f"{image}: not an Intel HEX file (its records start with ':'); `make -C firmware` makes one")
         return image
     image = paths.firmware_image(".hex")
-    if not image.exists() and paths.in_checkout():
+    build_dir = paths.firmware_build_dir()
+    if build_dir is not None and image == build_dir / "sphere.hex":
         try:
-            firmware_elf(build=True)  # the same `make -C firmware` writes the .hex beside the .elf
+            # the checkout's own image: made when missing or older than firmware/src (the same `make -C firmware`
+            # writes the .hex beside the .elf), so a Nano is never flashed with an image of older sources
+            firmware_elf(build=True)
         except BoardUnavailable as e:
             raise FlashError(str(e)) from None
     if not image.exists():

@@ -77,10 +77,36 @@ def board_path(build: bool = True) -> Path:
     return BOARD
 
 
+def firmware_sources() -> list[Path]:
+    """The firmware's own sources (firmware/src, what `make -C firmware` compiles and its headers)."""
+    return sorted(p for p in (FIRMWARE_DIR / "src").rglob("*") if p.suffix in (".c", ".cpp", ".h", ".S"))
+
+
+def _newer_source(elf: Path) -> Path | None:
+    """A firmware source changed after ``elf`` was made (the newest one), or None."""
+    t = elf.stat().st_mtime
+    newer = [(p.stat().st_mtime, p) for p in firmware_sources() if p.stat().st_mtime > t]
+    return max(newer)[1] if newer else None
+
+
 def firmware_elf(build: bool = True) -> Path:
-    """The firmware image, built with `make -C firmware` when it is missing and can be built."""
-    if FIRMWARE_ELF.exists():
+    """The firmware image, built with `make -C firmware` when it is missing and can be built. In a checkout,
+    the checkout's own image is also rebuilt when a firmware source is newer than it (with ``build=False``:
+    refused, saying which source and what to run): an image older than its sources is never run as if it
+    were them. An image named by $SPHERE_FIRMWARE or [paths] firmware is used as it is."""
+    build_dir = paths.firmware_build_dir()
+    ours = build_dir is not None and FIRMWARE_ELF == build_dir / "sphere.elf" and (FIRMWARE_DIR / "Makefile").exists()
+    newer = _newer_source(FIRMWARE_ELF) if ours and FIRMWARE_ELF.exists() else None
+    if FIRMWARE_ELF.exists() and newer is None:
         return FIRMWARE_ELF
+    if newer is not None:
+        what = (f"the firmware image {FIRMWARE_ELF} is older than its source "
+                f"{newer.relative_to(FIRMWARE_DIR.parent)}")
+        if not build:
+            raise BoardUnavailable(f"{what}: run `{BUILD_FIRMWARE_CMD}`")
+        print(f"sphere: {what}: rebuilding it (`{BUILD_FIRMWARE_CMD}`) ...", file=sys.stderr, flush=True)
+        _make(FIRMWARE_DIR, BUILD_FIRMWARE_CMD)
+        return FIRMWARE_ELF  # make decides what the change needs (a source no object depends on rebuilds nothing)
     if os.environ.get(paths.FIRMWARE_ENV) or not paths.in_checkout():
         raise BoardUnavailable(f"no firmware image at {FIRMWARE_ELF}: {paths.firmware_missing_hint()}")
     if not (FIRMWARE_DIR / "Makefile").exists():
