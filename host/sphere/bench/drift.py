@@ -52,10 +52,9 @@ from sphere import argtypes
 from sphere.bench._xvfb import PointerSampler
 from sphere.bench._xvfb import Xvfb as _Server
 from sphere.bench._xvfb import XvfbUnavailable
-from sphere.bench.pointer import Recording, _low_pass, daemon, ideal_path, raw_packets, turn_figures
+from sphere.bench.pointer import Recording, _low_pass, daemon, ideal_path, raw_packets, true_inputs, turn_figures
 from sphere.daemon.config import Config, ConfigError, parse_set, smoothing_params
 from sphere.daemon.gyro_bias import GyroBias
-from sphere.daemon.motion import up_from_quat
 from sphere.daemon.pointer import PointerMapper
 from sphere.daemon.scripted_sphere import hello_packet
 from sphere.protocol import PacketStream, RawSample, encode_frame
@@ -309,21 +308,15 @@ def reference_pointer(sc: Scenario, n: int, cfg=None) -> np.ndarray:
     rates — no bias, no noise, the true vertical: what a perfect bias estimate would show. The pointer minus
     this is what the host adds (its bias, the sensors' noise), without the hand's own slow motion."""
     cfg = cfg or Config()
-    h = sc.hold
-    k = int(round(h.motion.rate_hz / RATE_HZ))
-    m = min(n, len(h.true_gyro_dps) // k)
-    rates = h.true_gyro_dps[: m * k].reshape(m, k, 3).mean(axis=1)
-    quats = h.quat_enu[k - 1:: k][:m]
     mapper = PointerMapper(cfg.pointer, 1920, smoothing_params(cfg, cfg.pointer.smoothing))
     out = np.zeros((n, 2))
     x = y = 0
     rem = mapper.remainder
-    for i in range(m):
-        dx, dy = mapper.update(tuple(rates[i]), 1.0 / RATE_HZ, up_from_quat(tuple(quats[i])))
+    for i, step in enumerate(true_inputs(sc.hold, n)):
+        dx, dy = mapper.update(*step)
         x += dx
         y += dy
         out[i] = x + rem[0], y + rem[1]
-    out[m:] = out[m - 1]
     return out
 
 

@@ -35,6 +35,10 @@ overshoot ≤ 1 px, fine-band lag ≤ fast-band lag + 40 ms, drift ≤ 1 px/s, 3
 clean turn's travel within 3 %): the setting furthest inside all of them. Overshoot and drift are taken
 from the pointer with its sub-pixel remainder (whole pixels would round a 0.6-px overshoot to 0 or 1). The row ``(defaults)`` is each filter's own PARAMS defaults — what
 ``sphere-mouse`` runs with ``pointer.smoothing = NAME``.
+The row ``(true rates)`` is the daemon's default mapper fed the synthetic motions' true rates (no noise, no
+bias, the true vertical): what the mapper's own rules give with a perfect gyro and bias estimate, told apart
+from what the sensor and the host add. ``--set SECTION.KEY=VALUE`` runs the recordings' daemon and every mapper
+with a setting other than its default (``pointer.hold_band_dps=0``: the pointer without the hand hold).
 """
 
 from __future__ import annotations
@@ -43,7 +47,7 @@ import json
 import math
 import sys
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from types import SimpleNamespace
 
 import numpy as np
@@ -53,7 +57,8 @@ from sphere import quaternion as quat
 from sphere.broad import BroadMissing, load_trial, trial_paths
 from sphere.daemon.app import SphereMouse
 from sphere.daemon.backends.memory import RecordingBackend
-from sphere.daemon.config import Config
+from sphere.daemon.config import Config, ConfigError, parse_set, smoothing_params
+from sphere.daemon.motion import up_from_quat
 from sphere.daemon.pointer import PointerMapper, PointerSettings
 from sphere.progress import bar
 from sphere.sim import trace as T
@@ -83,6 +88,9 @@ def add_arguments(p) -> None:
     p.add_argument("--seeds", type=int, default=3, help="synthetic:hold seeds per fold (default 3)")
     p.add_argument("--no-tune", action="store_true", help="only each filter's defaults (no grid, quicker)")
     p.add_argument("--all-settings", action="store_true", help="print every setting tried on the TRAIN fold")
+    p.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
+                   help="a daemon setting other than its default (as sphere-mouse's --set): the recordings' daemon "
+                        "and every filter's pointer mapper use it (e.g. pointer.hold_band_dps=0: no hand hold)")
     p.add_argument("--pose", action="store_true", help="the 3-D stream's pose filter instead of the pointer: "
                    "orientation jitter still and held, lag per band")
 
@@ -103,6 +111,7 @@ class Recording:
     wander_px: np.ndarray | None = None  # (N, 2) the hand's slow wander (ideal − intent below 3 Hz)
     rest: np.ndarray | None = None  # (N,) bool, BROAD's rest samples
     poses: list = field(default_factory=list)  # [(t_us, quat)] the host filter's pose as the daemon publishes it
+    true_inputs: list | None = None  # the same for the motion's true rates (:func:`true_inputs`)
 
 
 class _InputRecorder:
@@ -127,8 +136,8 @@ def daemon(cfg=None):
     return SphereMouse(cfg or Config(), None, RecordingBackend((1920, 1080)), log=lambda m: None)
 
 
-def record(name: str, kind: str, motion, **known) -> Recording:
-    d = daemon()
+def record(name: str, kind: str, motion, cfg=None, **known) -> Recording:
+    d = daemon(cfg)
     rec = _InputRecorder()
     d.mapper = rec
     poses = []
@@ -161,20 +170,33 @@ def _low_pass(x: np.ndarray, corner_hz: float) -> np.ndarray:
     return np.fft.irfft(spec * (f <= corner_hz)[:, None], len(x), axis=0)
 
 
-def hold_recordings(seeds, seconds: float = HOLD_SECONDS) -> list[Recording]:
+def true_inputs(h, n: int) -> list:
+    """``n`` mapper inputs at RATE_HZ for the sphere's true motion of a :mod:`sphere.sim.hold` trace ``h``: its
+    body rates without bias or noise, the true vertical (then standing still if the trace is shorter) — what a
+    perfect gyro and bias estimate would give the pointer."""
+    k = int(round(h.motion.rate_hz / RATE_HZ))
+    m = min(n, len(h.true_gyro_dps) // k)
+    rates = h.true_gyro_dps[: m * k].reshape(m, k, 3).mean(axis=1)
+    ups = [up_from_quat(tuple(q)) for q in h.quat_enu[k - 1:: k][:m]]
+    return [(tuple(rates[i]), 1.0 / RATE_HZ, ups[i]) for i in range(m)] + [((0.0, 0.0, 0.0), 1.0 / RATE_HZ, ups[-1])] * (n - m)
+
+
+def hold_recordings(seeds, seconds: float = HOLD_SECONDS, cfg=None) -> list[Recording]:
     out = []
     for seed in seeds:
         for kind, params in (("hold", None), ("clean", with_params(tremor_rms_deg=0.0, wander_rms_deg=0.0))):
             h = hold_script(seconds, seed, params)
-            r = record(f"{kind}:{seed}", kind, h.motion, phases=h.phases)
+            r = record(f"{kind}:{seed}", kind, h.motion, cfg, phases=h.phases)
             r.ideal_px = ideal_path(h.quat_enu, h.motion.rate_hz, len(r.inputs))
             r.intent_px = ideal_path(h.intent_quat_enu, h.motion.rate_hz, len(r.inputs))
             r.wander_px = _low_pass(r.ideal_px - r.intent_px, 3.0)
+            r.true_inputs = true_inputs(h, len(r.inputs))
             out.append(r)
     return out
 
 
-def broad_recordings(paths, seconds: float | None, noise_dps: float = ITG3200_NOISE_DPS, seed: int = 7) -> list[Recording]:
+def broad_recordings(paths, seconds: float | None, noise_dps: float = ITG3200_NOISE_DPS, seed: int = 7,
+                     cfg=None) -> list[Recording]:
     out = []
     for path in paths:
         trial = load_trial(path)
@@ -183,7 +205,7 @@ def broad_recordings(paths, seconds: float | None, noise_dps: float = ITG3200_NO
         m = T.from_broad(trial)
         rng = np.random.default_rng(seed)
         m.gyr_rad_s = T.fill_gaps(m.gyr_rad_s) + np.radians(rng.normal(0.0, noise_dps, m.gyr_rad_s.shape))
-        r = record(path.stem, "broad", m)
+        r = record(path.stem, "broad", m, cfg)
         t = np.arange(len(r.inputs)) / RATE_HZ
         r.rest = ~trial.movement[np.minimum(np.rint(t * trial.rate_hz).astype(int), len(trial) - 1)]
         out.append(r)
@@ -206,10 +228,12 @@ def with_breaks_trials(directory=None):
 # ---------------------------------------------------------------- the pointer for one filter setting
 
 
-def pointer_paths(rec: Recording, smoothing: str, params: dict | None = None) -> tuple[np.ndarray, np.ndarray]:
+def pointer_paths(rec: Recording, smoothing: str, params: dict | None = None,
+                  pointer: dict | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The pointer (px, summed integer steps) the daemon's mapper gives for these inputs, and the same plus
-    the mapper's sub-pixel remainder (where the pointer is heading between whole pixels)."""
-    mapper = PointerMapper(PointerSettings(smoothing=smoothing), 1920, params)
+    the mapper's sub-pixel remainder (where the pointer is heading between whole pixels); ``pointer``: [pointer]
+    settings other than their defaults."""
+    mapper = PointerMapper(PointerSettings(**((pointer or {}) | {"smoothing": smoothing})), 1920, params)
     update = mapper.update
     out = np.empty((len(rec.inputs), 2))
     exact = np.empty((len(rec.inputs), 2))
@@ -362,9 +386,9 @@ def pick(rows: list[dict]) -> dict:
     return min(rows, key=lambda r: (round(badness(r["figures"]), 3), r["figures"]["lag_fine_ms"]))
 
 
-def evaluate(recs: list[Recording], name: str, params: dict | None) -> dict:
+def evaluate(recs: list[Recording], name: str, params: dict | None, pointer: dict | None = None) -> dict:
     t0 = time.perf_counter()
-    both = [pointer_paths(r, name, params) for r in recs]
+    both = [pointer_paths(r, name, params, pointer) for r in recs]
     us = (time.perf_counter() - t0) / max(1, sum(len(r.inputs) for r in recs)) * 1e6
     paths = [p for p, _ in both]
     exact = [e for _, e in both]
@@ -441,8 +465,8 @@ def pose_figures(recs: list[Recording], name: str, params: dict | None = None) -
 POSE_TARGETS = {"still_jitter_deg": 0.05, "held_jitter_deg": 0.1, "lag_slow_ms": 20.0}
 
 
-def run_pose(args, names) -> int:
-    recs = hold_recordings(TEST_SEEDS[: args.seeds])
+def run_pose(args, names, cfg=None) -> int:
+    recs = hold_recordings(TEST_SEEDS[: args.seeds], cfg=cfg)
     print(f"3-D stream pose on synthetic:hold seeds {', '.join(map(str, TEST_SEEDS[: args.seeds]))} (each filter's "
           f"defaults; lag against the unfiltered pose); targets: still ≤ {POSE_TARGETS['still_jitter_deg']}°, held ≤ "
           f"{POSE_TARGETS['held_jitter_deg']}°, slow-band lag ≤ {POSE_TARGETS['lag_slow_ms']:g} ms")
@@ -470,33 +494,47 @@ def run(args) -> int:
     if args.seeds < 1 or not (args.seconds is None or args.seconds > 0):
         print("sphere bench pointer: --seeds must be at least 1 and --seconds greater than 0", file=sys.stderr)
         return 2
+    try:
+        cfg = Config().with_overrides(parse_set(args.set), "--set") if args.set else Config()
+    except ConfigError as e:
+        print(f"sphere bench pointer: {e}", file=sys.stderr)
+        return 2
     if args.pose:
-        return run_pose(args, names)
+        return run_pose(args, names, cfg)
     try:
         trials = with_breaks_trials(args.trials)
     except BroadMissing as e:
         print(f"sphere bench pointer: {e}", file=sys.stderr)
         return 2
+    pointer = {k: v for k, v in cfg.pointer.as_dict().items() if k != "smoothing"}  # --filters picks the filter
     print(f"recording: synthetic:hold seeds through the daemon's packet path; BROAD {', '.join(p.stem for p in trials)} "
           f"(first {args.seconds:g} s)", file=sys.stderr)
-    train = hold_recordings(TRAIN_SEEDS[: args.seeds]) + broad_recordings(trials[:1], args.seconds)
-    test = hold_recordings(TEST_SEEDS[: args.seeds]) + broad_recordings(trials[1:], args.seconds)
+    train = hold_recordings(TRAIN_SEEDS[: args.seeds], cfg=cfg) + broad_recordings(trials[:1], args.seconds, cfg=cfg)
+    test = hold_recordings(TEST_SEEDS[: args.seeds], cfg=cfg) + broad_recordings(trials[1:], args.seconds, cfg=cfg)
     results = {}
 
-    work = {name: [None] if args.no_tune else [None] + list(grid(name)) for name in names}
-    with bar(total=sum(len(v) + 2 for v in work.values()), desc="bench pointer", unit="run") as runs:
+    # a filter's [smoothing.NAME] given with --set replaces its defaults (its row and the tuning's first setting)
+    given = parse_set(args.set)
+    own = {name: smoothing_params(cfg, name) if f"smoothing.{name}" in given else None for name in names}
+    work = {name: [own[name]] if args.no_tune else [own[name]] + list(grid(name)) for name in names}
+    with bar(total=sum(len(v) + 2 for v in work.values()) + 1, desc="bench pointer", unit="run") as runs:
         for name, settings in work.items():
             runs.set_postfix_str(name)
             rows = []
             for s in settings:
-                rows.append(evaluate(train, name, s))
+                rows.append(evaluate(train, name, s, pointer))
                 runs.update(1)
             chosen = pick(rows)
-            results[name] = {"defaults": evaluate(test, name, None), "tuned": evaluate(test, name, chosen["params"] or None),
-                             "train_rows": rows}
+            results[name] = {"defaults": evaluate(test, name, own[name], pointer),
+                             "tuned": evaluate(test, name, chosen["params"] or None, pointer), "train_rows": rows}
             runs.update(2)
             if runs.disable:
                 print(f"  {name}: {len(rows)} setting(s) tried on TRAIN", file=sys.stderr)
+        # the daemon's default mapper fed the synthetic motions' true rates: the figures a perfect gyro and bias
+        # estimate would give, so what the mapper's own rules cost is told from what the sensor and the host add
+        truth = evaluate([replace(r, inputs=r.true_inputs) for r in test if r.true_inputs is not None], DEFAULT,
+                         smoothing_params(cfg, DEFAULT) if f"smoothing.{DEFAULT}" in given else None, pointer)
+        runs.update(1)
     print(f"pointer feel on TEST (synthetic:hold seeds {', '.join(map(str, TEST_SEEDS[: args.seeds]))}, "
           f"{', '.join(p.stem for p in trials[1:])}); 40° per 1920 px; settings tuned on TRAIN; targets: "
           f"held ≤ {TARGETS['held_jitter_px']} px, rest ≤ {TARGETS['rest_jitter_px']} px, overshoot ≤ "
@@ -510,12 +548,17 @@ def run(args) -> int:
         if args.all_settings:
             for row in r["train_rows"]:
                 print(_row("    TRAIN", row["figures"], row["params"]))
-    print(f"* the daemon's default (pointer.smoothing = {DEFAULT})")
+    print(_row(f" {DEFAULT} (true rates)", truth["figures"], {}))
+    print(f"* the daemon's default (pointer.smoothing = {DEFAULT}); (true rates): the same mapper fed the synthetic "
+          "motions' true rates (no noise, no bias, the true vertical; no BROAD trial)")
+    if args.set:
+        print(f"settings other than the daemon's defaults (--set): {', '.join(args.set)}")
     if args.json:
         out = {"default": DEFAULT, "targets": TARGETS, "train_seeds": TRAIN_SEEDS[: args.seeds],
                "test_seeds": TEST_SEEDS[: args.seeds], "broad_train": trials[0].stem,
                "broad_test": [p.stem for p in trials[1:]],
-               "filters": {n: {"defaults": r["defaults"], "tuned": r["tuned"]} for n, r in results.items()}}
+               "filters": {n: {"defaults": r["defaults"], "tuned": r["tuned"]} for n, r in results.items()},
+               "true_rates": truth, "settings": args.set}
         with open(args.json, "w") as f:
             json.dump(out, f, indent=2, default=float)
     return 0
