@@ -278,6 +278,21 @@ def test_the_equalizer_from_rest_keeps_a_release_carry_whole():
     assert ends[0] == pytest.approx(ends[1], abs=0.05)
 
 
+def test_the_equalizer_after_a_gap_in_a_turn_starts_from_the_turn_even_after_a_rest_hold():
+    """A gap in the samples (longer than 50 ms) restarts the equalizer from the sample after it, as if that rate
+    had lasted: a turn going on through the gap keeps its rate. The history of zeros is for the first sample
+    after a rest hold only (it used to stay for every later restart: 200 °/s came back from 0, 12 px lost)."""
+    from sphere.daemon.pointer import LowpassEqualizer
+
+    eq = LowpassEqualizer(98.0)
+    eq.reset(at_rest=True)
+    first = [eq((0.0, 0.0, 200.0), DT)[2] for _ in range(40)]
+    assert first[0] < 180.0 and first[-1] == pytest.approx(200.0)  # from rest: from zeros (not at once 200)
+    eq((0.0, 0.0, 200.0), 0.2)  # 0.2 s without a sample
+    after = [eq((0.0, 0.0, 200.0), DT)[2] for _ in range(10)]
+    assert after == pytest.approx([200.0] * 10)
+
+
 def test_the_equalizer_takes_samples_stamped_microseconds_apart():
     """A sender that fell behind writes a burst whose stamps are 1 µs apart (seen from a loaded pty in CI): at a
     step of 0 the design would divide 0 by 0 and stop the daemon; the steps are taken as half a chip period, and a

@@ -219,6 +219,7 @@ class LowpassEqualizer:
         st = self._state
         if st is None:
             st = self._state = [[0.0] * 4 if self._at_rest else [v, v, v, v] for v in rate]
+            self._at_rest = False  # once: a later restart (a gap in the samples) starts from its first sample
         out = []
         for v, s in zip(rate, st):
             y = b0 * v + b1 * s[0] + b2 * s[1] - d1 * s[2] - d2 * s[3]
