@@ -188,7 +188,8 @@ class Xvfb:
 
 def x11_path(capture: bytes, display: str, reference: np.ndarray, speed: float, settings=()) -> np.ndarray:
     """The X pointer as (t_s device time, x, y) for ``sphere-mouse --replay`` of this capture onto ``display``;
-    device time from matching the pointer's path to the daemon's own (:func:`device_times`)."""
+    device time from the pointer's steps onto the daemon's own path (:func:`anchored_times`: a pixel the X
+    pointer moved on its own shows at its time)."""
     with tempfile.TemporaryDirectory(prefix="sphere-drift-x-") as tmp:
         path = Path(tmp) / "capture.bin"
         path.write_bytes(capture)
@@ -203,7 +204,7 @@ def x11_path(capture: bytes, display: str, reference: np.ndarray, speed: float, 
         if r.returncode != 0:
             raise RuntimeError(f"sphere-mouse failed: {r.stderr.strip()[-300:]}")
     a = np.array(sampler.samples, dtype=float)
-    return np.column_stack([device_times(a, reference, speed), a[:, 1:] - a[0, 1:] + reference[0, 1:3]])
+    return np.column_stack([anchored_times(a, reference, speed), a[:, 1:] - a[0, 1:] + reference[0, 1:3]])
 
 
 def device_times(a: np.ndarray, reference: np.ndarray, speed: float, lookahead_s: float = 2.0,
