@@ -148,6 +148,49 @@ def test_pointer_mode_position_is_exact(xvfb, tmp_path):
     assert abs(x - (100 + 256)) <= 2 and abs(y - (100 + 102)) <= 2, (x, y)
 
 
+def test_pointer_moves_are_exact_under_x_pointer_acceleration_and_follow_other_moves(xvfb, tmp_path):
+    """The x11 backend moves by relative XTest motion (no read-back of the position on the pointer's path): the X
+    server's pointer acceleration (`xset m 10 1`) must not touch it, and a move another client makes in between
+    (a real mouse, a warp) is kept: the next move starts from there."""
+    from Xlib import display
+
+    from sphere.daemon.backends.x11 import X11Backend
+
+    d = display.Display(xvfb)
+    before = d.get_pointer_control()
+    d.change_pointer_control(accel=(10, 1), threshold=1)
+    d.sync()
+    try:
+        capture = tmp_path / "turn.bin"
+        capture.write_bytes(script_bytes([("still", 1.0), ("turn", (0, 0, 1), -20.0, 0.5),
+                                          ("turn", (0, 1, 0), 8.0, 0.5)]))
+        xdotool(xvfb, "mousemove", "100", "100")
+        result = run_mouse(xvfb, capture, "--speed", "0", "--sensitivity", "50")
+        assert result.returncode == 0, result.stderr
+        x, y = pointer(xvfb)  # as in test_pointer_mode_position_is_exact: 10 x 10x accelerated would be far off
+        assert abs(x - (100 + 256)) <= 2 and abs(y - (100 + 102)) <= 2, (x, y)
+
+        backend = X11Backend(xvfb)
+        try:
+            backend.move(3, 4)
+            backend.display.sync()
+            assert pointer(xvfb) == (x + 3, y + 4)
+            xdotool(xvfb, "mousemove", "700", "600")  # another client moves the pointer
+            backend.move(-5, 2)
+            backend.display.sync()
+            assert pointer(xvfb) == (695, 602)
+            backend.move_to(WIDTH - 2, 1)
+            backend.move(10, -10)  # clipped at the screen's edge, as the X server clips any motion
+            backend.move(-1, 1)
+            backend.display.sync()
+            assert pointer(xvfb) == (WIDTH - 2, 1)
+        finally:
+            backend.close()
+    finally:
+        d.change_pointer_control(accel=(before.accel_num, before.accel_denom), threshold=before.threshold)
+        d.close()
+
+
 def test_config_error_is_clear(xvfb, tmp_path):
     bad = tmp_path / "config.toml"
     bad.write_text("[pointer]\nslow_deg_per_widht = 30\n")

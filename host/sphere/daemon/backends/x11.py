@@ -10,6 +10,11 @@ from sphere.settings import Param
 _BUTTON = {"left": 1, "middle": 2, "right": 3}
 
 
+def _int16(v: int) -> int:
+    """A relative motion's offset as the request carries it (INT16; a move never comes near the limits)."""
+    return max(-32768, min(32767, int(v)))
+
+
 class X11Backend(Backend):
     NAME = "x11"
     PARAMS = {"display": Param("", doc="X display of the x11 backend (empty = `$DISPLAY`)")}
@@ -38,10 +43,12 @@ class X11Backend(Backend):
         self._root = screen.root
 
     def move(self, dx: int, dy: int) -> None:
-        # Absolute motion from the current position: XTest relative motion would go through the
-        # server's pointer acceleration, which the mapper already replaces.
-        p = self._root.query_pointer()
-        self._xtest.fake_input(self.display, self._X.MotionNotify, x=p.root_x + dx, y=p.root_y + dy)
+        # XTest relative motion (detail True): one request, no round trip. The server adds the offset to where the
+        # pointer is when it processes it (so a real mouse's moves in between are kept) and clips it to the
+        # screen; since X.Org 1.7 the XTest device's relative motion gets no pointer acceleration (Xext/xtest.c
+        # passes no POINTER_ACCELERATE to GetPointerEvents), so the mapper's own curve is what the hand gets.
+        # Before, the position was read back first (XQueryPointer): a round trip on the pointer's path.
+        self._xtest.fake_input(self.display, self._X.MotionNotify, detail=True, x=_int16(dx), y=_int16(dy))
         self.display.flush()
 
     def move_to(self, x: int, y: int) -> None:
@@ -61,6 +68,9 @@ class X11Backend(Backend):
 
     def close(self) -> None:
         try:
+            # the moves are requests without replies: wait until the server has done them all, so the pointer is
+            # where the last one put it once the daemon has stopped (a replay, a script reading it back)
+            self.display.sync()
             self.display.close()
         except Exception:
             pass
