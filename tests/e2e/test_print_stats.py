@@ -50,6 +50,8 @@ def test_print_stats_reports_the_link_and_the_sample_age_when_the_daemon_stops(t
     # machine's worst
     assert 0.3 < med < 40.0 and med <= p95 <= p99 <= top and n > 100, lines[1]
     assert lines[2].startswith("sphere-mouse stats: pointer moves "), lines[2]
+    # the garbage collector ran between batches (sphere.daemon.collector), not on a frame's way to the pointer
+    assert re.search(r"garbage collected \d+ times, between batches \(longest [\d.]+ ms\)", lines[2]), lines[2]
 
 
 def test_print_stats_says_when_the_source_has_no_device_clock(tmp_path):

@@ -6,6 +6,7 @@ import logging
 import os
 
 from sphere.daemon.actions import Action, EventActions
+from sphere.daemon.collector import BetweenBatches
 from sphere.daemon.backends.pynput_backend import main_screen_size
 from sphere.daemon.config import smoothing_params
 from sphere.daemon.gyro_bias import GyroBias, RestHold
@@ -98,6 +99,8 @@ class SphereMouse:
             stream.mode = self.mode
         # outputs that speak rates (a 3-D mouse, a motion server) get each sample's rate and acceleration
         self._publish_motion = getattr(stream, "publish_motion", None)
+        #: the garbage collector, run between batches (after the move) while the loop runs
+        self.collector = BetweenBatches()
 
     # -- actions --
     def set_mode(self, mode: str) -> None:
@@ -304,6 +307,8 @@ class SphereMouse:
     # -- loop --
     def run(self) -> int:
         source = self.source
+        collector = self.collector
+        collector.start()
         try:
             for batch in source:
                 if source.generation != self._generation:
@@ -318,7 +323,9 @@ class SphereMouse:
                     self.status.tick(self)
                 if self._stopped:
                     break
+                collector.step()
         finally:
+            collector.stop()
             if self.status is not None:
                 self.status.tick(self, force=True)
                 if self.status.overwrite:

@@ -95,5 +95,10 @@ def run_stats(daemon, seconds: float) -> str:
                      f"max {run[3]:.1f} ms ({ages.run_samples} samples"
                      + (f", device clock ±{unc * 1e3:.2f} ms" if unc is not None else "") + "); "
                      + (f"grew {ages.growing_spells} times" if ages.growing_spells else "never grew"))
-    lines.append(f"pointer moves {daemon.moves}, clicks {daemon.clicks}, mode {daemon.mode}")
+    line = f"pointer moves {daemon.moves}, clicks {daemon.clicks}, mode {daemon.mode}"
+    collector = getattr(daemon, "collector", None)
+    if collector is not None:
+        line += (f"; garbage collected {sum(collector.collections)} times, between batches (longest "
+                 f"{collector.longest_s * 1e3:.1f} ms)")
+    lines.append(line)
     return "\n".join("sphere-mouse stats: " + line for line in lines)
