@@ -79,5 +79,26 @@ def test_a_row_that_cannot_be_measured_is_reported_and_the_others_kept(tmp_path,
     assert "ftdi-16ms at 115200: FAILED, not measured: sphere-mouse did not find the virtual board" in printed
     result = json.loads(out.read_text())
     assert [r["row"] for r in result["rows"]] == ["none"] and result["rows"][0]["moves"] >= 3
-    assert result["failed_rows"] == [{"row": "ftdi-16ms", "baud": 115200,
+    assert result["failed_rows"] == [{"row": "ftdi-16ms", "baud": 115200, "tree": "this",
                                       "error": "sphere-mouse did not find the virtual board: (injected by the test)"}]
+
+
+def test_against_another_revision_runs_each_row_with_both_daemons_side_by_side(tmp_path):
+    """--against REV: every row twice in the same run, this tree's sphere-mouse and REV's (here HEAD: its host/ out
+    of git, on PYTHONPATH), and a table of this tree's figures over REV's."""
+    from simscenarios import need_board
+
+    need_board()
+    out = tmp_path / "latency.json"
+    r = subprocess.run([sys.executable, "-m", "sphere.cli", "bench", "latency", "--seconds", "9", "--adapters", "none",
+                        "--bauds", "115200", "--no-monitor", "--against", "HEAD", "--json", str(out)],
+                       capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stderr[-2000:]
+    result = json.loads(out.read_text())
+    assert result["against"] == "HEAD"
+    assert sorted(row["tree"] for row in result["rows"]) == ["HEAD", "this"]
+    for row in result["rows"]:
+        assert row["moves"] >= 3 and row["stages_ms"]["host"]["p50"] > 0, row
+        assert row["pointer_read_gap_ms"]["max"] >= row["pointer_read_gap_ms"]["p99"]
+    assert "this tree / HEAD (the same rows, the same run):" in r.stdout
+    assert "none at 115200 baud (HEAD)" in r.stderr and "none at 115200 baud (this)" in r.stderr

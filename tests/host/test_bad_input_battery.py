@@ -354,6 +354,7 @@ ROWS = [
     S(["bench", "latency", "--seconds", "3"], 2, "leaves no onset"),
     S(["bench", "latency", "--seed", "-1"], 2, "seed"),
     S(["bench", "latency", "--json", "{tmp}"], 2, "is a folder"),
+    S(["bench", "latency", "--against", "no-such-revision"], 2, "not a commit of the repository"),
     S(["bench", "daemon", "--set", "nope.x=1"], 2, "nope"),
     S(["bench", "daemon", "--against", "default", "--set", "outputs.spacenav.mapping=orbit"], 2, "mapping"),
     S(["sim", "--trace", "synthetic:turn:abc", "--seconds", "9"], 2, "number of degrees"),

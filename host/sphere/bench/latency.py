@@ -29,11 +29,17 @@ such RAW_SAMPLE (an FTDI packet holds several frames; the daemon moves at the fi
 A move with no such frame before it is counted as unattributed. ``total`` = age + wire + adapter + host. The board paces itself to
 the wall clock and writes no packet before its simulated time; ``lag`` (the write's wall time minus its
 simulated time) is how late it was, left out of ``total`` and printed so that a run on a loaded machine shows.
+
+``--against REV`` runs every row twice, side by side in the same run: with this tree's sphere-mouse and with the
+sphere-mouse of git revision REV (its ``host/`` from ``git archive``, on ``PYTHONPATH``; the same firmware, board,
+X server and pointer sampler), the two in alternating order, and prints this tree's figures over REV's.
 """
 
 from __future__ import annotations
 
 import argparse
+import array
+import gc
 import json
 import os
 import re
@@ -49,6 +55,7 @@ import numpy as np
 
 from sphere import argtypes
 from sphere.bench._xvfb import PointerReader, Xvfb, XvfbUnavailable
+from sphere.bench._revision import RevisionError, tree_of
 from sphere.errors import SphereError
 from sphere.protocol import FrameDecoder, RawSample
 from sphere.protocol.packets import FAST_BAUDS
@@ -68,6 +75,8 @@ class RowFailed(SphereError, RuntimeError):
     loaded machine): the run goes on with the other rows and says which one failed."""
 
 
+#: a row whose pointer sampler went this long without a read is named under the table
+SAMPLER_GAP_NOTE_MS = 5.0
 #: a move this long after its onset is not this onset's (the next comes PERIOD_S later)
 MOVE_WINDOW_S = 0.25
 
@@ -84,6 +93,8 @@ def add_arguments(p) -> None:
     p.add_argument("--no-monitor", action="store_true",
                    help="leave out the check of `sphere monitor`'s sample age against the board's truth")
     p.add_argument("--json", metavar="OUT", type=argtypes.out_file, help="also write every figure as JSON")
+    p.add_argument("--against", metavar="REV", help="also run every row with the sphere-mouse of this git revision "
+                                                   "(say main before a change), side by side, in alternating order")
 
 
 def _adapter_list(text: str) -> list[str]:
@@ -223,49 +234,74 @@ def percentiles(values) -> dict:
 
 
 class PointerRecorder(threading.Thread):
-    """Reads the X pointer every 0.2 ms or so (the sleep plus one round trip) and keeps each change."""
+    """Reads the X pointer every 0.2 ms or so (the sleep plus one round trip) and keeps each change.
+
+    A move the sampler sees late is timed late, and counted in the wrong stage: the frames written meanwhile make it
+    look like a late frame (``age``). So what it keeps goes into flat arrays of integers (no object per read for
+    Python's garbage collector to count), and :func:`run_row` holds this process's automatic collection off while a
+    row runs (a full one takes ≈20 ms here, idle). What is left, a machine whose cores are all busy, shows: the
+    longest gap between reads is in the JSON and named under the table when over :data:`SAMPLER_GAP_NOTE_MS`."""
 
     def __init__(self, display: str):
         super().__init__(daemon=True)
 
         self.reader = PointerReader(display)
         self.stop = threading.Event()
-        self.changes: list[tuple[int, int, int]] = []
+        self._changes = array.array("q")  # (monotonic ns, x, y) per change, flat
         self.reads = 0
-        self.gaps_ns: list[int] = []
+        self.gaps_ns = array.array("q")
+
+    @property
+    def changes(self) -> np.ndarray:
+        """(monotonic ns, x, y) of each change, as rows."""
+        return np.asarray(self._changes, dtype=np.int64).reshape(-1, 3)
 
     def run(self):
         pos = self.reader.position()
         last = time.monotonic_ns()
-        self.changes.append((last, *pos))
+        keep = self._changes.extend
+        gap = self.gaps_ns.append
+        keep((last, *pos))
         while not self.stop.is_set():
             p = self.reader.position()
             now = time.monotonic_ns()
             self.reads += 1
-            self.gaps_ns.append(now - last)
+            gap(now - last)
             last = now
             if p != pos:
                 pos = p
-                self.changes.append((now, *p))
+                keep((now, *p))
             time.sleep(0.0002)  # about 3,000 reads a second on an idle machine: the sampler's period stays well under 1 ms
-        self.changes.append((time.monotonic_ns(), *pos))
+        keep((time.monotonic_ns(), *pos))
         self.reader.close()
 
 
-def run_row(name: str, baud: int, trace: Path, onsets_s, seconds: float, display: str, tmp: Path, elf) -> dict:
+#: the row's tree when --against is not given (or for this tree's rows beside it)
+THIS = "this"
+
+
+def run_row(name: str, baud: int, trace: Path, onsets_s, seconds: float, display: str, tmp: Path, elf,
+            tree: str = THIS, host_dir: str | None = None) -> dict:
+    """One row; ``host_dir``: the ``host/`` folder whose sphere-mouse runs (another revision's, --against), else
+    this tree's."""
     adapter, low_latency = ADAPTERS[name]
-    log_path, cap_path = tmp / f"{name}-{baud}.log", tmp / f"{name}-{baud}.cap"
+    log_path, cap_path = tmp / f"{name}-{baud}-{tree}.log", tmp / f"{name}-{baud}-{tree}.cap"
     board, pty = start_pty_board(board_command(elf, trace, seconds, capture=cap_path, pty=True, adapter=adapter,
                                                host_log=log_path))
     mouse = None
     recorder = PointerRecorder(display)
+    collecting = gc.isenabled()
+    gc.disable()  # no collection in this process stalls the pointer sampler during the row (PointerRecorder)
     recorder.start()
     try:
-        mouse_cmd = [sys.executable, "-m", "sphere.mouse", "--port", pty, "--backend", "x11",
+        env = None
+        if host_dir is not None:  # -P: that tree's package, never one in the current folder
+            env = dict(os.environ, PYTHONPATH=host_dir)
+        mouse_cmd = [sys.executable, "-P", "-m", "sphere.mouse", "--port", pty, "--backend", "x11",
                      "--display", display, "--no-stream", "--quiet", "--config", os.devnull,
                      "--set", f"source.low_latency={'true' if low_latency else 'false'}",
                      "--set", f"source.baud_switch={0 if baud == 115200 else baud}"]
-        mouse = subprocess.Popen(mouse_cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+        mouse = subprocess.Popen(mouse_cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, env=env)
         connected = {}
 
         def watch():
@@ -280,6 +316,8 @@ def run_row(name: str, baud: int, trace: Path, onsets_s, seconds: float, display
     finally:
         recorder.stop.set()
         recorder.join(5)
+        if collecting:
+            gc.enable()
         for proc in (mouse, board):
             if proc is not None and proc.poll() is None:
                 proc.terminate()
@@ -291,18 +329,18 @@ def run_row(name: str, baud: int, trace: Path, onsets_s, seconds: float, display
         raise RowFailed("sphere-mouse did not find the virtual board: " + " | ".join(connected.get("lines", [])[-3:]))
     log = HostLog.read(log_path)
     frames = frames_of(cap_path.read_bytes(), log)
-    samples = np.array(recorder.changes, dtype=np.int64)
+    samples = recorder.changes
     # from 0.5 s after the daemon found the port: its start-up (HELLO, gyro bias) is not the steady state
     got = attribute(onsets_s, connected["ns"] + 500_000_000, frames, samples, log.t0_ns)
     gaps = np.asarray(recorder.gaps_ns, dtype=float) / 1e6
     fell_back = any("back to 115200" in line for line in connected.get("lines", []))
-    return {"row": name, "baud": baud, "fell_back_to_115200": fell_back, "onsets": len(onsets_s),
+    return {"row": name, "baud": baud, "tree": tree, "fell_back_to_115200": fell_back, "onsets": len(onsets_s),
             "moves": len(got["ms"]["total"]),
             "missed": got["missed"], "unattributed": got["unattributed"], "skipped_before_connect": got["skipped"],
             "stages_ms": {k: percentiles(v) for k, v in got["ms"].items()},
             "pointer_reads_per_s": recorder.reads / max(1e-9, gaps.sum() / 1e3),
-            "pointer_read_gap_ms": {"p50": float(np.percentile(gaps, 50)), "p99": float(np.percentile(gaps, 99))}
-            if len(gaps) else {}}
+            "pointer_read_gap_ms": {"p50": float(np.percentile(gaps, 50)), "p99": float(np.percentile(gaps, 99)),
+                                    "max": float(gaps.max())} if len(gaps) else {}}
 
 
 def true_ages(frames: list[Frame], log: HostLog, from_ns: int, to_ns: int) -> list[float]:
@@ -359,10 +397,21 @@ def run(args) -> int:
         print(f"sphere bench latency: --seconds {args.seconds:g} leaves no onset (the first comes at "
               f"{O.LEAD_S:g} s): give at least {O.LEAD_S + O.PERIOD_S:g}", file=sys.stderr)
         return 2
+    revision = against_dir = None
+    if args.against:  # that revision's host/ first: a wrong name is a usage error before any work
+        revision = tempfile.TemporaryDirectory(prefix="sphere-latency-rev-")
+        try:
+            against_dir = tree_of(args.against, revision.name)
+        except RevisionError as e:
+            revision.cleanup()
+            print(f"sphere bench latency: {e}", file=sys.stderr)
+            return 2
     try:
         elf = firmware_elf()
         xvfb = Xvfb()
     except (XvfbUnavailable, RuntimeError, OSError) as e:
+        if revision is not None:
+            revision.cleanup()
         print(f"sphere bench latency: {e}", file=sys.stderr)
         return 1
     rows, failed = [], []
@@ -372,13 +421,19 @@ def run(args) -> int:
         with tempfile.TemporaryDirectory(prefix="sphere-latency-") as tmp:
             tmp = Path(tmp)
             trace = T.to_chips(O.onsets(args.seconds, args.seed), gyro_rate_hz=1000.0).write(tmp / "onsets.bin")
+            sides = [(THIS, None)] + ([(args.against, against_dir)] if args.against else [])
+            k = 0
             for baud in args.bauds:
                 for name in args.adapters:
-                    print(f"  {name} at {baud} baud: {args.seconds:g} s ...", file=sys.stderr, flush=True)
-                    try:
-                        rows.append(run_row(name, baud, trace, onsets_s, args.seconds, xvfb.display, tmp, elf))
-                    except RowFailed as e:
-                        failed.append({"row": name, "baud": baud, "error": str(e)})
+                    for tree, host_dir in (sides if k % 2 == 0 else sides[::-1]):  # who goes first alternates
+                        side = f" ({tree})" if args.against else ""
+                        print(f"  {name} at {baud} baud{side}: {args.seconds:g} s ...", file=sys.stderr, flush=True)
+                        try:
+                            rows.append(run_row(name, baud, trace, onsets_s, args.seconds, xvfb.display, tmp, elf,
+                                                tree, host_dir))
+                        except RowFailed as e:
+                            failed.append({"row": name, "baud": baud, "tree": tree, "error": str(e)})
+                    k += 1
             if not args.no_monitor:
                 print(f"  sphere monitor's sample age against the board's truth: {args.seconds:g} s ...",
                       file=sys.stderr, flush=True)
@@ -388,8 +443,10 @@ def run(args) -> int:
         return 1
     finally:
         xvfb.close()
+        if revision is not None:
+            revision.cleanup()
     result = {"seconds_per_row": args.seconds, "seed": args.seed, "load_average": [load_before, os.getloadavg()[0]],
-              "rows": rows, "failed_rows": failed, "sample_age": monitor}
+              "against": args.against, "rows": rows, "failed_rows": failed, "sample_age": monitor}
     report(result)
     if args.json:
         with open(args.json, "w") as f:
@@ -397,12 +454,19 @@ def run(args) -> int:
     return 1 if failed else 0
 
 
+def _tree(r) -> str:
+    return r.get("tree", THIS)
+
+
 def report(result: dict) -> None:
     rows = result["rows"]
-    base = {r["baud"]: r for r in rows if r["row"] == BASELINE}
+    against = result.get("against")
+    base = {(r["baud"], _tree(r)): r for r in rows if r["row"] == BASELINE}
     print(f"motion onset -> X pointer move, ms ({result['seconds_per_row']:g} s a row, seed {result['seed']}; "
           f"load average {result['load_average'][0]:.1f} -> {result['load_average'][1]:.1f})")
-    head = (f"{'adapter':<10} {'baud':>7} {'moves':>7} {'total p50':>9} {'p95':>6} {'p99':>6} {'max':>6} "
+    tw = max([len(THIS)] + [len(_tree(r)) for r in rows]) if against else 0
+    tree_head = f"{'daemon':<{tw}} " if against else ""
+    head = (f"{'adapter':<10} {'baud':>7} {tree_head}{'moves':>7} {'total p50':>9} {'p95':>6} {'p99':>6} {'max':>6} "
             f"{'vs 16ms':>7} | {'age p50':>7} {'p95':>5} | {'wire':>5} | {'adapter p50':>11} {'p95':>5} | "
             f"{'host p50':>8} {'p95':>5} {'p99':>5} | {'lag p95':>7} {'reads/s':>7}")
     print(head)
@@ -413,19 +477,26 @@ def report(result: dict) -> None:
             v = s[stage].get(p)
             return f"{v:{width}.2f}" if v is not None else " " * (width - 1) + "-"
 
-        b = base.get(r["baud"])
+        b = base.get((r["baud"], _tree(r)))
         ratio = (f"{s['total']['p95'] / b['stages_ms']['total']['p95']:7.2f}"
                  if b and b is not r and s["total"].get("p95") and b["stages_ms"]["total"].get("p95") else "      -")
-        print(f"{r['row']:<10} {r['baud']:>7} {r['moves']:>3}/{r['onsets'] - r['skipped_before_connect']:<3} "
+        tree = f"{_tree(r):<{tw}} " if against else ""
+        print(f"{r['row']:<10} {r['baud']:>7} {tree}{r['moves']:>3}/{r['onsets'] - r['skipped_before_connect']:<3} "
               f"{f('total', 'p50', 9)} {f('total', 'p95')} {f('total', 'p99')} {f('total', 'max')} {ratio} | "
               f"{f('age', 'p50', 7)} {f('age', 'p95', 5)} | {f('wire', 'p50', 5)} | {f('adapter', 'p50', 11)} "
               f"{f('adapter', 'p95', 5)} | {f('host', 'p50', 8)} {f('host', 'p95', 5)} {f('host', 'p99', 5)} | "
               f"{f('lag', 'p95', 7)} {r['pointer_reads_per_s']:7.0f}")
-    notes = [f"{r['row']} at {r['baud']}: {r['missed']} onsets without a move, {r['unattributed']} unattributed"
+    if against:
+        side_by_side(rows, against)
+    def who(r):
+        return f"{r['row']} at {r['baud']}" + (f" ({_tree(r)})" if against else "")
+
+    notes = [f"{who(r)}: {r['missed']} onsets without a move, {r['unattributed']} unattributed"
              for r in rows if r["missed"] or r["unattributed"]]
-    notes += [f"{r['row']} at {r['baud']}: the daemon fell back to 115200 during the row"
-              for r in rows if r.get("fell_back_to_115200")]
-    notes += [f"{r['row']} at {r['baud']}: FAILED, not measured: {r['error']}" for r in result.get("failed_rows", ())]
+    notes += [f"{who(r)}: the daemon fell back to 115200 during the row" for r in rows if r.get("fell_back_to_115200")]
+    notes += [f"{who(r)}: the pointer sampler was held up to {r['pointer_read_gap_ms']['max']:.1f} ms at once (a move in "
+              f"such a gap is seen late)" for r in rows if r["pointer_read_gap_ms"].get("max", 0) > SAMPLER_GAP_NOTE_MS]
+    notes += [f"{who(r)}: FAILED, not measured: {r['error']}" for r in result.get("failed_rows", ())]
     if notes:
         print("; ".join(notes))
     age = result.get("sample_age")
@@ -434,3 +505,23 @@ def report(result: dict) -> None:
         print(f"sample age (ftdi, 115200), sphere monitor's last 2 s: median {shown['p50']:.2f} ms, p95 "
               f"{shown['p95']:.2f} ms; the board's truth: median {truth['p50']:.2f} ms, p95 {truth['p95']:.2f} ms "
               f"({truth['n']} samples); monitor - truth: {diff['p50']:+.2f} / {diff['p95']:+.2f} ms")
+
+
+#: the figures --against puts side by side: (stage, percentile)
+COMPARED = (("total", "p50"), ("total", "p95"), ("host", "p50"), ("host", "p95"), ("host", "p99"))
+
+
+def side_by_side(rows, against: str) -> None:
+    """Each row's figures of this tree over REV's (below 1: this tree is faster)."""
+    print(f"this tree / {against} (the same rows, the same run):")
+    print(f"  {'adapter':<10} {'baud':>7} " + " ".join(f"{stage + ' ' + p:>16}" for stage, p in COMPARED))
+    other = {(r["row"], r["baud"]): r for r in rows if _tree(r) == against}
+    for r in rows:
+        o = other.get((r["row"], r["baud"]))
+        if _tree(r) != THIS or o is None:
+            continue
+        cells = []
+        for stage, p in COMPARED:
+            a, b = r["stages_ms"][stage].get(p), o["stages_ms"][stage].get(p)
+            cells.append(f"{a:5.2f}/{b:5.2f} {a / b:4.2f}" if a is not None and b else f"{'-':>16}")
+        print(f"  {r['row']:<10} {r['baud']:>7} " + " ".join(f"{c:>16}" for c in cells))
