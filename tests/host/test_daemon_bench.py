@@ -65,7 +65,10 @@ def test_side_by_side_with_a_revision_of_this_repository():
     for (_, label), row in zip(bench.COMPARED, table):
         assert row.strip().startswith(label), (label, row)
         this, other, ratio = (float(v) for v in row.split()[-3:])
-        assert this > 0 and other > 0 and ratio == pytest.approx(this / other, abs=0.01)
+        # the figures are printed to 0.01: their ratio is known to that rounding (a 5 ms p99 beside 28 µs under
+        # load is 181.01 printed, 181.02 from the printed figures)
+        r = this / other
+        assert this > 0 and other > 0 and ratio == pytest.approx(r, abs=0.005 + r * (0.005 / this + 0.005 / other))
 
 
 @pytest.mark.parametrize("args, says", [
