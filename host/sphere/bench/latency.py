@@ -494,8 +494,11 @@ def report(result: dict) -> None:
     notes = [f"{who(r)}: {r['missed']} onsets without a move, {r['unattributed']} unattributed"
              for r in rows if r["missed"] or r["unattributed"]]
     notes += [f"{who(r)}: the daemon fell back to 115200 during the row" for r in rows if r.get("fell_back_to_115200")]
-    notes += [f"{who(r)}: the pointer sampler was held up to {r['pointer_read_gap_ms']['max']:.1f} ms at once (a move in "
-              f"such a gap is seen late)" for r in rows if r["pointer_read_gap_ms"].get("max", 0) > SAMPLER_GAP_NOTE_MS]
+    held = [f"{who(r)} {r['pointer_read_gap_ms']['max']:.1f}" for r in rows
+            if r["pointer_read_gap_ms"].get("max", 0) > SAMPLER_GAP_NOTE_MS]
+    if held:
+        notes.append("the pointer sampler went without a read for longer than "
+                     f"{SAMPLER_GAP_NOTE_MS:g} ms (a move in such a gap is seen late), longest in ms: " + ", ".join(held))
     notes += [f"{who(r)}: FAILED, not measured: {r['error']}" for r in result.get("failed_rows", ())]
     if notes:
         print("; ".join(notes))
