@@ -73,7 +73,7 @@ def measure(trial: str = "10", start_s: float = 40.0, seconds: float = 5.0, dist
     for f in frames:
         while i < len(rt.t) and rt.t[i] <= f.t_arrival:
             t0 = clock()
-            trk.imu(rt.t[i], rt.q_host_enu[i], rt.trial.acc_m_s2[i])
+            trk.imu(rt.t[i], rt.q_host_enu[i], rt.trial.acc_m_s2[i], gyro_rad_s=rt.trial.gyr_rad_s[i])
             imu_us.append(1e6 * (clock() - t0))
             i += 1
         w0 = time.perf_counter()

@@ -5,7 +5,7 @@ Wiring (for the daemon; its ``PARAMS`` are the ``[camera]`` section, by one line
 
     cam = CameraPosition.from_settings(cfg["camera"], log, source)  # None without [camera] source or a session
     ... on every RAW_SAMPLE, after the orientation filter:
-    stream.position = cam.update(quat_sensor_to_earth, acc_m_s2, t_us) if cam else None
+    stream.position = cam.update(quat_sensor_to_earth, acc_m_s2, t_us, gyro_rad_s) if cam else None
     ... at exit: cam.close()
 
 The position is the ball's centre in metres in the camera's frame (x right, y down, z out of the lens),
@@ -119,11 +119,11 @@ class CameraPosition:
             log(f"camera: the session's video ({len(session.frame_times)} frames), ball hue {s.hue_deg:g}°")
         return cls(LiveTracker(src), clock=lambda: source.host_time_s)
 
-    def update(self, q_sensor_to_earth, acc_m_s2, t_us=None):
+    def update(self, q_sensor_to_earth, acc_m_s2, t_us=None, gyro_rad_s=None):
         """One sensor sample (device time ``t_us``) that arrived now: the ball's position (list of 3, m) at
-        the moment of its arrival, or None."""
+        the moment of its arrival, or None. ``gyro_rad_s``: the sample's rates, bias removed (sensor axes)."""
         t = self.sample_clock(t_us, self.clock())
-        p = self.live.sensor(t, q_sensor_to_earth, acc_m_s2)
+        p = self.live.sensor(t, q_sensor_to_earth, acc_m_s2, gyro_rad_s)
         return None if p is None else [float(v) for v in p]
 
     def watch_frames(self, on: bool) -> None:

@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from sphere import broad
 from sphere import quaternion as quat
 from sphere.camera.detect import BallDetector, blob_position
 from sphere.camera.live import FrameClock, hint_from
@@ -76,6 +77,7 @@ def run(rt: RenderedTrial, hue_deg: float = 120.0, tracker: dict | None = None) 
     frame_iter = {k: None for k in range(len(start))}
     pending = {}
     clock = FrameClock(NOMINAL_CAMERA_LATENCY_S, 1.0 / rt.scene.fps)
+    gyro = tr.gyr_rad_s - gyro_bias(rt)  # the rates as the daemon gives them to the tracker: bias removed
     for i in range(n):
         # frames that arrived before this IMU sample reaches the host
         while next_frame < len(order) and arrival[order[next_frame]] <= t_imu_host[i]:
@@ -118,13 +120,13 @@ def run(rt: RenderedTrial, hue_deg: float = 120.0, tracker: dict | None = None) 
         q, a = rt.q_host_enu[i], tr.acc_m_s2[i]
         if t_ready is None and hyb.alignment.ready:
             t_ready = float(t_imu_host[i])
-        p = hyb.imu(rt.t[i], q, a, lead_s=IMU_LATENCY_S)
+        p = hyb.imu(rt.t[i], q, a, lead_s=IMU_LATENCY_S, gyro_rad_s=gyro[i])
         if p is not None:
             est["hybrid"][i] = p
         if mdet is not None and hyb.alignment.ready:
             R_host[i] = hyb.alignment.R @ _rot(q)
             R_hyb[i] = hyb.orientation(q)
-        p = ckf.imu(rt.t[i], q, a, lead_s=IMU_LATENCY_S)
+        p = ckf.imu(rt.t[i], q, a, lead_s=IMU_LATENCY_S, gyro_rad_s=gyro[i])
         if p is not None:
             est["camera-kf"][i] = p
         if last_cam is not None:
@@ -145,6 +147,15 @@ def run(rt: RenderedTrial, hue_deg: float = 120.0, tracker: dict | None = None) 
     if mdet is not None:
         run_.orientation = _orientation_errors(rt, R_host, R_hyb, markers)
     return run_
+
+
+def gyro_bias(rt: RenderedTrial) -> np.ndarray:
+    """The gyro's bias (rad/s) as a device learns it while it lies still: the mean rate over the trial's rest
+    samples before the stretch (BROAD's trials start at rest); zeros without any."""
+    full = broad.load_trial(broad.find_trial(rt.name))
+    a = int(round(rt.start_s * full.rate_hz))
+    rest = ~full.movement[:a].astype(bool)
+    return full.gyr_rad_s[:a][rest].mean(axis=0) if rest.sum() >= 10 else np.zeros(3)
 
 
 def _orientation_errors(rt: RenderedTrial, R_host, R_hyb, markers: int) -> dict:

@@ -2,7 +2,7 @@
 each frame, each fix stamped with its exposure time on the host's clock.
 
 This is the piece a daemon plugs in beside its serial source: ``CameraSource.start()``, then, on every
-sensor sample, ``LiveTracker.sensor(t, q, acc)`` → the ball's position (camera frame, m) or None. Frames
+sensor sample, ``LiveTracker.sensor(t, q, acc, gyro)`` → the ball's position (camera frame, m) or None. Frames
 are stamped when they arrive (``time.monotonic()``) and their exposure is taken to be ``latency_s``
 earlier; for a video file the stamps are the file's frame times from the start (or arrival times given
 with it), or, with ``realtime=True``, the file is paced at its frame rate and stamped by the clock.
@@ -339,10 +339,10 @@ class LiveTracker:
     def _hint(self, t_exposure):
         return hint_from(self.tracker, self.source.camera, t_exposure, self.source.radius_m)
 
-    def sensor(self, t: float, q_sensor_to_earth, acc_sensor):
+    def sensor(self, t: float, q_sensor_to_earth, acc_sensor, gyro_rad_s=None):
         """One sensor sample taken at ``t`` (host clock), arriving ``lead_s`` later (the link's latency): the
         frames that arrived by then are used, and the position (camera frame, m) at the arrival, when the
-        output is used, is returned; None while it is unknown."""
+        output is used, is returned; None while it is unknown. ``gyro_rad_s``: its rates (bias removed)."""
         now = t + self.lead_s
         self._pending += self.source.poll_frames(now)
         due = [f for f in self._pending if f.t_arrival <= now]  # (a file read ahead of time waits its turn)
@@ -355,4 +355,4 @@ class LiveTracker:
                 if self.keep_frames:  # the pose at the frame's exposure, its stamp as the frame itself corrected it
                     shift = self.tracker.exposure_shift_s if status == "accepted" else 0.0
                     self.ar_frame = (f, status, *self.tracker.pose_at(f.t_exposure + shift))
-        return self.tracker.imu(t, q_sensor_to_earth, acc_sensor, lead_s=self.lead_s)
+        return self.tracker.imu(t, q_sensor_to_earth, acc_sensor, lead_s=self.lead_s, gyro_rad_s=gyro_rad_s)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import logging
+import math
 import os
 
 from sphere.daemon.actions import Action, EventActions
@@ -25,6 +26,20 @@ def pose_filter(cfg) -> PoseFilter:
     orientation, ``stream.position_smoothing`` and its ``[position_smoothing.NAME]`` for the position."""
     name, pname = cfg.stream.smoothing, cfg.stream.position_smoothing
     return PoseFilter(name, (pname, smoothing_params(cfg, pname, POSITION)), **smoothing_params(cfg, name))
+
+
+def motion_tracker(cfg) -> MotionTracker:
+    """The daemon's motion tracker (host orientation filter, gyro bias, rest hold) from its config."""
+    g = cfg.gyro
+    motion = MotionTracker(cfg.orientation.source, cfg.orientation.use_mag,
+                           GyroBias(still_dps=g.still_dps, still_time_s=g.still_time_s, enabled=g.auto_bias,
+                                    **cfg["gyro_bias"].as_dict()),
+                           filter_name=cfg.orientation.filter, rest_hold=RestHold(**cfg["rest_hold"].as_dict()),
+                           filter_settings=cfg.get)
+    motion.defer = True  # handle() runs the deferred work after each sample's move
+    return motion
+
+
 BUTTONS = {"left_click": "left", "right_click": "right", "middle_click": "middle"}
 logger = logging.getLogger("sphere.daemon")
 
@@ -69,13 +84,7 @@ class SphereMouse:
         self.mapper = PointerMapper(cfg.pointer, width, smoothing_params(cfg, cfg.pointer.smoothing))
         self.pose = pose_filter(cfg)  # the pose the stream and every output get ([stream] smoothing)
         self.tilt = TiltMapper(cfg.tilt, cfg.pointer.invert_x, cfg.pointer.invert_y)
-        g = cfg.gyro
-        self.motion = MotionTracker(cfg.orientation.source, cfg.orientation.use_mag,
-                                    GyroBias(still_dps=g.still_dps, still_time_s=g.still_time_s, enabled=g.auto_bias,
-                                             **cfg["gyro_bias"].as_dict()),
-                                    filter_name=cfg.orientation.filter, rest_hold=RestHold(**cfg["rest_hold"].as_dict()),
-                                    filter_settings=cfg.get)
-        self.motion.defer = True  # handle() runs the deferred work after each sample's move
+        self.motion = motion_tracker(cfg)
         self.actions = EventActions(cfg.events, cfg.freeze)
         self.modes = list(cfg.mode.cycle)
         if cfg.mode.start not in self.modes:
@@ -247,7 +256,8 @@ class SphereMouse:
             return
         position = None
         if self.motion.quat is not None and self.motion.accel_g is not None:
-            position = self.camera.update(self.motion.quat, [v * G_M_S2 for v in self.motion.accel_g], t_us)
+            position = self.camera.update(self.motion.quat, [v * G_M_S2 for v in self.motion.accel_g], t_us,
+                                          [math.radians(v) for v in self.motion.gyro_dps])
         if position is None:
             q = self.pose.at(self.motion.quat, t_us)
         else:

@@ -27,10 +27,12 @@ tables beside the dissertation's Tables 2–3.
 
 from __future__ import annotations
 
+from collections import deque
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from sphere import quaternion as quat
 from sphere.chips import STANDARD_GRAVITY_M_S2
 
 
@@ -241,16 +243,27 @@ def table(values: dict) -> dict:
 
 #: chapter 3's outlier gate (eq. 104): an innovation beyond 5 % of the measurement is not trusted
 Z_TH = 0.05
-#: the camera tracker's gate (same rule, a tighter share of the distance): cross-validated on rendered
-#: stretches 16:100, 07:40, 09:40, 10:100, 14:120 (render seed 2) among 5, 3.5, 2.5, 2 and 1.5 % — the least
-#: worst ratio of the hybrid's RMSE to its targets among those that let no fix more than 50 mm off through
-#: (5 %: one, 50 mm, on 16:100; 1.5 %: three, and the track lost); 2 % also gave the lowest depth RMSE
+#: the camera tracker's gate (same rule, a tighter share of the distance): chosen on rendered stretches 16:100,
+#: 07:40, 09:40, 10:100, 14:120 (render seed 2) among 5, 3.5, 2.5, 2 and 1.5 % — the least worst ratio of the
+#: hybrid's RMSE to its targets among those that let no fix more than 50 mm off through (that choice was made by a
+#: script that is not in the repository; `sphere hybrid-eval` counts the fixes the gate lets through)
 CAMERA_Z_TH = 0.02
 #: how well a fix's exposure time is known (s): the frame clock (sphere.camera.live.FrameClock) leaves 1.4 ms sd
-#: on the virtual camera, the exposure's own length more. Chosen by sphere bench position's rule on the same
-#: train stretches (16:100, 07:40, 10:100, 14:120, render seed 2) among 2, 3, 4 and 6 ms: worst mean ratio to the
-#: targets 0.610, 0.607, 0.675, 0.674 (6 ms was for stamps of arrival − 40 ms, 4.7 ms sd)
+#: on the virtual camera, the exposure's own length more. `sphere bench tracker` scores 2, 3 and 4 ms with the rest
+#: of its pick (6 ms was for stamps of arrival − 40 ms, 4.7 ms sd)
 TIMING_SIGMA_S = 0.003
+#: the camera alignment's refinement by the tracker: its error's sd when the tracker takes it over (deg) and its
+#: random walk (deg/√s: the host filter's heading drifts without a magnetometer); 0: not refined.
+#: The tracker's own orientation for the acceleration: the gyro pulled to the host filter's with this time constant
+#: (s); 0: the host filter's. The acceleration bias's random walk (m/s²/√s). All chosen by `sphere bench tracker`
+#: (leave one BROAD trial out, the AR view's centre within 3 px through 1 s losses of the ball)
+ALIGN_SIGMA_DEG = 8.0
+ALIGN_WALK_DEG = 0.1
+ALIGN_AFTER_PAIRS = 15
+ORIENTATION_TAU_S = 2.0
+BIAS_WALK = 0.02
+#: the tracker's state: position, velocity, the acceleration's bias (camera frame) and the alignment's error
+N_STATE = 12
 
 
 def _rot(q) -> np.ndarray:
@@ -259,6 +272,28 @@ def _rot(q) -> np.ndarray:
     return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
                      [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
                      [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+
+
+def _skew(a) -> np.ndarray:
+    return np.array([[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]])
+
+
+def _exp(r) -> np.ndarray:
+    """Rotation matrix of a rotation vector (rad)."""
+    th = float(np.linalg.norm(r))
+    if th < 1e-12:
+        return np.eye(3)
+    K = _skew(np.asarray(r, float) / th)
+    return np.eye(3) + np.sin(th) * K + (1.0 - np.cos(th)) * (K @ K)
+
+
+def _exp_q(r) -> tuple:
+    """Unit quaternion of a rotation vector (rad)."""
+    th = float(np.linalg.norm(r))
+    if th < 1e-12:
+        return (1.0, 0.5 * float(r[0]), 0.5 * float(r[1]), 0.5 * float(r[2]))
+    s = np.sin(0.5 * th) / th
+    return (float(np.cos(0.5 * th)), float(r[0] * s), float(r[1] * s), float(r[2] * s))
 
 
 def _rz(a: float) -> np.ndarray:
@@ -285,15 +320,19 @@ class CameraAlignment:
     """
 
     def __init__(self, spacing_s: float = 0.2, min_pairs: int = 15, min_ratio: float = 0.01,
-                 min_energy: float = 0.5):
+                 min_energy: float = 0.5, forget_s: float = 0.0):
         self.spacing_s = spacing_s
         self.min_pairs, self.min_ratio, self.min_energy = min_pairs, min_ratio, min_energy
+        self.forget_s = forget_s  # > 0: older pairs count less, by exp(-age / forget_s) (a drifting earth frame)
+        self.frozen = False  # the camera tracker refines R itself now: no more solving
+        self._t_pair = None
         self.cam: list[tuple[float, np.ndarray]] = []  # (t, p) of recent camera fixes
         self.acc: list[tuple[float, np.ndarray]] = []  # (t, a_earth) of recent IMU samples
         self.H = np.zeros((3, 3))
         self.sum_earth = np.zeros(3)
         self.sum_cam = np.zeros(3)
         self.pairs = 0
+        self.weight = 0.0  # the pairs' summed weight (their number without forgetting)
         self.energy = 0.0
         self.R = None  # earth → camera, once ready
         self.residual = None
@@ -304,6 +343,8 @@ class CameraAlignment:
             self.acc.pop(0)
 
     def add_camera(self, t: float, p_cam: np.ndarray) -> None:
+        if self.frozen:
+            return
         if self.cam and t - self.cam[-1][0] > 0.15:  # a gap: start a new run of fixes
             self.cam.clear()
         self.cam.append((t, np.asarray(p_cam, float)))
@@ -332,18 +373,26 @@ class CameraAlignment:
         w = np.where(s <= t1, (s - t0) / h1, (t2 - s) / h2)
         dt = np.gradient(ts)[use]
         d_earth = (A[use] * (w * dt)[:, None]).sum(axis=0)
+        if self.forget_s > 0 and self._t_pair is not None:
+            f = float(np.exp(-(t2 - self._t_pair) / self.forget_s))
+            self.H *= f
+            self.sum_earth *= f
+            self.sum_cam *= f
+            self.energy *= f
+            self.weight *= f
+        self._t_pair = t2
         self.H += np.outer(d_earth, d_cam)
         self.sum_earth += d_earth
         self.sum_cam += d_cam
         self.pairs += 1
+        self.weight += 1.0
         self.energy += float(d_earth @ d_earth)
         self._solve()
 
     def _solve(self) -> None:
         # centred (the cross-covariance): a constant error in the removed gravity, which adds the same
         # vector to every earth-frame pair, drops out
-        n = self.pairs
-        U, S, Vt = np.linalg.svd(self.H - np.outer(self.sum_earth, self.sum_cam) / n)
+        U, S, Vt = np.linalg.svd(self.H - np.outer(self.sum_earth, self.sum_cam) / self.weight)
         if self.pairs < self.min_pairs or self.energy < self.min_energy or S[1] < self.min_ratio * S[0]:
             return
         d = np.sign(np.linalg.det(Vt.T @ U.T))
@@ -357,11 +406,17 @@ class CameraAlignment:
 class CameraImuTracker:
     """Position of the ball in the camera's frame from camera fixes (at their exposure times) and the IMU.
 
-    State x = [p, v, b] (camera frame): position, velocity and the acceleration's slowly varying bias.
+    State x = [p, v, b, δ] (camera frame): position, velocity, the acceleration's slowly varying bias and, once
+    the alignment is known, its error δ (a small rotation in the earth frame, folded into R_ce after each fix).
     - **Predict** at the IMU's rate with its acceleration as the control input (chapter 3's "SF drives the
-      process"): a_cam = R_ce (R(q) a_sensor − g ẑ) with q the host orientation filter's quaternion and
-      R_ce the estimated :class:`CameraAlignment`. Until the alignment is known the prediction is
+      process"): a_cam = R_ce Exp(δ) (R(q) a_sensor − g ẑ) with R_ce the estimated :class:`CameraAlignment` and
+      q the tracker's own orientation: the gyro integrated and pulled toward the host orientation filter's with
+      a time constant of 2 s (the host filter follows the accelerometer, which swings while a hand shakes the
+      ball; its tilt errors leak gravity into the acceleration). Until the alignment is known the prediction is
       constant-velocity with a hand's acceleration as process noise.
+    - **Refine the alignment** while the ball is seen: from the moment CameraAlignment first solves it, δ joins the
+      state (8° sd, a random walk of 0.1°/√s) and every fix corrects it with the rest of the state, so the IMU's
+      prediction through a loss of the ball is turned the way the fixes say; CameraAlignment stops then.
     - **Correct** with a camera fix at its exposure time: the filter goes back to the state saved at the
       last IMU sample before the exposure, applies the fix there and re-propagates the IMU samples since
       (latency compensation), so the output at the IMU's rate never waits for the camera. The fix's
@@ -376,18 +431,29 @@ class CameraImuTracker:
       position is reported unknown (None) until the camera finds the ball again.
     """
 
-    def __init__(self, accel_noise: float = 0.5, free_accel_noise: float = 20.0, bias_walk: float = 0.05,
+    def __init__(self, accel_noise: float = 0.5, free_accel_noise: float = 20.0, bias_walk: float = BIAS_WALK,
                  z_th: float = CAMERA_Z_TH, history_s: float = 0.3, reacquire_after: int = 3,
                  cam_floor_m=(0.0005, 0.0005, 0.002), timing_sigma_s: float = TIMING_SIGMA_S, use_imu: bool = True,
-                 max_coast_s: float = 2.0):
+                 max_coast_s: float = 2.0, align_sigma_deg: float = ALIGN_SIGMA_DEG,
+                 align_walk_deg: float = ALIGN_WALK_DEG, align_forget_s: float = 0.0, align_min_energy: float = 0.5,
+                 orientation_tau_s: float = ORIENTATION_TAU_S, align_after_pairs: int = ALIGN_AFTER_PAIRS):
         self.use_imu = use_imu
+        # the orientation the acceleration is turned by: the gyro integrated and pulled to the host filter's with this
+        # time constant (s), when the caller gives the rates; 0: the host filter's own
+        self.orientation_tau_s = orientation_tau_s
+        self._q = None  # that orientation (w, x, y, z), sensor → earth
+        self._q_t = None
+        # the alignment's refinement by the filter (see the class's doc): 0 leaves CameraAlignment's estimate as it is
+        self.align_sigma = np.radians(align_sigma_deg)
+        self.align_walk = np.radians(align_walk_deg)
+        self.align_after_pairs = align_after_pairs  # the filter takes the alignment over once it was solved from these
         self.timing_sigma_s = timing_sigma_s
         self.accel_noise, self.free_accel_noise, self.bias_walk = accel_noise, free_accel_noise, bias_walk
         self.z_th = z_th
         self.history_s = history_s
         self.reacquire_after = reacquire_after
         self.cam_floor = np.asarray(cam_floor_m, float)
-        self.alignment = CameraAlignment()
+        self.alignment = CameraAlignment(forget_s=align_forget_s, min_energy=align_min_energy)
         self.x = None
         self.P = None
         self.t = None
@@ -403,20 +469,26 @@ class CameraImuTracker:
         self.rejected: list = []
         self.stats = {"accepted": 0, "gated": 0, "reacquired": 0, "late": 0}
         self.exposure_shift_s = 0.0  # the last fix's correction of its exposure time (s)
+        self._fix_times = deque(maxlen=32)  # exposure times of the recent fixes' states in the history
 
     # -- IMU ---------------------------------------------------------------------------------------------
-    def imu(self, t: float, q_sensor_to_earth, acc_sensor, lead_s: float = 0.0):
+    def imu(self, t: float, q_sensor_to_earth, acc_sensor, lead_s: float = 0.0, gyro_rad_s=None):
         """One IMU sample; returns the position estimate (camera frame, m) at t + ``lead_s`` (the link's
-        latency: where the ball is when the output is used), or None before the first fix."""
+        latency: where the ball is when the output is used), or None before the first fix. ``gyro_rad_s``: the
+        sample's rates (sensor axes, bias removed), for the tracker's own orientation (``orientation_tau_s``)."""
         # standard gravity removed; the local difference (and the accelerometer's offset) is a constant that
         # the alignment's centring and the filter's bias state take up
-        a_earth = _rot(q_sensor_to_earth) @ np.asarray(acc_sensor, float) - np.array([0.0, 0.0, self.g])
+        q_acc = q_sensor_to_earth
+        if gyro_rad_s is not None and self.orientation_tau_s > 0:
+            q_acc = self._smooth_orientation(t, q_sensor_to_earth, gyro_rad_s)
+        a_earth = _rot(q_acc) @ np.asarray(acc_sensor, float) - np.array([0.0, 0.0, self.g])
         self.alignment.add_imu(t, a_earth)
         if self.x is None:
             self.hist.append([t, a_earth, None, None, q_sensor_to_earth])
             self._trim(t)
             self.t = t
             return None
+        self._take_over()
         self._predict(t - self.t, a_earth)
         self.t = t
         self.hist.append([t, a_earth, self.x.copy(), self.P.copy(), q_sensor_to_earth])
@@ -428,6 +500,37 @@ class CameraImuTracker:
         u = self.alignment.R @ a_earth - self.x[6:9] if (self.use_imu and self.alignment.ready) else 0.0
         return self.x[:3] + self.x[3:6] * lead_s + 0.5 * u * lead_s * lead_s
 
+    def _smooth_orientation(self, t: float, q_host, gyro_rad_s) -> np.ndarray:
+        """The gyro integrated from the last sample (its rate over the step), then turned toward the host filter's
+        orientation by dt / τ of the rotation between them (in the earth frame): the host filter's corrections,
+        which follow the accelerometer and swing while the hand shakes the ball, come in low-passed."""
+        q_host = np.asarray(q_host, float)
+        dt = None if self._q_t is None else t - self._q_t
+        self._q_t = t
+        if dt is None or not 0.0 < dt < 0.1:
+            self._q = q_host / np.linalg.norm(q_host)
+            return self._q
+        q = quat.mul(self._q, _exp_q(np.asarray(gyro_rad_s, float) * dt))
+        e = quat.mul(q_host, quat.conj(q))  # host = e ⊗ q
+        rv = 2.0 * np.asarray(e[1:]) * (1.0 if e[0] >= 0 else -1.0)
+        q = np.asarray(quat.mul(_exp_q(rv * min(1.0, dt / self.orientation_tau_s)), q))
+        self._q = q / np.linalg.norm(q)
+        return self._q
+
+    def _take_over(self) -> None:
+        """Once the alignment is known, the filter refines it (with ``align_sigma_deg`` > 0): CameraAlignment stops,
+        its error joins the state with that sd, in every saved state too (a fix may go back to one)."""
+        if (self.align_sigma <= 0 or not self.use_imu or self.alignment.frozen or not self.alignment.ready
+                or self.alignment.pairs < self.align_after_pairs or self.x is None):
+            return
+        self.alignment.frozen = True
+        add = np.eye(3) * self.align_sigma ** 2
+        self.P[9:12, 9:12] += add
+        for h in self.hist:
+            if h[3] is not None:
+                h[3] = h[3].copy()
+                h[3][9:12, 9:12] += add
+
     def _trim(self, t):
         while self.hist and self.hist[0][0] < t - self.history_s:
             self.hist.pop(0)
@@ -437,16 +540,18 @@ class CameraImuTracker:
         key = (round(dt, 6), with_imu)
         m = self._models.get(key)
         if m is None:
-            F = np.eye(9)
+            F = np.eye(N_STATE)
             F[0:3, 3:6] = np.eye(3) * dt
             F[0:3, 6:9] = -0.5 * dt * dt * np.eye(3)
             F[3:6, 6:9] = -dt * np.eye(3)
             q_a, q_b = (self.accel_noise, self.bias_walk) if with_imu else (self.free_accel_noise, 0.0)
-            G = np.zeros((9, 3))
+            G = np.zeros((N_STATE, 3))
             G[0:3] = 0.5 * dt * dt * np.eye(3)
             G[3:6] = dt * np.eye(3)
             Q = (q_a * q_a) * (G @ G.T)
             Q[6:9, 6:9] += (q_b * q_b * dt) * np.eye(3)
+            if with_imu and self.align_sigma > 0:
+                Q[9:12, 9:12] += (self.align_walk ** 2 * dt) * np.eye(3)
             if len(self._models) > 64:
                 self._models.clear()
             m = self._models[key] = (F, Q, F.T.copy())
@@ -461,6 +566,13 @@ class CameraImuTracker:
             return x, P
         R = self.alignment.R if self.use_imu else None
         F, Q, Ft = self._model(dt, R is not None)
+        if R is not None and self.alignment.frozen:
+            # the alignment's error δ (earth frame) turns the acceleration: R Exp(δ) a ≈ R a − R [a]× δ
+            M = -R @ _skew(a_earth)
+            F = F.copy()
+            F[0:3, 9:12] = 0.5 * dt * dt * M
+            F[3:6, 9:12] = dt * M
+            Ft = F.T
         x = F @ x
         if R is not None:
             u = R @ a_earth
@@ -519,14 +631,19 @@ class CameraImuTracker:
         self.exposure_shift_s = float(np.clip(self.timing_sigma_s ** 2 * (v @ S_inv @ nu),
                                               -3.0 * self.timing_sigma_s, 3.0 * self.timing_sigma_s))
         x = x + K @ nu
-        P = (np.eye(9) - K[:, :3] @ np.eye(3, 9)) @ P
+        P = (np.eye(N_STATE) - K[:, :3] @ np.eye(3, N_STATE)) @ P
         P = 0.5 * (P + P.T)
+        if self.alignment.frozen:  # the alignment's error estimate is folded into the rotation itself
+            self.alignment.R = self.alignment.R @ _exp(x[9:12])
+            x = x.copy()
+            x[9:12] = 0.0
         if t_exposure > self.hist[k][0]:  # the state at the exposure joins the history, the samples after follow it
             k += 1
             self.hist.insert(k, [t_exposure, nxt[1], x, P, nxt[4]])
         else:
             self.hist[k][2], self.hist[k][3] = x, P
         self._repropagate(k)
+        self._fix_times.append(t_exposure)
         self.alignment.add_camera(t_exposure, z)
         self.t_fix = max(self.t_fix, t_exposure)
         self.stats["accepted"] += 1
@@ -582,8 +699,16 @@ class CameraImuTracker:
         return p, (None if q is None else self.orientation(q))
 
     def position_at(self, t: float):
-        """The estimate at a recent time t (the saved state of the last IMU sample before it), e.g. where to
-        look for the ball in a frame exposed at t; None without one."""
+        """The estimate at a recent time t, e.g. where to look for the ball in a frame exposed at t; None without
+        one. Within 3 timing sd of a fix's exposure, that fix's own state moved along its velocity (a frame whose
+        fix says it was exposed a little before its stamp is drawn from the fix, not from the samples before it);
+        else the saved state of the last IMU sample before t."""
+        near = [tf for tf in self._fix_times if abs(tf - t) <= 3.0 * self.timing_sigma_s]
+        if near:
+            tf = min(near, key=lambda v: abs(v - t))
+            for h in reversed(self.hist):
+                if h[0] == tf and h[2] is not None:
+                    return h[2][:3] + h[2][3:6] * (t - tf)
         for h in reversed(self.hist):
             if h[0] <= t and h[2] is not None:
                 return h[2][:3] + h[2][3:6] * (t - h[0])
@@ -606,15 +731,19 @@ class CameraImuTracker:
         res = zs - A @ coef
         return bool(np.abs(res).max() < self.z_th * np.linalg.norm(zs[-1]) * 0.5)
 
-    def _init(self, t, z, Rm, v=None):
-        self.x = np.zeros(9)
+    def _init(self, t, z, Rm, v=None, bias=None, P_align=None):
+        self.x = np.zeros(N_STATE)
         self.x[:3] = z
         if v is not None:
             self.x[3:6] = v
-        self.P = np.zeros((9, 9))
+        if bias is not None:
+            self.x[6:9] = bias
+        self.P = np.zeros((N_STATE, N_STATE))
         self.P[:3, :3] = Rm
         self.P[3:6, 3:6] = np.eye(3) * (0.5 ** 2 if v is None else 0.2 ** 2)
         self.P[6:9, 6:9] = np.eye(3) * 0.3 ** 2
+        if P_align is not None:  # a loss of the ball does not lose how the camera stands
+            self.P[9:12, 9:12] = P_align
         # from the exposure to now with the IMU samples since (or held where there are none)
         later = [h for h in self.hist if h[0] > t]
         self.t = t
@@ -631,6 +760,7 @@ class CameraImuTracker:
         A = np.c_[np.ones_like(ts), ts - ts[-1]]
         coef, *_ = np.linalg.lstsq(A, zs, rcond=None)
         bias = self.x[6:9].copy() if self.x is not None else np.zeros(3)
+        P_align = self.P[9:12, 9:12].copy() if self.P is not None else np.zeros((3, 3))
         t_last, Rm = self.rejected[-1][0], self.rejected[-1][2]
         # restart at the last fix's exposure time, then run the IMU samples since
         keep = [h for h in self.hist if h[0] > t_last]
@@ -638,7 +768,6 @@ class CameraImuTracker:
         self.hist = self.hist[-1:] if self.hist else []
         self.x = None
         self.hist += keep
-        self._init(t_last, coef[0], Rm, v=coef[1])
-        self.x[6:9] = bias
+        self._init(t_last, coef[0], Rm, v=coef[1], bias=bias, P_align=P_align)
         self.rejected.clear()
         self.stats["reacquired"] += 1
