@@ -19,13 +19,14 @@ STRICT = os.environ.get("SPHERE_STRICT_SKIPS") == "1"
 settings.register_profile("sphere", deadline=None)
 settings.load_profile("sphere")
 
-#: Modules whose figures are the machine's timing (motion to X pointer in ms, the X pointer's px/s, the daemon bench's
-#: side-by-side speed, the AR page's frames drawn, the samples' age): `scripts/test` runs the suite on several
-#: workers (pytest-xdist, --dist loadgroup), and these run one after another on one of them, never two at once.
+#: Modules whose figures are the machine's timing (motion to X pointer in ms, the X pointer's px/s and clicks, the
+#: daemon bench's side-by-side speed, the AR page's frames drawn, the samples' age): marked ``timing``.
+#: `scripts/test` runs the rest on several workers (pytest-xdist) and then these alone, one after another.
 TIMING_MODULES = frozenset({
     "tests/e2e/test_bench_latency.py",
     "tests/e2e/test_pointer_drift_x11.py",
     "tests/e2e/test_pointer_smoothing_x11.py",
+    "tests/e2e/test_mouse_x11.py",
     "tests/e2e/test_hybrid_ar.py",
     "tests/host/test_daemon_bench.py",
     "tests/host/test_sample_age.py",
@@ -33,12 +34,18 @@ TIMING_MODULES = frozenset({
 ROOT = Path(__file__).resolve().parents[1]
 
 
+def pytest_configure(config):
+    config.addinivalue_line("markers", "timing: judges the machine's timing; run alone (tests/conftest.py)")
+
+
 def pytest_collection_modifyitems(config, items):
-    """Each module's tests on one worker (its module fixtures, a simulator or an X server, made once), the
-    timing modules together on one."""
+    """The timing modules marked ``timing``; every test grouped by its module, so that with pytest-xdist's
+    ``--dist loadgroup`` a module's tests share one worker (its fixtures, a simulator or an X server, made once)."""
     for item in items:
         module = Path(str(item.fspath)).resolve().relative_to(ROOT).as_posix()
-        item.add_marker(pytest.mark.xdist_group("timing" if module in TIMING_MODULES else module))
+        if module in TIMING_MODULES:
+            item.add_marker(pytest.mark.timing)
+        item.add_marker(pytest.mark.xdist_group(module))
 
 
 @pytest.hookimpl(hookwrapper=True)
