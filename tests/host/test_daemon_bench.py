@@ -97,3 +97,12 @@ def test_a_setting_reaches_every_part_of_the_measurement():
     assert out.returncode == 0, out.stderr
     bad = _bench("--set", "gyro.nope=1", timeout=60)
     assert bad.returncode == 2 and "nope" in bad.stderr and "Traceback" not in bad.stderr
+
+
+def test_cpu_between_two_readings_never_goes_down_when_a_thread_ends():
+    """A thread that ran 80 ms and ended between the readings took its total with it: the sum of the second
+    reading is smaller than the first's (a -15 % CPU share was printed at load 6), each live thread's increase is not."""
+    before = {"100": 500_000_000, "101": 80_000_000}
+    after = {"100": 510_000_000, "102": 2_000_000}
+    assert sum(after.values()) < sum(before.values())
+    assert bench.cpu_between(before, after) == pytest.approx(0.012)

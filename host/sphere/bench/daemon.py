@@ -202,19 +202,30 @@ def baseline(seconds: float, rate: float):
     return sorted((g - w) / 1000.0 for w, g in zip(written, got))
 
 
+def task_cpu_ns(pid: int) -> dict | None:
+    """Thread id → CPU nanoseconds it has run (schedstat), for the process's live threads; None without them."""
+    out = {}
+    try:
+        for path in glob.glob(f"/proc/{pid}/task/*/schedstat"):
+            with open(path) as f:
+                out[path.split("/")[-2]] = int(f.read().split()[0])
+    except (OSError, ValueError, IndexError):
+        return None
+    return out or None
+
+
+def cpu_between(before: dict, after: dict) -> float:
+    """CPU seconds the threads ran between two :func:`task_cpu_ns` readings: each live thread's own increase (a
+    thread that ended in between takes its total with it, so a sum of the two readings could go down)."""
+    return sum(ns - before.get(tid, 0) for tid, ns in after.items()) * 1e-9
+
+
 def proc_cpu_s(pid: int) -> float:
     """CPU seconds the process's threads have run: schedstat's nanoseconds where the kernel keeps them (a
     10 s run at 2.5 % is 25 clock ticks, too coarse to compare two versions), else utime + stime."""
-    tasks = glob.glob(f"/proc/{pid}/task/*/schedstat")
-    try:
-        total_ns = 0
-        for path in tasks:
-            with open(path) as f:
-                total_ns += int(f.read().split()[0])
-        if tasks:
-            return total_ns * 1e-9
-    except (OSError, ValueError, IndexError):
-        pass
+    tasks = task_cpu_ns(pid)
+    if tasks is not None:
+        return sum(tasks.values()) * 1e-9
     with open(f"/proc/{pid}/stat") as f:
         fields = f.read().rsplit(")", 1)[1].split()
     ticks = os.sysconf("SC_CLK_TCK")
@@ -231,11 +242,13 @@ def cpu(seconds: float, rate: float, orientation: bool, set_items=()):
         if not dev.started.wait(15):
             raise RuntimeError("sphere-mouse did not ask for HELLO")
         time.sleep(1.0)  # imports, discovery and warm-up are not the steady state
-        c0, w0 = proc_cpu_s(proc.pid), time.perf_counter()
+        t0, c0, w0 = task_cpu_ns(proc.pid), proc_cpu_s(proc.pid), time.perf_counter()
         f0 = dev.frames
         dev.wait(seconds + 10)
-        c1, w1 = proc_cpu_s(proc.pid), time.perf_counter()
+        t1, c1, w1 = task_cpu_ns(proc.pid), proc_cpu_s(proc.pid), time.perf_counter()
         f1 = dev.frames
+        if t0 is not None and t1 is not None:  # per thread: a thread that ended does not take its past away
+            c0, c1 = 0.0, cpu_between(t0, t1)
     finally:
         proc.terminate()
         proc.wait(10)
