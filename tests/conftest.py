@@ -36,6 +36,8 @@ ROOT = Path(__file__).resolve().parents[1]
 
 def pytest_configure(config):
     config.addinivalue_line("markers", "timing: judges the machine's timing; run alone (tests/conftest.py)")
+    # pytest-xdist's own mark (pytest_collection_modifyitems), known also to a pytest without the plugin
+    config.addinivalue_line("markers", "xdist_group(name): the tests of one group run on one worker (pytest-xdist)")
 
 
 def pytest_collection_modifyitems(config, items):

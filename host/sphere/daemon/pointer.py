@@ -145,8 +145,11 @@ class _HoldWindow:
 
     def within(self, band_dps: float) -> bool:
         """Whether the window's mean rate is within ``band_dps``."""
-        band = band_dps * self.sums[2]
-        return self.sums[0] * self.sums[0] + self.sums[1] * self.sums[1] <= band * band
+        return self.turned_within(band_dps * self.sums[2])
+
+    def turned_within(self, limit_deg: float) -> bool:
+        """Whether the window's turn (its displacement, °) is within ``limit_deg``."""
+        return self.sums[0] * self.sums[0] + self.sums[1] * self.sums[1] <= limit_deg * limit_deg
 
     def held(self, fx: float, fy: float) -> None:
         row = self.rows[-1]
@@ -256,7 +259,7 @@ class PointerMapper:
     def reset(self) -> None:
         """Forget smoothing history and sub-pixel remainders (after a pause, a freeze, a mode switch)."""
         self.filter.reset()
-        if getattr(self, "equalizer", None) is not None:
+        if self.equalizer is not None:
             self.equalizer.reset()
         self._angle = [0.0, 0.0]  # the pointer's angles (°, right and down) fed to the filter
         self._filtered = None
@@ -352,14 +355,14 @@ class PointerMapper:
         limit = s.hold_slow_dps * s.hold_slow_window_s
         if self._slow_aim:
             slow.add(sx * dt_s, sy * dt_s, dt_s, s.hold_slow_window_s)
-            if slow.sums[0] * slow.sums[0] + slow.sums[1] * slow.sums[1] > limit * limit:
+            if not slow.turned_within(limit):
                 return fx, fy
             self._slow_aim = False
         if self._within_s >= s.hold_after_s:
             if not self._hand_held:
                 slow.clear()  # the slow aim's test counts from the hold's start, not the move before it
             slow.add(sx * dt_s, sy * dt_s, dt_s, s.hold_slow_window_s)
-            if slow.sums[0] * slow.sums[0] + slow.sums[1] * slow.sums[1] <= limit * limit:
+            if slow.turned_within(limit):
                 self._hand_held = True
                 short.held(fx, fy)
                 slow.held(fx, fy)
