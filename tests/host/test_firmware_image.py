@@ -81,3 +81,29 @@ def test_an_image_named_by_the_user_is_used_whatever_its_age(firmware, tmp_path,
     _age(named, 3600)
     monkeypatch.setattr(board, "FIRMWARE_ELF", named)  # $SPHERE_FIRMWARE / [paths] firmware: not the checkout's
     assert board.firmware_elf(build=False) == named
+
+
+@needs_make
+def test_two_builds_of_one_folder_at_once_take_turns(tmp_path):
+    """Two test workers that both find an image missing build it one after the other (CI of stop 35: a worker's
+    `make testfw` cleared the object folder under the other's link: `undefined reference to attachInterrupt`)."""
+    import threading
+
+    # a rule like hardware/sim's sketches: clear the objects, make them, link from them
+    (tmp_path / "Makefile").write_text(
+        "all:\n\trm -rf o && mkdir o && touch o/a.o && sleep 0.3 && touch o/b.o && cat o/a.o o/b.o > image\n")
+    errors = []
+
+    def build():
+        try:
+            board._make(tmp_path, "make", None)
+        except board.BoardUnavailable as e:
+            errors.append(str(e))
+
+    workers = [threading.Thread(target=build) for _ in range(3)]
+    for w in workers:
+        w.start()
+    for w in workers:
+        w.join()
+    assert errors == []
+    assert (tmp_path / "image").exists()

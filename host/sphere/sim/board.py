@@ -7,6 +7,7 @@
 
 from __future__ import annotations
 
+import fcntl
 import json
 import os
 import shutil
@@ -47,7 +48,15 @@ def _make(directory: Path, cmd_text: str, target: str | None = None, quiet: bool
     if shutil.which("make") is None:
         raise BoardUnavailable(f"`make` is not installed; install it and run `{cmd_text}`")
     cmd = ["make", "-C", str(directory)] + ([target] if target else [])
-    r = subprocess.run(cmd, capture_output=quiet, text=True)
+    # One make at a time per folder, across processes: two test workers (or a bench beside a test) that both
+    # found an image missing would otherwise build it together, and a rule that clears its object folder
+    # (hardware/sim's sketches) pulls objects from under the other's link. The second waits, then finds it built.
+    fd = os.open(directory, os.O_RDONLY)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX)
+        r = subprocess.run(cmd, capture_output=quiet, text=True)
+    finally:
+        os.close(fd)
     if r.returncode != 0:
         tail = (r.stderr or r.stdout or "")[-2000:] if quiet else ""
         raise BoardUnavailable(f"`{cmd_text}` failed:\n{tail}")
