@@ -7,6 +7,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import fcntl
 import json
 import os
@@ -44,22 +45,33 @@ def _stale(target: Path, sources) -> bool:
     return any(Path(s).exists() and Path(s).stat().st_mtime > t for s in sources)
 
 
-def _make(directory: Path, cmd_text: str, target: str | None = None, quiet: bool = True) -> None:
-    if shutil.which("make") is None:
-        raise BoardUnavailable(f"`make` is not installed; install it and run `{cmd_text}`")
-    cmd = ["make", "-C", str(directory)] + ([target] if target else [])
-    # One make at a time per folder, across processes: two test workers (or a bench beside a test) that both
-    # found an image missing would otherwise build it together, and a rule that clears its object folder
-    # (hardware/sim's sketches) pulls objects from under the other's link. The second waits, then finds it built.
+@contextlib.contextmanager
+def _folder_lock(directory: Path):
+    """One build at a time per folder, across processes: two test workers (or a bench beside a test, or two
+    first runs) that both found an image missing would otherwise build it together, and a rule that clears its
+    object folder (hardware/sim's sketches) pulls objects from under the other's link. The second waits, then
+    finds it built."""
     fd = os.open(directory, os.O_RDONLY)
     try:
         fcntl.flock(fd, fcntl.LOCK_EX)
-        r = subprocess.run(cmd, capture_output=quiet, text=True)
+        yield
     finally:
         os.close(fd)
+
+
+def _run_make(directory: Path, cmd_text: str, target: str | None = None, quiet: bool = True) -> None:
+    if shutil.which("make") is None:
+        raise BoardUnavailable(f"`make` is not installed; install it and run `{cmd_text}`")
+    cmd = ["make", "-C", str(directory)] + ([target] if target else [])
+    r = subprocess.run(cmd, capture_output=quiet, text=True)
     if r.returncode != 0:
         tail = (r.stderr or r.stdout or "")[-2000:] if quiet else ""
         raise BoardUnavailable(f"`{cmd_text}` failed:\n{tail}")
+
+
+def _make(directory: Path, cmd_text: str, target: str | None = None, quiet: bool = True) -> None:
+    with _folder_lock(directory):
+        _run_make(directory, cmd_text, target, quiet)
 
 
 def board_path(build: bool = True) -> Path:
@@ -75,11 +87,12 @@ def board_path(build: bool = True) -> Path:
         if first_use:  # installed: first use builds a copy in the user's cache
             print(f"sphere: building the virtual board in {SIM_DIR} (first use only) ...", file=sys.stderr, flush=True)
             SIM_DIR.mkdir(parents=True, exist_ok=True)
-            for name in BOARD_SOURCES:
+        t0 = time.monotonic()
+        with _folder_lock(SIM_DIR):  # the copy too: another first run must not rewrite a source make is reading
+            for name in BOARD_SOURCES if first_use else ():
                 (SIM_DIR / name).parent.mkdir(parents=True, exist_ok=True)
                 shutil.copy2(paths.sim_source_dir() / name, SIM_DIR / name)
-        t0 = time.monotonic()
-        _make(SIM_DIR, BUILD_BOARD_CMD)
+            _run_make(SIM_DIR, BUILD_BOARD_CMD)
         if first_use:
             print(f"sphere: the virtual board is built ({time.monotonic() - t0:.1f} s; kept for next time)",
                   file=sys.stderr, flush=True)
