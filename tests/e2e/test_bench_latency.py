@@ -4,6 +4,7 @@ daemon on Xvfb, the pointer read back; the stages add up and the adapter models 
 from __future__ import annotations
 
 import json
+import re
 import shutil
 import subprocess
 import sys
@@ -21,7 +22,8 @@ def test_bench_latency_rows_and_stages(tmp_path):
     r = subprocess.run([sys.executable, "-m", "sphere.cli", "bench", "latency", "--seconds", "9", "--adapters",
                         "none,ftdi-16ms", "--bauds", "115200", "--no-monitor", "--json", str(out)], capture_output=True, text=True, timeout=600)
     assert r.returncode == 0, r.stderr[-2000:]
-    assert "motion onset -> X pointer move" in r.stdout and "ftdi-16ms" in r.stdout
+    assert "motion onset -> X pointer move" in r.stdout and "ftdi-16ms" in r.stdout and "daemon loop" in r.stdout
+    assert "scheduling (--instruments-nice -10): the virtual board SCHED_OTHER nice " in r.stdout, r.stdout
     rows = {row["row"]: row for row in json.loads(out.read_text())["rows"]}
     assert set(rows) == {"none", "ftdi-16ms"}
     for row in rows.values():
@@ -32,6 +34,9 @@ def test_bench_latency_rows_and_stages(tmp_path):
         # the MARG update (0.59 ms: sent before it, the UART's transmit interrupt held back during it)
         assert 3.0 <= s["wire"]["p50"] <= 3.6
         assert s["age"]["p50"] > 0 and s["host"]["p50"] > 0
+        # how the kernel scheduled the daemon's loop, read from /proc while it ran (sphere.daemon.priority)
+        for who in ("daemon", "board", "sampler"):
+            assert re.fullmatch(r"SCHED_(FIFO \d+|OTHER nice -?\d+)", row[f"{who}_scheduling"]), row
     # without an adapter the pty gets each byte as it leaves the UART; the FT232R at 16 ms holds a frame for
     # up to its latency timer plus a 1 ms USB frame
     assert rows["none"]["stages_ms"]["adapter"]["max"] < 0.01

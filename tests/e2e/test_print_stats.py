@@ -38,7 +38,7 @@ def test_print_stats_reports_the_link_and_the_sample_age_when_the_daemon_stops(t
                 proc.wait(10)
     assert mouse.returncode == 0, err
     lines = [line for line in out.splitlines() if line.startswith("sphere-mouse stats: ")]
-    assert len(lines) == 3, out
+    assert len(lines) == 4, out
     frames = re.search(r"frames (\d+) \(([\d.]+)/s\) over ([\d.]+) s, bad (\d+) .*gaps (\d+) \((\d+) lost\)", lines[0])
     assert frames, lines[0]
     assert int(frames[1]) > 300, lines[0]  # (the open may cut the first frame: bad and gaps are test_baud_switch's)
@@ -52,6 +52,9 @@ def test_print_stats_reports_the_link_and_the_sample_age_when_the_daemon_stops(t
     assert lines[2].startswith("sphere-mouse stats: pointer moves "), lines[2]
     # the garbage collector ran between batches (sphere.daemon.collector), not on a frame's way to the pointer
     assert re.search(r"garbage collected \d+ times, between batches \(longest [\d.]+ ms\)", lines[2]), lines[2]
+    # how the port -> pointer loop was scheduled (sphere.daemon.priority; tests/e2e/test_loop_priority.py)
+    assert re.match(r"sphere-mouse stats: scheduling of the port -> pointer loop: SCHED_(FIFO \d+|OTHER nice -?\d+)$",
+                    lines[3]), lines[3]
 
 
 def test_print_stats_says_when_the_source_has_no_device_clock(tmp_path):

@@ -29,6 +29,16 @@ such RAW_SAMPLE (an FTDI packet holds several frames; the daemon moves at the fi
 A move with no such frame before it is counted as unattributed. ``total`` = age + wire + adapter + host. The board paces itself to
 the wall clock and writes no packet before its simulated time; ``lag`` (the write's wall time minus its
 simulated time) is how late it was, left out of ``total`` and printed so that a run on a loaded machine shows.
+The last column, ``daemon loop``, is how the kernel scheduled sphere-mouse's loop during the row, read from /proc
+(``SCHED_FIFO 5`` where it was allowed real time: :mod:`sphere.daemon.priority`): the host stage's tail depends on
+it, so no figure is printed without it.
+
+The virtual board stands in for the sphere and its USB adapter, which on a desk have chips of their own, and the
+pointer sampler is the measuring instrument; on a machine whose cores are busy both wait for a core, and what
+they lose shows as ``lag`` (the board behind the wall clock) and as moves seen late (the sampler's gaps). So both
+run at nice ``--instruments-nice`` (−10; 0 = as the bench itself) where the bench may lower it, and the line
+above the table says how the board, the sampler and Xvfb were scheduled. Xvfb stands in for the desktop's display
+server and runs as the bench does; the daemon as it asks for itself.
 
 ``--against REV`` runs every row twice, side by side in the same run: with this tree's sphere-mouse and with the
 sphere-mouse of git revision REV (its ``host/`` from ``git archive``, on ``PYTHONPATH``; the same firmware, board,
@@ -39,6 +49,7 @@ from __future__ import annotations
 
 import argparse
 import array
+import contextlib
 import gc
 import json
 import os
@@ -56,6 +67,7 @@ import numpy as np
 from sphere import argtypes
 from sphere.bench._xvfb import PointerReader, Xvfb, XvfbUnavailable
 from sphere.bench._revision import RevisionError, tree_of
+from sphere.daemon.priority import thread_scheduling
 from sphere.errors import SphereError
 from sphere.protocol import FrameDecoder, RawSample
 from sphere.protocol.packets import FAST_BAUDS
@@ -75,6 +87,8 @@ class RowFailed(SphereError, RuntimeError):
     loaded machine): the run goes on with the other rows and says which one failed."""
 
 
+#: the nice value of the virtual board and the pointer sampler unless --instruments-nice says otherwise
+INSTRUMENTS_NICE = -10
 #: a row whose pointer sampler went this long without a read is named under the table
 SAMPLER_GAP_NOTE_MS = 5.0
 #: a move this long after its onset is not this onset's (the next comes PERIOD_S later)
@@ -93,8 +107,21 @@ def add_arguments(p) -> None:
     p.add_argument("--no-monitor", action="store_true",
                    help="leave out the check of `sphere monitor`'s sample age against the board's truth")
     p.add_argument("--json", metavar="OUT", type=argtypes.out_file, help="also write every figure as JSON")
+    p.add_argument("--instruments-nice", type=_nice_value, default=INSTRUMENTS_NICE, metavar="N",
+                   help="nice value of the virtual board (the sphere's stand-in) and the pointer sampler (the "
+                        f"instrument), -20..0 (default {INSTRUMENTS_NICE}; 0 = as the bench runs)")
     p.add_argument("--against", metavar="REV", help="also run every row with the sphere-mouse of this git revision "
                                                    "(say main before a change), side by side, in alternating order")
+
+
+def _nice_value(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number: a nice value from -20 to 0") from None
+    if not -20 <= value <= 0:
+        raise argparse.ArgumentTypeError(f"{value}: a nice value from -20 to 0 (lower runs first)")
+    return value
 
 
 def _adapter_list(text: str) -> list[str]:
@@ -242,10 +269,12 @@ class PointerRecorder(threading.Thread):
     row runs (a full one takes ≈20 ms here, idle). What is left, a machine whose cores are all busy, shows: the
     longest gap between reads is in the JSON and named under the table when over :data:`SAMPLER_GAP_NOTE_MS`."""
 
-    def __init__(self, display: str):
+    def __init__(self, display: str, nice: int = 0):
         super().__init__(daemon=True)
 
         self.reader = PointerReader(display)
+        self.nice = nice
+        self.scheduling = "unknown"  # how the sampler ran (sphere.daemon.priority.thread_scheduling)
         self.stop = threading.Event()
         self._changes = array.array("q")  # (monotonic ns, x, y) per change, flat
         self.reads = 0
@@ -257,6 +286,11 @@ class PointerRecorder(threading.Thread):
         return np.asarray(self._changes, dtype=np.int64).reshape(-1, 3)
 
     def run(self):
+        tid = threading.get_native_id()
+        if self.nice:
+            with contextlib.suppress(OSError):  # not allowed: it runs as the bench does, and says so
+                os.setpriority(os.PRIO_PROCESS, tid, self.nice)
+        self.scheduling = thread_scheduling(os.getpid(), tid)
         pos = self.reader.position()
         last = time.monotonic_ns()
         keep = self._changes.extend
@@ -276,20 +310,39 @@ class PointerRecorder(threading.Thread):
         self.reader.close()
 
 
+@contextlib.contextmanager
+def niced(value: int):
+    """The calling thread at nice ``value`` while the block runs, so that a process it starts begins there; as it
+    was if that is not allowed (the process started then says how it runs: thread_scheduling)."""
+    tid = threading.get_native_id()
+    before = os.getpriority(os.PRIO_PROCESS, tid)
+    try:
+        if value:
+            os.setpriority(os.PRIO_PROCESS, tid, value)
+    except OSError:
+        pass
+    try:
+        yield
+    finally:
+        os.setpriority(os.PRIO_PROCESS, tid, before)  # up again: always allowed
+
+
 #: the row's tree when --against is not given (or for this tree's rows beside it)
 THIS = "this"
 
 
 def run_row(name: str, baud: int, trace: Path, onsets_s, seconds: float, display: str, tmp: Path, elf,
-            tree: str = THIS, host_dir: str | None = None) -> dict:
+            tree: str = THIS, host_dir: str | None = None, instruments_nice: int = 0) -> dict:
     """One row; ``host_dir``: the ``host/`` folder whose sphere-mouse runs (another revision's, --against), else
-    this tree's."""
+    this tree's; ``instruments_nice``: the board's and the sampler's nice value (module docstring)."""
     adapter, low_latency = ADAPTERS[name]
     log_path, cap_path = tmp / f"{name}-{baud}-{tree}.log", tmp / f"{name}-{baud}-{tree}.cap"
-    board, pty = start_pty_board(board_command(elf, trace, seconds, capture=cap_path, pty=True, adapter=adapter,
-                                               host_log=log_path))
+    with niced(instruments_nice):
+        board, pty = start_pty_board(board_command(elf, trace, seconds, capture=cap_path, pty=True, adapter=adapter,
+                                                   host_log=log_path))
+    board_scheduling = thread_scheduling(board.pid)
     mouse = None
-    recorder = PointerRecorder(display)
+    recorder = PointerRecorder(display, instruments_nice)
     collecting = gc.isenabled()
     gc.disable()  # no collection in this process stalls the pointer sampler during the row (PointerRecorder)
     recorder.start()
@@ -313,6 +366,8 @@ def run_row(name: str, baud: int, trace: Path, onsets_s, seconds: float, display
         watcher = threading.Thread(target=watch, daemon=True)
         watcher.start()
         board.wait(seconds * 4 + 60)
+        # how the daemon's loop (its main thread) was scheduled, as the kernel applies it: no figure without it
+        scheduling = thread_scheduling(mouse.pid) if mouse.poll() is None else "unknown (the daemon had ended)"
     finally:
         recorder.stop.set()
         recorder.join(5)
@@ -334,7 +389,9 @@ def run_row(name: str, baud: int, trace: Path, onsets_s, seconds: float, display
     got = attribute(onsets_s, connected["ns"] + 500_000_000, frames, samples, log.t0_ns)
     gaps = np.asarray(recorder.gaps_ns, dtype=float) / 1e6
     fell_back = any("back to 115200" in line for line in connected.get("lines", []))
-    return {"row": name, "baud": baud, "tree": tree, "fell_back_to_115200": fell_back, "onsets": len(onsets_s),
+    return {"row": name, "baud": baud, "tree": tree, "daemon_scheduling": scheduling,
+            "board_scheduling": board_scheduling, "sampler_scheduling": recorder.scheduling,
+            "fell_back_to_115200": fell_back, "onsets": len(onsets_s),
             "moves": len(got["ms"]["total"]),
             "missed": got["missed"], "unattributed": got["unattributed"], "skipped_before_connect": got["skipped"],
             "stages_ms": {k: percentiles(v) for k, v in got["ms"].items()},
@@ -361,12 +418,13 @@ def true_ages(frames: list[Frame], log: HostLog, from_ns: int, to_ns: int) -> li
     return out
 
 
-def monitor_check(trace: Path, seconds: float, tmp: Path, elf) -> dict:
+def monitor_check(trace: Path, seconds: float, tmp: Path, elf, instruments_nice: int = 0) -> dict:
     """`sphere monitor` on the FTDI board (low latency, 115200): its last view's sample age against the truth of the
     board's log over the same last 2 s."""
     log_path, cap_path = tmp / "monitor.log", tmp / "monitor.cap"
-    board, pty = start_pty_board(board_command(elf, trace, seconds, capture=cap_path, pty=True, adapter="ftdi",
-                                               host_log=log_path))
+    with niced(instruments_nice):
+        board, pty = start_pty_board(board_command(elf, trace, seconds, capture=cap_path, pty=True, adapter="ftdi",
+                                                   host_log=log_path))
     try:
         r = subprocess.run([sys.executable, "-m", "sphere.cli", "monitor", "--port", pty, "--seconds",
                             f"{max(4.0, seconds - 3.0):g}"], capture_output=True, text=True, timeout=seconds * 4 + 60)
@@ -414,6 +472,7 @@ def run(args) -> int:
             revision.cleanup()
         print(f"sphere bench latency: {e}", file=sys.stderr)
         return 1
+    xvfb_scheduling = thread_scheduling(xvfb.proc.pid)
     rows, failed = [], []
     monitor = None
     load_before = os.getloadavg()[0]
@@ -430,14 +489,14 @@ def run(args) -> int:
                         print(f"  {name} at {baud} baud{side}: {args.seconds:g} s ...", file=sys.stderr, flush=True)
                         try:
                             rows.append(run_row(name, baud, trace, onsets_s, args.seconds, xvfb.display, tmp, elf,
-                                                tree, host_dir))
+                                                tree, host_dir, args.instruments_nice))
                         except RowFailed as e:
                             failed.append({"row": name, "baud": baud, "tree": tree, "error": str(e)})
                     k += 1
             if not args.no_monitor:
                 print(f"  sphere monitor's sample age against the board's truth: {args.seconds:g} s ...",
                       file=sys.stderr, flush=True)
-                monitor = monitor_check(trace, args.seconds, tmp, elf)
+                monitor = monitor_check(trace, args.seconds, tmp, elf, args.instruments_nice)
     except RuntimeError as e:  # BoardUnavailable, a daemon that did not start
         print(f"sphere bench latency: {e}", file=sys.stderr)
         return 1
@@ -446,6 +505,7 @@ def run(args) -> int:
         if revision is not None:
             revision.cleanup()
     result = {"seconds_per_row": args.seconds, "seed": args.seed, "load_average": [load_before, os.getloadavg()[0]],
+              "instruments_nice": args.instruments_nice, "xvfb_scheduling": xvfb_scheduling,
               "against": args.against, "rows": rows, "failed_rows": failed, "sample_age": monitor}
     report(result)
     if args.json:
@@ -464,11 +524,16 @@ def report(result: dict) -> None:
     base = {(r["baud"], _tree(r)): r for r in rows if r["row"] == BASELINE}
     print(f"motion onset -> X pointer move, ms ({result['seconds_per_row']:g} s a row, seed {result['seed']}; "
           f"load average {result['load_average'][0]:.1f} -> {result['load_average'][1]:.1f})")
+    seen = sorted({f"the virtual board {r['board_scheduling']}, the pointer sampler {r['sampler_scheduling']}"
+                   for r in rows if "board_scheduling" in r})
+    if seen:
+        print(f"scheduling (--instruments-nice {result.get('instruments_nice', 0)}): " + "; ".join(seen)
+              + f"; Xvfb {result.get('xvfb_scheduling', 'unknown')}; the daemon's loop: the last column")
     tw = max([len(THIS)] + [len(_tree(r)) for r in rows]) if against else 0
     tree_head = f"{'daemon':<{tw}} " if against else ""
     head = (f"{'adapter':<10} {'baud':>7} {tree_head}{'moves':>7} {'total p50':>9} {'p95':>6} {'p99':>6} {'max':>6} "
             f"{'vs 16ms':>7} | {'age p50':>7} {'p95':>5} | {'wire':>5} | {'adapter p50':>11} {'p95':>5} | "
-            f"{'host p50':>8} {'p95':>5} {'p99':>5} | {'lag p95':>7} {'reads/s':>7}")
+            f"{'host p50':>8} {'p95':>5} {'p99':>5} | {'lag p95':>7} {'reads/s':>7} | daemon loop")
     print(head)
     for r in rows:
         s = r["stages_ms"]
@@ -485,7 +550,7 @@ def report(result: dict) -> None:
               f"{f('total', 'p50', 9)} {f('total', 'p95')} {f('total', 'p99')} {f('total', 'max')} {ratio} | "
               f"{f('age', 'p50', 7)} {f('age', 'p95', 5)} | {f('wire', 'p50', 5)} | {f('adapter', 'p50', 11)} "
               f"{f('adapter', 'p95', 5)} | {f('host', 'p50', 8)} {f('host', 'p95', 5)} {f('host', 'p99', 5)} | "
-              f"{f('lag', 'p95', 7)} {r['pointer_reads_per_s']:7.0f}")
+              f"{f('lag', 'p95', 7)} {r['pointer_reads_per_s']:7.0f} | {r.get('daemon_scheduling', '-')}")
     if against:
         side_by_side(rows, against)
     def who(r):

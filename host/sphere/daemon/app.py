@@ -13,6 +13,7 @@ from sphere.daemon.config import smoothing_params
 from sphere.daemon.gyro_bias import GyroBias, RestHold
 from sphere.daemon.motion import G_M_S2, MotionTracker
 from sphere.daemon.pointer import PointerMapper, TiltMapper
+from sphere.daemon.priority import LoopPriority
 from sphere.protocol.packets import RAW_ACCEL_OK, RAW_GYRO_OK, RAW_GYRO_STALE, RAW_MAG_OK, RAW_TAP_ACTIVE
 from sphere.protocol import Event, Hello, Orientation, RawSample, Status
 from sphere.smoothing.pose import PoseFilter
@@ -110,6 +111,9 @@ class SphereMouse:
         self._publish_motion = getattr(stream, "publish_motion", None)
         #: the garbage collector, run between batches (after the move) while the loop runs
         self.collector = BetweenBatches()
+        #: the loop's scheduling priority, raised while it reads a live source (sphere.daemon.priority)
+        self.priority = LoopPriority(**cfg["priority"].as_dict())
+        self.priority.on_demoted = lambda: self.request("demoted")
 
     # -- actions --
     def set_mode(self, mode: str) -> None:
@@ -313,11 +317,19 @@ class SphereMouse:
                 self.recentre()
             elif what == "pause":
                 self.toggle_pause()
+            elif what == "demoted":
+                self.warn(self.priority.runaway_message())
 
     # -- loop --
     def run(self) -> int:
         source = self.source
         collector = self.collector
+        priority = self.priority
+        if getattr(source, "DEVICE_PACED", False):  # a replay as fast as possible computes without a pause: never in real time
+            priority.raise_()
+            logger.debug(priority.refused or f"scheduling priority: {priority.granted} for the port -> pointer loop")
+        else:
+            priority.granted = "not asked (the source is not paced by a device)"
         collector.start()
         try:
             for batch in source:
@@ -336,6 +348,7 @@ class SphereMouse:
                 collector.step()
         finally:
             collector.stop()
+            priority.restore()
             if self.status is not None:
                 self.status.tick(self, force=True)
                 if self.status.overwrite:

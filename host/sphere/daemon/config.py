@@ -59,6 +59,7 @@ PARTS = Registry("part", {
     "paths": "sphere.daemon.paths_config:PathsSettings",  # [paths] (read by sphere.paths)
     "gyro_bias": "sphere.daemon.gyro_bias:GyroBias",  # the host's one gyro-bias estimate (its [gyro] keys stay there)
     "rest_hold": "sphere.daemon.gyro_bias:RestHold",  # the pointer held while the sphere lies still
+    "priority": "sphere.daemon.priority:LoopPriority",  # the port -> pointer loop's scheduling priority
 }, section="{name}")
 
 #: Every registry whose components have a section of their own: "module:attribute" of a
@@ -75,7 +76,7 @@ REGISTRIES: tuple[str, ...] = (
 
 #: The sections in the order the reference lists them (by their first part; others follow).
 ORDER = ("source", "output", "backend", "mode", "pointer", "tilt", "events", "freeze", "gyro", "gyro_bias",
-         "rest_hold", "orientation", "stream", "device", "status", "outputs", "smoothing", "position_smoothing",
+         "rest_hold", "orientation", "stream", "device", "status", "priority", "outputs", "smoothing", "position_smoothing",
          "paths", "camera")
 
 #: Keys of earlier releases that live elsewhere now: (section, key) -> what to write instead.

@@ -101,4 +101,8 @@ def run_stats(daemon, seconds: float) -> str:
         line += (f"; garbage collected {sum(collector.collections)} times, between batches (longest "
                  f"{collector.longest_s * 1e3:.1f} ms)")
     lines.append(line)
+    priority = getattr(daemon, "priority", None)
+    if priority is not None:
+        lines.append(f"scheduling of the port -> pointer loop: {priority.granted}"
+                     + (" until the runaway guard put it back (a bug: please report it)" if priority.demoted else ""))
     return "\n".join("sphere-mouse stats: " + line for line in lines)

@@ -69,6 +69,9 @@ class Source:
     NAME = ""
     #: the settings of ``[source.NAME]`` (sphere.settings.Param)
     PARAMS: dict = {}
+    #: its batches come at a device's pace (the loop waits for them): the daemon's loop then asks for a higher
+    #: scheduling priority (sphere.daemon.priority); never for a replay, which may run as fast as it can
+    DEVICE_PACED = False
 
     def __init__(self, reconnect_interval_s: float = RECONNECT_INTERVAL_S, link_timeout_s: float = 0.0, log=None):
         self.stream = PacketStream("device")

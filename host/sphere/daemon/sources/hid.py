@@ -21,6 +21,7 @@ class HidSource(Source):
     """The receiver found by USB IDs (or its product string), reopened when it is unplugged."""
 
     NAME = "hid"
+    DEVICE_PACED = True
     PARAMS = {
         "vendor_id": Param(0, doc="USB vendor ID of the receiver (0 = any device whose product string contains "
                                   "`product`)", lo=0, hi=0xFFFF),

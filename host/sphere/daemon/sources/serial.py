@@ -145,6 +145,7 @@ class SerialSource(Source):
     for the sphere again every ``reconnect_interval_s`` without ending."""
 
     NAME = "serial"
+    DEVICE_PACED = True
     PARAMS = {
         "port": Param("auto", doc="serial port (`/dev/ttyUSB0`, `/dev/rfcomm0`, `/dev/sphere`; `--port`); `auto` = "
                                   "discovery: the ports in `candidates` and those whose USB IDs are in `usb_ids`, not "
