@@ -303,3 +303,47 @@ def test_the_equalizer_takes_samples_stamped_microseconds_apart():
     out = [eq((0.0, 0.0, 50.0), dt)[2] for dt in [DT] * 20 + [1e-6, 0.0, 2e-5] * 5 + [DT] * 20]
     assert all(math.isfinite(v) for v in out)
     assert out[-1] == pytest.approx(50.0)
+
+
+def _step_through_chip(rate_dps, phase_ms, before_s=2.0, after_s=0.2, corner_hz=98.0):
+    """Still for ``before_s``, then a sharp turn about z starting ``phase_ms`` into a 5-ms sample period, as the
+    host reads it through the ITG-3200's low-pass (200 Hz samples of the chip's 1 kHz filter)."""
+    n0, n1 = int(round(before_s * 1000)) + phase_ms, int(round(after_s * 1000))
+    z = _chip_lowpass([0.0] * n0 + [rate_dps] * n1, corner_hz)
+    return [(0.0, 0.0, v) for v in z]
+
+
+def _first_move(mapper, rates):
+    for i, r in enumerate(rates):
+        if mapper.update(r, DT) != (0, 0):
+            return i
+    return None
+
+
+@pytest.mark.parametrize("phase_ms", range(5))
+@pytest.mark.parametrize("rate", [60.0, 120.0, -120.0])
+def test_a_sharp_move_from_the_hand_hold_moves_on_its_first_sample(rate, phase_ms):
+    """Held (the hand hold engaged), a sharp turn starting at any phase of the sample clock: the pointer moves on
+    the same sample as without the hold. Before `hold_pass_dps`, the chip's first step (8–33 °/s) stayed within
+    the hold's 0.1-s mean and the pointer moved a sample (5 ms) later in 21 of 67 onsets of `sphere bench
+    latency`."""
+    rates = _step_through_chip(rate, phase_ms)
+    held = PointerMapper(PointerSettings(), 1920)
+    first = _first_move(held, rates)
+    assert held._hand_held or first is not None
+    assert first == _first_move(PointerMapper(PointerSettings(hold_band_dps=0.0), 1920), rates)
+    assert first is not None and first * DT < 2.0 + 0.015
+
+
+@pytest.mark.parametrize("tremor_deg", [0.1, 0.2, 0.3])
+def test_the_hands_tremor_does_not_pass_the_hand_hold(tremor_deg):
+    """Held in the hand with tremor of 0.1–0.3° RMS at 9–11 Hz (tens of °/s at its peaks) and the ITG-3200's
+    noise: once held, the pointer does not move for 8 s — a single fast sample passes the hold only above
+    `hold_pass_spread` times the held rate's own RMS (a fixed 4 °/s lets 0.3° of this tremor through)."""
+    rates = _noisy([(0.0, 0.0, 0.0)] * int(10.0 / DT), seed=5, noise_dps=0.38, tremor_deg=tremor_deg)
+    path = _path(PointerMapper(PointerSettings(), 1920), rates)
+    assert path[-1] == path[int(2.0 / DT)]
+    assert max(abs(r[2]) for r in rates) > 10.0  # the tremor's peaks are far above hold_pass_dps
+    fixed = _path(PointerMapper(PointerSettings(hold_pass_spread=0.0), 1920), rates)
+    moved = sum(a != b for a, b in zip(fixed[int(2.0 / DT):], fixed[int(2.0 / DT) + 1:]))
+    assert moved > 50 if tremor_deg >= 0.3 else moved == 0

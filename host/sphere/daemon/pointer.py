@@ -21,7 +21,8 @@
 5. **Hand hold.** Held in the hand between moves, the pointer stays where it is once the smoothed rate has
    settled (``hold_*``): the ITG-3200's noise and the hand's slow sway would creep it by several px/s after
    every stop, which tightening alone does not stop. A move, or a slow steady aim, ends the hold and brings
-   what was held back of it at once.
+   what was held back of it at once; a single sample far above what the held hand's tremor reaches
+   (``hold_pass_*``) moves the pointer at once, so a sharp move is not a sample late.
 6. **Sub-pixel remainders** carry over to the next sample, so slow motion is not lost to rounding.
 
 :class:`TiltMapper` makes the tilt from a recentred pose drive pointer *velocity*.
@@ -61,6 +62,14 @@ POINTER_PARAMS = {
                                     "`hold_slow_window_s` exceeds this rate (°/s) times that window, it comes at once "
                                     "and the pointer follows", lo=0.0, hi=10.0),
     "hold_slow_window_s": Param(1.0, doc="the window of `hold_slow_dps`", lo=0.005, hi=5.0),
+    "hold_pass_dps": Param(4.0, doc="while held, a single sample whose smoothed rate exceeds this (°/s) and "
+                                    "`hold_pass_spread` times the held rate's RMS moves the pointer at once, so a sharp "
+                                    "move's first sample is not kept back until the short mean leaves the band; what "
+                                    "the hold kept back comes when the hold ends (0 = off)", lo=0.0, hi=100.0),
+    "hold_pass_spread": Param(6.0, doc="`hold_pass_dps` in the held hand's own units: the smoothed rate's RMS over "
+                                       "the held samples (time constant `hold_slow_window_s`: the tremor and noise this "
+                                       "hand shows) times this must be exceeded too; 0 = `hold_pass_dps` alone",
+        lo=0.0, hi=100.0),
     "gyro_lowpass_hz": Param(98.0, doc="the gyro chip's own low-pass as the firmware sets it (ITG-3200 DLPF_CFG 2: "
                                        "98 Hz at its 1 kHz internal rate, firmware 0.3.2; 42 before): its ringing "
                                        "after a hard stop is turned into a critically damped response before the "
@@ -270,6 +279,7 @@ class PointerMapper:
         self._hand_held = False
         self._within_s = 0.0
         self._slow_aim = False  # a slow steady aim ended the hold: followed until its slow mean settles
+        self._held_ms = 0.0  # the mean square of the smoothed rate over held samples ((°/s)², hold_pass_spread)
 
     def rate_px_s(self, gyro_dps, up_body=None, dt_s: float = 0.005):
         """The pointer velocity (px/s, screen x right, y down) for one gyro sample, updating smoothing state."""
@@ -364,6 +374,8 @@ class PointerMapper:
             slow.add(sx * dt_s, sy * dt_s, dt_s, s.hold_slow_window_s)
             if slow.turned_within(limit):
                 self._hand_held = True
+                if self._passes(sx * sx + sy * sy, dt_s):
+                    return fx, fy  # a move's first sample: it moves now, what was held back waits for the release
                 short.held(fx, fy)
                 slow.held(fx, fy)
                 return 0.0, 0.0
@@ -375,6 +387,21 @@ class PointerMapper:
             short.release()
             slow.release()
         return fx, fy
+
+    def _passes(self, square: float, dt_s: float) -> bool:
+        """Whether a held sample whose smoothed rate squared is ``square`` moves the pointer at once: above
+        ``hold_pass_dps`` and ``hold_pass_spread`` times the RMS of the held samples before it (a sample that
+        passes does not count in that RMS)."""
+        s = self.settings
+        if s.hold_pass_dps <= 0:
+            return False
+        limit = s.hold_pass_dps * s.hold_pass_dps
+        if s.hold_pass_spread > 0:
+            limit = max(limit, s.hold_pass_spread * s.hold_pass_spread * self._held_ms)
+        if square > limit:
+            return True
+        self._held_ms += min(1.0, dt_s / s.hold_slow_window_s) * (square - self._held_ms)
+        return False
 
     def emit(self, fx: float, fy: float) -> tuple[int, int]:
         """Add a fractional displacement to the remainders and take out whole pixels."""
