@@ -330,6 +330,7 @@ ROWS = [
     S(["bench", "pointer", "--seeds", "0"], 2, "seeds"),
     S(["bench", "pointer", "--seconds", "-1"], 2, "seconds"),
     S(["bench", "pointer", "--filters", "wobble", "--no-tune"], 2, "wobble"),
+    S(["bench", "pointer", "--against", "no-such-revision"], 2, "not a commit"),
     S(["bench", "pointer", "--set", "pointer.hold_band=0"], 2, "hold_band"),
     S(["bench", "pointer", "--set", "pointer.hold_band_dps=-1"], 2, "hold_band_dps"),
     S(["bench", "pointer", "--set", "hold_band_dps"], 2, "SECTION.KEY=VALUE"),

@@ -49,6 +49,31 @@ def test_overshoot_drift_and_travel_are_seen():
     assert bench.turn_figures(path, rec)[0]["travel_err"] == pytest.approx(0.04, abs=0.002)
 
 
+def test_travel_against_the_aim_leaves_the_hands_sway_out():
+    """The hand sways 6 px back to the right in the window after the stop (not meant): the pointer that ends where
+    the aim ends reads +1.3 % against where the hand points (480 px of 474) and 0 against the aim."""
+    rec, path = _turn_recording()
+    t = np.arange(len(path)) / R
+    rec.ideal_px = rec.ideal_px.copy()
+    rec.ideal_px[t >= 2.3, 0] += 6.0
+    (f,) = bench.turn_figures(path, rec)
+    assert f["aim_err"] == pytest.approx(0.0, abs=1e-9)
+    assert f["travel_err"] == pytest.approx(480.0 / 474.0 - 1.0, abs=1e-9)
+
+
+def test_another_revisions_daemon_is_measured_on_the_same_path():
+    """--against's side (the daemon of a given host/ tree fed the recording's wire frames) run with this tree
+    gives exactly the pointer the bench's own path gives for the daemon's default."""
+    import os
+
+    rec = bench.hold_recordings([2], seconds=12.0, frames=True)[0]
+    host = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(bench.__file__))))
+    ((whole, exact),) = bench.revision_paths(host, [rec])
+    own, own_exact = bench.pointer_paths(rec, bench.DEFAULT)
+    assert np.array_equal(whole, own) and np.allclose(exact, own_exact, atol=1e-9)
+    assert np.ptp(whole, axis=0).max() >= 10  # it moved
+
+
 def test_window_jitter_is_the_shake_about_a_line():
     rng = np.random.default_rng(0)
     line = np.stack([np.arange(1000) * 0.3, np.zeros(1000)], axis=1)
@@ -105,8 +130,8 @@ def test_the_hand_hold_loses_nothing_of_a_turn_through_the_daemons_path():
                         for p in fine)
 
 
-@pytest.mark.slow
-def test_bench_pointer_command(tmp_path):
+def _bench_pointer(tmp_path, *args):
+    """`sphere bench pointer` on 20 s of BROAD and one seed, untuned, with ``args``: its output and its JSON."""
     from sphere.broad import BroadMissing
 
     try:
@@ -114,13 +139,15 @@ def test_bench_pointer_command(tmp_path):
     except BroadMissing as e:
         pytest.skip(str(e))
     out = tmp_path / "pointer.json"
-    r = subprocess.run(
-        [sys.executable, "-m", "sphere.cli", "bench", "pointer", "--seconds", "20", "--seeds", "1", "--no-tune",
-         "--filters", "none,tremor,tiered", "--json", str(out)],
-        capture_output=True, text=True, timeout=600,
-    )
+    r = subprocess.run([sys.executable, "-m", "sphere.cli", "bench", "pointer", "--seconds", "20", "--seeds", "1",
+                        "--no-tune", *args, "--json", str(out)], capture_output=True, text=True, timeout=600)
     assert r.returncode == 0, r.stderr
-    data = json.loads(out.read_text())
+    return r, json.loads(out.read_text())
+
+
+@pytest.mark.slow
+def test_bench_pointer_command(tmp_path):
+    r, data = _bench_pointer(tmp_path, "--filters", "none,tremor,tiered")
     assert set(data["filters"]) == {"none", "tremor", "tiered"}
     none = data["filters"]["none"]["defaults"]["figures"]
     tremor = data["filters"]["tremor"]["defaults"]["figures"]
@@ -132,6 +159,18 @@ def test_bench_pointer_command(tmp_path):
     truth = data["true_rates"]["figures"]
     assert set(truth) == set(tremor) and truth["rest_jitter_px"] < 0.05
     assert " tremor (true rates)" in r.stdout
+
+
+@pytest.mark.slow
+def test_bench_pointer_against_a_revision(tmp_path):
+    """`--against REV`: the daemon of REV (here this very commit) on the same TEST motions, a row beside the default
+    and the ratios; the two match when the code does."""
+    r, data = _bench_pointer(tmp_path, "--filters", "tremor", "--against", "HEAD")
+    mine, theirs = data["filters"]["tremor"]["defaults"]["figures"], data["against"]["figures"]
+    if subprocess.run(["git", "diff", "--quiet", "HEAD", "--", "host/sphere/daemon"], cwd=bench.__file__.rsplit("/host/", 1)[0]).returncode == 0:
+        for k in ("fine_travel_err_max", "fine_aim_err_max", "lag_fine_ms", "held_jitter_px"):
+            assert theirs[k] == pytest.approx(mine[k], abs=1e-9), k
+    assert " HEAD (its defaults)" in r.stdout and "this tree / HEAD: " in r.stdout and "3°/s aim" in r.stdout
 
 
 def test_bench_pointer_bad_filter_name_is_one_line():

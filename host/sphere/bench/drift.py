@@ -49,6 +49,7 @@ from pathlib import Path
 import numpy as np
 
 from sphere import argtypes
+from sphere.bench._pointer_side import pointer as pointer_path
 from sphere.bench._xvfb import PointerSampler
 from sphere.bench._xvfb import Xvfb as _Server
 from sphere.bench._xvfb import XvfbUnavailable
@@ -57,7 +58,7 @@ from sphere.daemon.config import Config, ConfigError, parse_set, smoothing_param
 from sphere.daemon.gyro_bias import GyroBias
 from sphere.daemon.pointer import PointerMapper
 from sphere.daemon.scripted_sphere import hello_packet
-from sphere.protocol import PacketStream, RawSample, encode_frame
+from sphere.protocol import encode_frame
 from sphere.sim import hold as H
 from sphere.sim import trace as T
 from sphere.sim.board import firmware_elf, run_board
@@ -158,15 +159,7 @@ def model_capture(sc: Scenario) -> bytes:
 def daemon_path(capture: bytes, cfg=None) -> np.ndarray:
     """(t_s device time, x, y, x exact, y exact) after every RAW_SAMPLE: SphereMouse.handle on the memory backend
     (exact = with the mapper's sub-pixel remainder)."""
-    d = daemon(cfg)
-    out = []
-    for dp in PacketStream().feed(capture):
-        d.handle(dp)
-        if dp.packet.TYPE == RawSample.TYPE:
-            r = d.mapper.remainder
-            b = d.backend
-            out.append((dp.t_us * 1e-6, b.x, b.y, b.x + r[0], b.y + r[1]))
-    return np.array(out, dtype=float)
+    return pointer_path(capture, daemon(cfg))
 
 
 class Xvfb:

@@ -26,7 +26,10 @@ Figures (px at 40° per 1920-px width; the reference path is the true orientatio
   turn at 10–200 °/s; ``drift_px_s``: after every clean turn (all bands), how far the pointer moves in the
   second from 0.45 s to 1.45 s after the stop (``held_drift_px_s``: the same held, relative to the true
   path); ``fine_travel_err_max``: the worst travel error of the held 3 °/s turns; ``travel_err``: the pointer's travel over the true
-  travel − 1, from means over 0.25 s before the start and 0.4 s from 0.5 s after the stop.
+  travel − 1, from means over 0.25 s before the start and 0.4 s from 0.5 s after the stop (the true travel: where the
+  hand points, its sway in those windows included); ``fine_aim_err_max`` ("3°/s aim"): the same travel over the turn
+  the hand meant (the generator's aim, without tremor and wander: what a pointer that keeps still between moves
+  should travel) − 1, worst of the held 3 °/s turns.
 
 Tuning (cross-validated; the same rule for every filter): settings are chosen on the TRAIN seeds and
 the first BROAD trial, and every figure printed is measured on the TEST seeds and the other trials.
@@ -39,13 +42,20 @@ The row ``(true rates)`` is the daemon's default mapper fed the synthetic motion
 bias, the true vertical): what the mapper's own rules give with a perfect gyro and bias estimate, told apart
 from what the sensor and the host add. ``--set SECTION.KEY=VALUE`` runs the recordings' daemon and every mapper
 with a setting other than its default (``pointer.hold_band_dps=0``: the pointer without the hand hold).
+``--against REV`` adds the row of another revision's daemon with its own defaults (its ``host/`` from git archive, in a
+fresh interpreter: :mod:`sphere.bench._pointer_side`), fed the same TEST motions as wire frames through its own packet
+path and measured by this tree's figures, and the ratios of the figures issue 28 compares (held jitter, fine − fast
+lag, 3 °/s travel by both definitions).
 """
 
 from __future__ import annotations
 
 import json
 import math
+import os
+import subprocess
 import sys
+import tempfile
 import time
 from dataclasses import dataclass, field, replace
 from types import SimpleNamespace
@@ -54,6 +64,7 @@ import numpy as np
 
 from sphere import argtypes
 from sphere import quaternion as quat
+from sphere.bench._revision import RevisionError, tree_of
 from sphere.broad import BroadMissing, load_trial, trial_paths
 from sphere.daemon.app import SphereMouse
 from sphere.daemon.backends.memory import RecordingBackend
@@ -61,6 +72,7 @@ from sphere.daemon.config import Config, ConfigError, parse_set, smoothing_param
 from sphere.daemon.motion import up_from_quat
 from sphere.daemon.pointer import PointerMapper, PointerSettings
 from sphere.progress import bar
+from sphere.protocol import encode_frame
 from sphere.sim import trace as T
 from sphere.sim.hold import hold_script, with_params
 from sphere.sim.trace import raw_packets
@@ -91,6 +103,9 @@ def add_arguments(p) -> None:
     p.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
                    help="a daemon setting other than its default (as sphere-mouse's --set): the recordings' daemon "
                         "and every filter's pointer mapper use it (e.g. pointer.hold_band_dps=0: no hand hold)")
+    p.add_argument("--against", metavar="REV", help="also the daemon of git revision REV (its host/ from git archive, "
+                   "its default settings) fed the same TEST motions, measured by this tree's figures: a row beside "
+                   "the default's and their ratios")
     p.add_argument("--pose", action="store_true", help="the 3-D stream's pose filter instead of the pointer: "
                    "orientation jitter still and held, lag per band")
 
@@ -112,6 +127,7 @@ class Recording:
     rest: np.ndarray | None = None  # (N,) bool, BROAD's rest samples
     poses: list = field(default_factory=list)  # [(t_us, quat)] the host filter's pose as the daemon publishes it
     true_inputs: list | None = None  # the same for the motion's true rates (:func:`true_inputs`)
+    frames: bytes | None = None  # the RAW_SAMPLE frames the daemon was fed, as the wire carries them (--against)
 
 
 class _InputRecorder:
@@ -136,15 +152,18 @@ def daemon(cfg=None):
     return SphereMouse(cfg or Config(), None, RecordingBackend((1920, 1080)), log=lambda m: None)
 
 
-def record(name: str, kind: str, motion, cfg=None, **known) -> Recording:
+def record(name: str, kind: str, motion, cfg=None, frames: bool = False, **known) -> Recording:
+    """``frames``: keep the packets as wire frames too (for another revision's daemon, ``--against``)."""
     d = daemon(cfg)
     rec = _InputRecorder()
     d.mapper = rec
     poses = []
-    for t_us, p in raw_packets(motion):
+    packets = raw_packets(motion)
+    for t_us, p in packets:
         d.handle(SimpleNamespace(packet=p, t_us=t_us))
         poses.append((t_us, d.motion.quat))
-    return Recording(name, kind, rec.inputs, poses=poses, **known)
+    wire = b"".join(encode_frame(p, i & 0xFF) for i, (_, p) in enumerate(packets)) if frames else None
+    return Recording(name, kind, rec.inputs, poses=poses, frames=wire, **known)
 
 
 def px_per_deg() -> float:
@@ -181,12 +200,12 @@ def true_inputs(h, n: int) -> list:
     return [(tuple(rates[i]), 1.0 / RATE_HZ, ups[i]) for i in range(m)] + [((0.0, 0.0, 0.0), 1.0 / RATE_HZ, ups[-1])] * (n - m)
 
 
-def hold_recordings(seeds, seconds: float = HOLD_SECONDS, cfg=None) -> list[Recording]:
+def hold_recordings(seeds, seconds: float = HOLD_SECONDS, cfg=None, frames: bool = False) -> list[Recording]:
     out = []
     for seed in seeds:
         for kind, params in (("hold", None), ("clean", with_params(tremor_rms_deg=0.0, wander_rms_deg=0.0))):
             h = hold_script(seconds, seed, params)
-            r = record(f"{kind}:{seed}", kind, h.motion, cfg, phases=h.phases)
+            r = record(f"{kind}:{seed}", kind, h.motion, cfg, frames, phases=h.phases)
             r.ideal_px = ideal_path(h.quat_enu, h.motion.rate_hz, len(r.inputs))
             r.intent_px = ideal_path(h.intent_quat_enu, h.motion.rate_hz, len(r.inputs))
             r.wander_px = _low_pass(r.ideal_px - r.intent_px, 3.0)
@@ -196,7 +215,7 @@ def hold_recordings(seeds, seconds: float = HOLD_SECONDS, cfg=None) -> list[Reco
 
 
 def broad_recordings(paths, seconds: float | None, noise_dps: float = ITG3200_NOISE_DPS, seed: int = 7,
-                     cfg=None) -> list[Recording]:
+                     cfg=None, frames: bool = False) -> list[Recording]:
     out = []
     for path in paths:
         trial = load_trial(path)
@@ -205,7 +224,7 @@ def broad_recordings(paths, seconds: float | None, noise_dps: float = ITG3200_NO
         m = T.from_broad(trial)
         rng = np.random.default_rng(seed)
         m.gyr_rad_s = T.fill_gaps(m.gyr_rad_s) + np.radians(rng.normal(0.0, noise_dps, m.gyr_rad_s.shape))
-        r = record(path.stem, "broad", m, cfg)
+        r = record(path.stem, "broad", m, cfg, frames)
         t = np.arange(len(r.inputs)) / RATE_HZ
         r.rest = ~trial.movement[np.minimum(np.rint(t * trial.rate_hz).astype(int), len(trial) - 1)]
         out.append(r)
@@ -314,9 +333,10 @@ def turn_figures(path: np.ndarray, rec: Recording, exact: np.ndarray | None = No
         q = rec.ideal_px @ u
         travel = p[post].mean() - p[pre].mean()
         itravel = q[post].mean() - q[pre].mean()
+        qa = rec.intent_px @ u  # the turn the hand meant: the generator's aim, without tremor and wander
+        aim = travel / (qa[post].mean() - qa[pre].mean()) - 1.0
         # half travel: the pointer without the hand's wander against the aim (tremor-free)
         pw = (path - rec.wander_px) @ u
-        qa = rec.intent_px @ u
         half_p = _crossing_s(pw, a - _i(0.05), pw[pre].mean() + 0.5 * (qa[post].mean() - qa[pre].mean()))
         half_q = _crossing_s(qa, a - _i(0.05), qa[pre].mean() + 0.5 * (qa[post].mean() - qa[pre].mean()))
         pe = exact @ u
@@ -327,6 +347,7 @@ def turn_figures(path: np.ndarray, rec: Recording, exact: np.ndarray | None = No
         late = rel[b + _i(1.4): b + _i(1.5)].mean(axis=0)
         slope = late - early
         out.append({"band": ph.band, "rate_dps": abs(ph.rate_dps), "travel_err": travel / itravel - 1.0,
+                    "aim_err": aim,
                     "lag_ms": (half_p - half_q) * 1000.0, "overshoot_px": over,
                     "drift_px_s": float(np.hypot(*slope))})
     return out
@@ -370,6 +391,7 @@ def figures(recs: list[Recording], paths: list[np.ndarray], exact: list[np.ndarr
     f["travel_err_max"] = max(errs, default=float("nan"))
     fine = [t for t in hold if t["band"] == "fine" and t["rate_dps"] == 3.0]  # the 3 °/s aiming turns, held
     f["fine_travel_err_max"] = max((abs(t["travel_err"]) for t in fine), default=float("nan"))
+    f["fine_aim_err_max"] = max((abs(t["aim_err"]) for t in fine), default=float("nan"))
     f["drift_px_s"] = max((t["drift_px_s"] for t in clean), default=float("nan"))
     f["held_drift_px_s"] = max((t["drift_px_s"] for t in hold), default=float("nan"))
     f["held_overshoot_px"] = max((t["overshoot_px"] for t in hold if t["rate_dps"] >= 10.0), default=float("nan"))
@@ -399,7 +421,8 @@ COLUMNS = [("held_jitter_px", "held px", "{:7.2f}"), ("rest_jitter_px", "rest px
            ("lag_fine_ms", "fine ms", "{:7.1f}"), ("lag_slow_ms", "slow ms", "{:7.1f}"),
            ("lag_medium_ms", "med ms", "{:6.1f}"), ("lag_fast_ms", "fast ms", "{:7.1f}"),
            ("overshoot_px", "over px", "{:7.2f}"), ("drift_px_s", "drift px/s", "{:10.2f}"),
-           ("fine_travel_err_max", "3°/s trav", "{:9.1%}"), ("travel_err_median", "trav med", "{:8.2%}"),
+           ("fine_travel_err_max", "3°/s trav", "{:9.1%}"), ("fine_aim_err_max", "3°/s aim", "{:8.1%}"),
+           ("travel_err_median", "trav med", "{:8.2%}"),
            ("travel_err_max", "trav max", "{:8.2%}"), ("us_per_sample", "µs", "{:6.1f}")]
 
 
@@ -407,6 +430,37 @@ def _row(label: str, f: dict, params: dict) -> str:
     cells = " ".join(fmt.format(f[k]) for k, _, fmt in COLUMNS)
     shown = " ".join(f"{k}={v:g}" if isinstance(v, (int, float)) else f"{k}={v}" for k, v in params.items())
     return f"{label:<32} {cells}  {shown}"
+
+
+def revision_paths(host_dir: str, recs: list[Recording]) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The pointer (whole pixels, and with the sub-pixel remainder) that the daemon of the ``sphere`` in
+    ``host_dir`` gives for each recording's frames, its default settings (:mod:`sphere.bench._pointer_side` run in
+    a fresh interpreter with that tree on PYTHONPATH)."""
+    side = os.path.join(os.path.dirname(os.path.abspath(__file__)), "_pointer_side.py")
+    with tempfile.TemporaryDirectory(prefix="sphere-pointer-side-") as tmp:
+        src, dst = os.path.join(tmp, "frames.npz"), os.path.join(tmp, "paths.npz")
+        np.savez(src, **{f"r{i}": np.frombuffer(r.frames, np.uint8) for i, r in enumerate(recs)})
+        out = subprocess.run([sys.executable, "-P", side, src, dst], env=dict(os.environ, PYTHONPATH=host_dir),
+                             capture_output=True, text=True)
+        if out.returncode != 0:
+            raise RuntimeError(f"the daemon of {host_dir} failed on the motions: {out.stderr.strip()[-1500:]}")
+        with np.load(dst) as z:
+            paths = [z[f"r{i}"] for i in range(len(recs))]
+    for r, p in zip(recs, paths):
+        if len(p) != len(r.inputs):
+            raise RuntimeError(f"the daemon of {host_dir} moved the pointer on {len(p)} samples of {r.name}, this "
+                               f"tree's on {len(r.inputs)}: the two cannot be compared sample by sample")
+    return [(p[:, 1:3], p[:, 3:5]) for p in paths]
+
+
+#: the figures --against puts side by side as ratios (issue 28: no worse than before the hand hold)
+AGAINST = (("held_jitter_px", "held jitter", "{:.2f} px"), ("fine_minus_fast_ms", "fine − fast lag", "{:.1f} ms"),
+           ("fine_travel_err_max", "3°/s travel vs the hand", "{:.2%}"),
+           ("fine_aim_err_max", "3°/s travel vs the aim", "{:.2%}"))
+
+
+def _ratio(now: float, before: float) -> str:
+    return f" = {now / before:.2f}" if abs(before) >= 1e-6 else ""
 
 
 # ---------------------------------------------------------------- pose mode: the 3-D stream's filter
@@ -506,11 +560,25 @@ def run(args) -> int:
     except BroadMissing as e:
         print(f"sphere bench pointer: {e}", file=sys.stderr)
         return 2
+    if not args.against:
+        return _run(args, names, cfg, trials, None)
+    with tempfile.TemporaryDirectory(prefix="sphere-pointer-rev-") as tmp:
+        try:
+            host_dir = tree_of(args.against, tmp)
+        except RevisionError as e:
+            print(f"sphere bench pointer: {e}", file=sys.stderr)
+            return 2
+        return _run(args, names, cfg, trials, host_dir)
+
+
+def _run(args, names, cfg, trials, against_dir) -> int:
     pointer = {k: v for k, v in cfg.pointer.as_dict().items() if k != "smoothing"}  # --filters picks the filter
     print(f"recording: synthetic:hold seeds through the daemon's packet path; BROAD {', '.join(p.stem for p in trials)} "
           f"(first {args.seconds:g} s)", file=sys.stderr)
     train = hold_recordings(TRAIN_SEEDS[: args.seeds], cfg=cfg) + broad_recordings(trials[:1], args.seconds, cfg=cfg)
-    test = hold_recordings(TEST_SEEDS[: args.seeds], cfg=cfg) + broad_recordings(trials[1:], args.seconds, cfg=cfg)
+    keep = against_dir is not None
+    test = (hold_recordings(TEST_SEEDS[: args.seeds], cfg=cfg, frames=keep)
+            + broad_recordings(trials[1:], args.seconds, cfg=cfg, frames=keep))
     results = {}
 
     # a filter's [smoothing.NAME] given with --set replaces its defaults (its row and the tuning's first setting)
@@ -549,16 +617,34 @@ def run(args) -> int:
             for row in r["train_rows"]:
                 print(_row("    TRAIN", row["figures"], row["params"]))
     print(_row(f" {DEFAULT} (true rates)", truth["figures"], {}))
+    before = None
+    if against_dir is not None:
+        print(f"the daemon of {args.against} on the same motions ...", file=sys.stderr)
+        both = revision_paths(against_dir, test)
+        before = figures(test, [p for p, _ in both], [e for _, e in both]) | {"us_per_sample": float("nan")}
+        print(_row(f" {args.against[:16]} (its defaults)", before, {}))
     print(f"* the daemon's default (pointer.smoothing = {DEFAULT}); (true rates): the same mapper fed the synthetic "
           "motions' true rates (no noise, no bias, the true vertical; no BROAD trial)")
     if args.set:
         print(f"settings other than the daemon's defaults (--set): {', '.join(args.set)}")
+    if before is not None:
+        now = results[DEFAULT]["defaults"]["figures"] if DEFAULT in results else None
+        print(f"({args.against[:16]} (its defaults)): the daemon of revision {args.against}, its own default settings, "
+              "fed the same TEST motions through its own packet path, measured by this tree's figures; µs not "
+              "measured. 3°/s aim: the travel against the turn the hand meant (the generator's aim, without tremor "
+              "and wander), 3°/s trav: against where the hand points, sway included")
+        if now is not None:
+            print(f"this tree / {args.against}: " + ", ".join(
+                f"{label} {fmt.format(now[k])} / {fmt.format(before[k])}{_ratio(now[k], before[k])}"
+                for k, label, fmt in AGAINST))
     if args.json:
         out = {"default": DEFAULT, "targets": TARGETS, "train_seeds": TRAIN_SEEDS[: args.seeds],
                "test_seeds": TEST_SEEDS[: args.seeds], "broad_train": trials[0].stem,
                "broad_test": [p.stem for p in trials[1:]],
                "filters": {n: {"defaults": r["defaults"], "tuned": r["tuned"]} for n, r in results.items()},
                "true_rates": truth, "settings": args.set}
+        if before is not None:
+            out["against"] = {"revision": args.against, "figures": before}
         with open(args.json, "w") as f:
             json.dump(out, f, indent=2, default=float)
     return 0
