@@ -4,12 +4,20 @@ one with 2 g), the stream settings come back in its HELLO, identify and reboot a
 shows the packets, rates, flags, values, link quality and the events as they happen."""
 
 
+import re
+from pathlib import Path
+
 import pytest
 
 from sphere.cli import main
 from sphere.sim import trace as T
 
 from simscenarios import need_board, need_firmware, stop_simulator
+
+#: the version the firmware's HELLO carries, as its source says (firmware/src/core/packets.h)
+FIRMWARE_VERSION = ".".join(re.search(
+    r"FIRMWARE_VERSION_MAJOR = (\d+), FIRMWARE_VERSION_MINOR = (\d+), FIRMWARE_VERSION_PATCH = (\d+)",
+    (Path(__file__).resolve().parents[2] / "firmware" / "src" / "core" / "packets.h").read_text()).groups())
 
 pytestmark = pytest.mark.slow
 
@@ -81,7 +89,7 @@ def test_settings_change_what_the_firmware_does(board, capsys, tmp_path):
     assert main(["monitor", "--port", board, "--seconds", "120", "--events", "4", "--plot", "--plot-out", str(png)]) == 0
     out = capsys.readouterr().out
     assert "single_tap (z)" in out and "double_tap (z)" in out, out
-    assert "HELLO seq" in out and "firmware 0.3.2, protocol 3" in out
+    assert "HELLO seq" in out and f"firmware {FIRMWARE_VERSION}, protocol 3" in out
     for expected in ("RAW_SAMPLE", "ORIENTATION", "flags: accel_ok gyro_ok mag_ok", "accel g", "gyro °/s", "mag µT",
                      "orientation  heading", "link: frames ok", "CRC errors", "frames lost"):
         assert expected in out, (expected, out)
@@ -90,7 +98,7 @@ def test_settings_change_what_the_firmware_does(board, capsys, tmp_path):
     assert main(["device", "--port", board, "identify", "2"]) == 0
     assert "blinks for 2 s" in capsys.readouterr().out
     assert main(["device", "--port", board, "reboot"]) == 0
-    assert "rebooted; firmware 0.3.2 is back" in capsys.readouterr().out
+    assert f"rebooted; firmware {FIRMWARE_VERSION} is back" in capsys.readouterr().out
 
 
 def test_bad_settings_are_one_line_and_touch_nothing(capsys):

@@ -235,7 +235,7 @@ TEST_CASE("SET_BOARD maps each chip's axes into the body frame and is kept in EE
     CHECK((*lastOf(f, PKT_HELLO))[2 + 21] == BOARD_GY85);
     // SEN-10724: the magnetometer turned 90° about z
     for (uint8_t x : frameOf(CMD_SET_BOARD, 2, {BOARD_SEN10724})) b2.dev.receive(x);
-    b2.run(2);
+    b2.run(3);  // the first conversion is read in the 2nd period, after its RAW_SAMPLE: the 3rd carries it
     f = b2.frames();
     r = lastOf(f, PKT_RAW_SAMPLE)->data() + 2 + 5;
     CHECK(getI16(r + 12) == 0);     // +y
@@ -304,16 +304,21 @@ TEST_CASE("QMC5883L at 0x0D: found when no HMC5883L answers, converted to the HM
     b.dev.tick();
     f = b.frames();
     const auto* raw = lastOf(f, PKT_RAW_SAMPLE);
-    REQUIRE(raw);
+    REQUIRE(raw);  // sent before the magnetometer's poll (spec §4.2): nothing read yet
+    CHECK_FALSE(((*raw)[2 + 4] & (RAW_MAG_FRESH | RAW_MAG_OK)));
+    CHECK((b.bus.qmc.regs[0x06] & 1) == 0);  // DRDY cleared by the data read, after the RAW_SAMPLE
+    b.dev.tick();  // this RAW_SAMPLE carries that read; no new sample since
+    f = b.frames();
+    raw = lastOf(f, PKT_RAW_SAMPLE);
     CHECK(((*raw)[2 + 4] & RAW_MAG_FRESH));
     CHECK(getI16(raw->data() + 2 + 17) == 1090);
     CHECK(getI16(raw->data() + 2 + 19) == -545);
-    CHECK((b.bus.qmc.regs[0x06] & 1) == 0);  // DRDY cleared by the data read
     b.dev.tick();  // no new sample: not fresh, value held
     f = b.frames();
     CHECK_FALSE(((*lastOf(f, PKT_RAW_SAMPLE))[2 + 4] & RAW_MAG_FRESH));
     CHECK(getI16(lastOf(f, PKT_RAW_SAMPLE)->data() + 2 + 17) == 1090);
     b.bus.setQmc(32767, 0, 0, true);  // OVL
+    b.dev.tick();
     b.dev.tick();
     f = b.frames();
     CHECK(getI16(lastOf(f, PKT_RAW_SAMPLE)->data() + 2 + 17) == -4096);
@@ -329,8 +334,9 @@ TEST_CASE("HMC5883L: mag_fresh only for a new conversion; overflow checked on th
         b.dev.tick();
     }
     auto f = b.frames();
+    int first = 1;  // the first carries the read of the period before (RAW_SAMPLE goes before the poll)
     for (auto& p : f)
-        if (p[0] == PKT_RAW_SAMPLE) CHECK_FALSE((p[2 + 4] & RAW_MAG_FRESH));
+        if (p[0] == PKT_RAW_SAMPLE && !first--) CHECK_FALSE((p[2 + 4] & RAW_MAG_FRESH));
     b.run(20);  // a conversion ready at every look: fresh every second period (100 Hz)
     f = b.frames();
     int fresh = 0, raws = 0;

@@ -7,7 +7,7 @@
 namespace sphere {
 
 const uint8_t PROTOCOL_VERSION = 3;
-const uint8_t FIRMWARE_VERSION_MAJOR = 0, FIRMWARE_VERSION_MINOR = 3, FIRMWARE_VERSION_PATCH = 2;
+const uint8_t FIRMWARE_VERSION_MAJOR = 0, FIRMWARE_VERSION_MINOR = 3, FIRMWARE_VERSION_PATCH = 3;
 
 enum PacketType : uint8_t {
     PKT_HELLO = 0x01,

@@ -187,12 +187,12 @@ bool SphereDevice::readSensor(uint8_t i, bool& fresh) {
     return ok;
 }
 
-// A failed transaction holds the sensor's last sample (flagged stale); MISSING_AFTER failures in a row
-// declare it missing, and a missing sensor is probed again from the next period on.
-__attribute__((noinline)) void SphereDevice::readSensors(uint32_t t_us) {
-    sample_t_us_ = t_us;
-    raw_flags_ = 0;
-    for (uint8_t i = 0; i < 3; ++i) {
+// Reads sensors first … last-1 (0 ADXL345, 1 ITG-3200, 2 magnetometer); their RAW_SAMPLE bits are replaced,
+// the others' kept. A failed transaction holds the sensor's last sample (flagged stale); MISSING_AFTER
+// failures in a row declare it missing, and a missing sensor is probed again from the next period on.
+__attribute__((noinline)) void SphereDevice::readSensors(uint8_t first, uint8_t last) {
+    for (uint8_t i = first; i < last; ++i) raw_flags_ &= (uint8_t)~((1u << i) | (RAW_ACCEL_STALE << i));
+    for (uint8_t i = first; i < last; ++i) {
         uint8_t bit = (uint8_t)(1u << i);
         if (!(sensors_ok_ & bit)) {
             if (fails_[i] < FAST_PROBES || phase_ % SLOW_PROBE_TICKS == 0) {
@@ -226,7 +226,7 @@ __attribute__((noinline)) void SphereDevice::readSensors(uint32_t t_us) {
         if (i < 2 || mag_seen_) raw_flags_ |= bit;  // RAW_ACCEL_OK, RAW_GYRO_OK, RAW_MAG_OK are the sensor bits
     }
     // a missing sensor's values are 0
-    for (uint8_t i = 0; i < 3; ++i)
+    for (uint8_t i = first; i < last; ++i)
         if (!(raw_flags_ & (1u << i))) raw_[i][0] = raw_[i][1] = raw_[i][2] = 0;
 }
 
@@ -370,12 +370,16 @@ __attribute__((noinline)) void SphereDevice::tick() {
                       : 0;
     last_t_us_ = t0;
     watchLink();
-    readSensors(t0);
+    sample_t_us_ = t0;
+    readSensors(0, 2);  // the accelerometer, then the gyroscope: the newest reading closest to the send
     if (!link_quiet_) handleEvents();  // an event waits latched in the ADXL345 while nothing may be sent (spec §5.4)
     if (raw_flags_ & RAW_ACCEL_OK) tap_active_ = guard_.update(raw_[0]);
     else tap_active_ = false;
-    if (tap_active_) raw_flags_ |= RAW_TAP_ACTIVE;
-    streamRaw(t0);  // the sample leaves now, not after the MARG update (firmware/README.md, "How old a sample is")
+    raw_flags_ = (uint8_t)(tap_active_ ? raw_flags_ | RAW_TAP_ACTIVE : raw_flags_ & ~RAW_TAP_ACTIVE);
+    // the sample leaves now, before the magnetometer's poll and the MARG update; it carries the magnetometer
+    // as the previous period's poll left it (spec §4.2; firmware/README.md, "How old a sample is")
+    streamRaw(t0);
+    readSensors(2, 3);
     trackBias();
     keepTrackedBias();
     runFilter(dt);

@@ -121,7 +121,7 @@ public:
 private:
     bool probe(uint8_t index);
     bool readSensor(uint8_t index, bool& fresh);
-    void readSensors(uint32_t t_us);
+    void readSensors(uint8_t first, uint8_t last);
     void trackBias();
     void keepTrackedBias();
     bool magAccepted(const int16_t m[3]);

@@ -225,8 +225,18 @@ def firmware_bias_schedule(raw: list) -> list[tuple[int, list[int]]]:
     return out
 
 
+#: the first firmware that sends RAW_SAMPLE before its magnetometer poll (protocol/spec.md §4.2): its update k uses the
+#: magnetometer reading RAW_SAMPLE k+1 carries
+MAG_AFTER_RAW_FIRMWARE = (0, 3, 3)
+
+
+def mag_after_raw(hello) -> bool:
+    """Whether the firmware of this HELLO polls the magnetometer after sending the period's RAW_SAMPLE."""
+    return hello is not None and tuple(hello.firmware_version) >= MAG_AFTER_RAW_FIRMWARE
+
+
 def host_madgwick(raw: list, imu_rate_hz: float, beta: float, bias_s: float = 0.0, orientation: list | None = None,
-                  startup_beta: float = STARTUP_BETA):
+                  startup_beta: float = STARTUP_BETA, mag_lag: bool = False):
     """The host's double-precision Madgwick on the RAW_SAMPLE values the firmware read.
 
     Returns (t_s, q_nwu). ``bias_s`` > 0: subtract
@@ -239,6 +249,9 @@ def host_madgwick(raw: list, imu_rate_hz: float, beta: float, bias_s: float = 0.
     was missing or ``mag_rejected`` (gravity-only), β is ``startup_beta`` while ``converging``, and the
     state starts at the identity as the firmware's does (without ``orientation``: at the e-compass), and
     each output is the state predicted GYRO_DELAY_S ahead at that sample's rate, as ORIENTATION carries it.
+    ``mag_lag`` (firmware 0.3.3 on, :func:`mag_after_raw`): a RAW_SAMPLE carries the magnetometer as the previous
+    period's poll left it, while the firmware's update of that period used its own poll, which the next RAW_SAMPLE
+    carries; so sample i takes sample i+1's magnetometer and its ``mag_ok`` (the last sample keeps its own).
     The flags of a raw sample without its own ORIENTATION packet are the next packet's "previous update"
     bits (protocol v2, flags bits 5-7) when that packet belongs to the next raw sample, else those of the
     newest packet before it.
@@ -250,6 +263,10 @@ def host_madgwick(raw: list, imu_rate_hz: float, beta: float, bias_s: float = 0.
     acc = np.array([p.accel_g for p in raw], dtype=float)
     mag = np.array([p.mag_uT for p in raw], dtype=float)
     rflags = np.array([p.flags for p in raw], dtype=int)
+    mag_ok = rflags & RAW_MAG_OK
+    if mag_lag and len(raw) > 1:
+        mag = np.vstack([mag[1:], mag[-1:]])
+        mag_ok = np.append(mag_ok[1:], mag_ok[-1])
     if bias_s > 0 and orientation:
         # the firmware's biases as it changed them: power-up estimate, then tracking while still
         applied = np.zeros(3)
@@ -261,7 +278,7 @@ def host_madgwick(raw: list, imu_rate_hz: float, beta: float, bias_s: float = 0.
         first = t < t[0] + bias_s
         gyr = gyr - gyr[first].mean(axis=0)
     acc_valid = (rflags & RAW_ACCEL_OK).astype(bool) & ~(rflags & RAW_TAP_ACTIVE).astype(bool)
-    mag_valid = (rflags & RAW_MAG_OK).astype(bool)
+    mag_valid = mag_ok.astype(bool)
     betas = np.full(len(raw), float(beta))
     if orientation:
         uo = TimeUnwrapper()
@@ -343,7 +360,8 @@ def accuracy(summary: CaptureSummary, trial, offset_s: float, beta: float, bias_
     q_h_enu = None
     imu_rate = summary.hello.imu_rate_hz if summary.hello else 200
     hm = host_madgwick(summary.raw, imu_rate, beta, bias_s,
-                       orientation=summary.orientation if follow_firmware else None) if summary.raw else None
+                       orientation=summary.orientation if follow_firmware else None,
+                       mag_lag=follow_firmware and mag_after_raw(summary.hello)) if summary.raw else None
     if hm is None:
         notes.append("host Madgwick unavailable (no RAW_SAMPLE packets)")
     else:
