@@ -23,7 +23,7 @@ def test_bench_latency_rows_and_stages(tmp_path):
                         "none,ftdi-16ms", "--bauds", "115200", "--no-monitor", "--json", str(out)], capture_output=True, text=True, timeout=600)
     assert r.returncode == 0, r.stderr[-2000:]
     assert "motion onset -> X pointer move" in r.stdout and "ftdi-16ms" in r.stdout and "daemon loop" in r.stdout
-    assert "scheduling (--instruments-nice -10): the virtual board SCHED_OTHER nice " in r.stdout, r.stdout
+    assert "scheduling (--instruments-nice -10, --xvfb-nice 0): the virtual board SCHED_OTHER nice " in r.stdout, r.stdout
     rows = {row["row"]: row for row in json.loads(out.read_text())["rows"]}
     assert set(rows) == {"none", "ftdi-16ms"}
     for row in rows.values():

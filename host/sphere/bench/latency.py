@@ -38,7 +38,7 @@ pointer sampler is the measuring instrument; on a machine whose cores are busy b
 they lose shows as ``lag`` (the board behind the wall clock) and as moves seen late (the sampler's gaps). So both
 run at nice ``--instruments-nice`` (−10; 0 = as the bench itself) where the bench may lower it, and the line
 above the table says how the board, the sampler and Xvfb were scheduled. Xvfb stands in for the desktop's display
-server and runs as the bench does; the daemon as it asks for itself.
+server and runs as the bench does unless ``--xvfb-nice`` says otherwise; the daemon as it asks for itself.
 
 ``--against REV`` runs every row twice, side by side in the same run: with this tree's sphere-mouse and with the
 sphere-mouse of git revision REV (its ``host/`` from ``git archive``, on ``PYTHONPATH``; the same firmware, board,
@@ -110,6 +110,9 @@ def add_arguments(p) -> None:
     p.add_argument("--instruments-nice", type=_nice_value, default=INSTRUMENTS_NICE, metavar="N",
                    help="nice value of the virtual board (the sphere's stand-in) and the pointer sampler (the "
                         f"instrument), -20..0 (default {INSTRUMENTS_NICE}; 0 = as the bench runs)")
+    p.add_argument("--xvfb-nice", type=_nice_value, default=0, metavar="N",
+                   help="nice value of Xvfb, the display server's stand-in, -20..0 (default 0: as the bench runs; "
+                        "what a desktop's display server gets is the desktop's)")
     p.add_argument("--against", metavar="REV", help="also run every row with the sphere-mouse of this git revision "
                                                    "(say main before a change), side by side, in alternating order")
 
@@ -466,7 +469,8 @@ def run(args) -> int:
             return 2
     try:
         elf = firmware_elf()
-        xvfb = Xvfb()
+        with niced(args.xvfb_nice):
+            xvfb = Xvfb()
     except (XvfbUnavailable, RuntimeError, OSError) as e:
         if revision is not None:
             revision.cleanup()
@@ -505,7 +509,7 @@ def run(args) -> int:
         if revision is not None:
             revision.cleanup()
     result = {"seconds_per_row": args.seconds, "seed": args.seed, "load_average": [load_before, os.getloadavg()[0]],
-              "instruments_nice": args.instruments_nice, "xvfb_scheduling": xvfb_scheduling,
+              "instruments_nice": args.instruments_nice, "xvfb_nice": args.xvfb_nice, "xvfb_scheduling": xvfb_scheduling,
               "against": args.against, "rows": rows, "failed_rows": failed, "sample_age": monitor}
     report(result)
     if args.json:
@@ -527,7 +531,8 @@ def report(result: dict) -> None:
     seen = sorted({f"the virtual board {r['board_scheduling']}, the pointer sampler {r['sampler_scheduling']}"
                    for r in rows if "board_scheduling" in r})
     if seen:
-        print(f"scheduling (--instruments-nice {result.get('instruments_nice', 0)}): " + "; ".join(seen)
+        print(f"scheduling (--instruments-nice {result.get('instruments_nice', 0)}, --xvfb-nice "
+              f"{result.get('xvfb_nice', 0)}): " + "; ".join(seen)
               + f"; Xvfb {result.get('xvfb_scheduling', 'unknown')}; the daemon's loop: the last column")
     tw = max([len(THIS)] + [len(_tree(r)) for r in rows]) if against else 0
     tree_head = f"{'daemon':<{tw}} " if against else ""
