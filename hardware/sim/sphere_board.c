@@ -361,12 +361,11 @@ static void host_baud_poll(uart_out_t *u)
 /* A byte crosses the serial line intact only when both ends run at the same rate: a UART tolerates about
  * ±2 % between them (ATmega328P datasheet, "Asynchronous Operational Range", Table 20-2/20-3: 8 data bits,
  * ±2.0 to ±3.0 %). Otherwise the receiver samples the wrong bits: a garbled byte (and a frame that fails). */
-static int rates_match(uart_out_t *u)
+static int rates_match(uart_out_t *u, double avr)
 {
 	host_baud_poll(u);
 	if (u->pty_fd <= 0 || u->host_baud <= 0 || !u->host_configured)
 		return 1; /* nobody has set a rate yet: nothing to disagree with */
-	double avr = avr_uart_baud(u->avr);
 	return fabs(avr - u->host_baud) <= 0.03 * u->host_baud;
 }
 
@@ -380,24 +379,72 @@ static void pty_to_avr_hook(struct avr_irq_t *irq, uint32_t value, void *param)
 	(void)irq;
 	uart_out_t *u = param;
 	uint8_t byte = (uint8_t)value;
-	if (!rates_match(u)) {
+	if (!rates_match(u, avr_uart_baud(u->avr))) {
 		byte = garble(byte);
 		u->garbled_in++;
 	}
 	avr_raise_irq(uart_in_irq, byte);
 }
 
+/* A byte the firmware wrote into UDR0 reaches the host's UART when its frame has been shifted out: the receiver
+ * moves a byte into its buffer once it has the stop bit ("Receiving Frames with 5 to 8 Data Bits", ATmega328P
+ * datasheet "USART0"), and the sender's TXC0 rises "when the entire frame in the Transmit Shift Register has been
+ * shifted out" ("Transmitter Flags and Interrupts"), which simavr raises one frame time after the UDR0 write (it
+ * models no second transmit buffer: UDRE0 rises then too). So a byte goes to the host one frame time (10 bits, 8N1,
+ * at the rate UBRR0 set when it was written) after the write, not at it: never before the sphere's TXC0, which a
+ * host reacting to the byte (SET_BAUD's REPLY, spec §5.4) cannot beat on a real line either. */
+#define TX_FLIGHT 64
+static struct { uint8_t byte; double baud; avr_cycle_count_t written, due; } tx_flight[TX_FLIGHT];
+static unsigned tx_head, tx_n;
+
+static void uart_byte_arrives(uart_out_t *u, uint8_t byte, double avr_baud, avr_cycle_count_t written);
+
+static avr_cycle_count_t tx_flight_timer(avr_t *avr, avr_cycle_count_t when, void *param)
+{
+	while (tx_n && tx_flight[tx_head].due <= when) {
+		unsigned i = tx_head;
+		tx_head = (tx_head + 1) % TX_FLIGHT;
+		tx_n--;
+		uart_byte_arrives(param, tx_flight[i].byte, tx_flight[i].baud, tx_flight[i].written);
+	}
+	return tx_n ? tx_flight[tx_head].due : 0;
+}
+
 static void uart_hook(struct avr_irq_t *irq, uint32_t value, void *param)
 {
 	(void)irq;
 	uart_out_t *u = param;
-	uint8_t byte = (uint8_t)value;
-	if (!rates_match(u)) { /* the adapter's UART samples at the host's rate */
+	avr_t *avr = u->avr;
+	double baud = avr_uart_baud(avr);
+	if (tx_n && !avr_cycle_timer_status(avr, tx_flight_timer, u)) /* a reset cancelled the timer: what was on */
+		tx_flight_timer(avr, (avr_cycle_count_t)-1, u);           /* the line when it came is out */
+	if (tx_n == TX_FLIGHT) { /* a firmware writing UDR0 faster than its frames leave: no room to model it */
+		uart_byte_arrives(u, (uint8_t)value, baud, avr->cycle);
+		return;
+	}
+	avr_cycle_count_t frame = (avr_cycle_count_t)(avr->frequency * 10.0 / baud + 0.5);
+	/* frames leave one after another: a byte written while the one before is still on the line follows it */
+	avr_cycle_count_t start = tx_n ? tx_flight[(tx_head + tx_n - 1) % TX_FLIGHT].due : avr->cycle;
+	if (start < avr->cycle)
+		start = avr->cycle;
+	unsigned i = (tx_head + tx_n) % TX_FLIGHT;
+	tx_flight[i].byte = (uint8_t)value;
+	tx_flight[i].baud = baud;
+	tx_flight[i].written = avr->cycle;
+	tx_flight[i].due = start + frame;
+	if (!tx_n++)
+		avr_cycle_timer_register(avr, tx_flight[i].due - avr->cycle, tx_flight_timer, u);
+}
+
+/* The byte has crossed the line: garbled when the host's UART runs at another rate than the one it was sent at. */
+static void uart_byte_arrives(uart_out_t *u, uint8_t byte, double avr_baud, avr_cycle_count_t written)
+{
+	if (!rates_match(u, avr_baud)) { /* the adapter's UART samples at the host's rate */
 		byte = garble(byte);
 		u->garbled_out++;
 	}
 	u->bytes++;
-	double now_s = (double)u->avr->cycle / u->avr->frequency;
+	double now_s = (double)written / u->avr->frequency; /* when the firmware wrote it into UDR0 */
 	if (byte == 0) {
 		if (u->last_nonzero) {
 			u->frames++;
@@ -1260,6 +1307,8 @@ int main(int argc, char **argv)
 	}
 	double wall = wall_now() - wall0, cpu = cpu_now() - cpu0;
 	double sim_s = (double)avr->cycle / avr->frequency;
+	if (tx_n)
+		tx_flight_timer(avr, (avr_cycle_count_t)-1, &uart_out); /* the frame on the line when the run ended */
 	if (uart_out.pending)
 		adapter_flush(&uart_out); /* what the adapter still held */
 	/* a full or read-only disk: say so and fail, never leave a short file behind silently */
