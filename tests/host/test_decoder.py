@@ -200,3 +200,26 @@ def test_every_untouched_frame_is_decoded_and_nothing_raises(items):
     assert all(any(g == e for g in it) for e in expected), (expected, got)
     stats = decoder.stats
     assert stats.frames_ok == len(out)
+
+
+@given(st.lists(packets, min_size=2, max_size=10), st.integers(1, 400))
+def test_a_stream_that_takes_over_from_a_probe_mid_frame_loses_nothing(pkts, cut):
+    """The serial source's discovery probe decodes up to the HELLO and hands over to the link's stream: the frame the
+    probe's last read cut in two is finished by the new stream (FrameDecoder.pending, PacketStream.adopt), not counted
+    as a framing error and a sequence gap."""
+    from sphere.daemon.scripted_sphere import hello_packet
+    from sphere.protocol import PacketStream
+
+    data = encode_frame(hello_packet(), 7) + stream_of(pkts, first_seq=8)
+    cut = min(cut, len(data) - 1)
+    probe = PacketStream("device")
+    got = probe.feed(data[:cut])
+    if not got:  # the probe has not the HELLO whole yet: it reads on
+        return
+    stream = PacketStream("device")
+    adopted = stream.adopt([d.packet for d in got], probe.decoder.pending())
+    rest = stream.feed(data[cut:])
+    assert [(d.packet.NAME, d.packet.seq) for d in adopted + rest] == [("HELLO", 7)] + [
+        (p.NAME, 8 + i) for i, p in enumerate(pkts)]
+    s = stream.stats
+    assert (s.framing_errors, s.crc_errors, s.seq_gaps, s.bytes_skipped) == (0, 0, 0, 0)

@@ -121,6 +121,11 @@ class FrameDecoder:
         self._last_seq = None
         self._forget_recent()
 
+    def pending(self) -> bytes:
+        """The bytes after the last delimiter: the start of a frame not complete yet (none inside a chunk dropped as
+        oversize). Another decoder of the same link that takes over from this one is fed them first."""
+        return bytes(self._buf) if self._room else b""
+
     def _forget_recent(self) -> None:
         self._recent = deque((-1,) * self.duplicate_window)
         self._recent_set.clear()

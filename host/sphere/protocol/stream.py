@@ -58,13 +58,17 @@ class PacketStream:
         t = getattr(p, "t_us", None)
         return DecodedPacket(p, self.unwrap(t) if t is not None else None)
 
-    def adopt(self, packets) -> list[DecodedPacket]:
+    def adopt(self, packets, pending: bytes = b"") -> list[DecodedPacket]:
         """Packets another decoder of this link already decoded (a discovery probe's HELLO onwards), counted
-        here as if this stream had decoded them."""
+        here as if this stream had decoded them; ``pending``: that decoder's frame not complete yet
+        (``FrameDecoder.pending``), which this stream goes on gathering (else its end is a framing error here and
+        its frame a sequence gap)."""
         out = []
         for p in packets:
             self.decoder.account(p)
             out.append(self.packet(p))
+        if pending:
+            self.decoder.feed(pending)  # no delimiter in it: kept, nothing decoded
         return out
 
     def feed(self, data: bytes) -> list[DecodedPacket]:

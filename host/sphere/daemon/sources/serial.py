@@ -262,7 +262,8 @@ class SerialSource(Source):
             self.log(msg)
 
     def _try_port(self, path: str, named: bool):
-        """Open ``path`` and wait for the sphere to identify itself: the packets from its HELLO on, or None."""
+        """Open ``path`` and wait for the sphere to identify itself: (port, the packets from its HELLO on, the start of
+        the frame after them), or None."""
         try:
             ser = self._open(path)
         except PortBusy as e:
@@ -296,7 +297,7 @@ class SerialSource(Source):
                                 raise SourceError(f"{path}: {problem}")
                             self.arrival_ns = arrival
                             self.link = link
-                            return ser, [d.packet for d in decoded[i:]]
+                            return ser, [d.packet for d in decoded[i:]], probe.decoder.pending()
                     good_run += len(decoded)
                     if good_run >= IDENTIFY_FRAMES and next_ask is None:
                         next_ask = time.monotonic()  # it speaks our protocol: now it may be asked
@@ -332,7 +333,7 @@ class SerialSource(Source):
             got = self._try_port(path, named)
             if got is None:
                 continue
-            ser, packets = got
+            ser, packets, pending = got
             self.serial = ser
             self.port_name = path
             self.stream.restart()
@@ -342,7 +343,7 @@ class SerialSource(Source):
             self.clock.restart(self.baud)
             self.ages.clear()
             self._next_echo = 0.0
-            adopted = self.stream.adopt(packets)
+            adopted = self.stream.adopt(packets, pending)
             if self.device_settings:  # a few ms at connect; the samples read meanwhile are counted, not used
                 self._apply_device_settings(self.stream.hello)
             self.link_baud = self.baud
