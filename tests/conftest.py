@@ -23,6 +23,7 @@ settings.load_profile("sphere")
 #: daemon bench's side-by-side speed, the AR page's frames drawn, the samples' age): marked ``timing``.
 #: `scripts/test` runs the rest on several workers (pytest-xdist) and then these alone, one after another.
 TIMING_MODULES = frozenset({
+    "tests/e2e/test_baud_switch.py",  # the board keeping pace with the host's wall-clock waits
     "tests/e2e/test_bench_latency.py",
     "tests/e2e/test_pointer_drift_x11.py",
     "tests/e2e/test_pointer_smoothing_x11.py",

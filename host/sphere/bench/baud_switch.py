@@ -5,8 +5,9 @@ The real firmware on the virtual board in real time behind a USB adapter model, 
 different rates (hardware/sim/README.md, "Baud rates"), so a frame sent at a rate the host does not listen at is
 lost, as on a real line. ``--rounds`` rounds, alternately:
 
-- a **switch** up to ``--baud`` and back: SET_BAUD, the port to the new rate, ECHO (the confirmation), a stretch of
-  stream, SET_BAUD 115200, the port back, ECHO, a stretch of stream;
+- a **switch** up to ``--baud`` and back, each by the daemon's own procedure (``sphere.link.baud.switch_baud``):
+  SET_BAUD, the port to the new rate, ECHO (the confirmation, sent again while unanswered), a stretch of stream,
+  the same down to 115200, a stretch of stream;
 - a **fall-back**: SET_BAUD to ``--baud`` that the host never confirms (it stays at 115200 and sends nothing): the
   sphere must come back to 115200 by itself within 2 s; the time to its next intact frame is measured.
 
@@ -25,9 +26,10 @@ import time
 from pathlib import Path
 
 from sphere import argtypes
+from sphere.link.baud import SET_BAUD_REPLY_S, switch_baud
 from sphere.link.device import DeviceLink
 from sphere.link.port import open_port, request_low_latency
-from sphere.protocol import Echo, PacketStream, SetBaud
+from sphere.protocol import PacketStream, SetBaud
 from sphere.protocol.packets import DEFAULT_BAUD
 from sphere.sim import trace as T
 from sphere.sim.board import BoardUnavailable, board_command, firmware_elf, start_pty_board
@@ -100,27 +102,24 @@ def run(args) -> int:
                 request_low_latency(ser)
 
             switches = failed = 0
+            echoes = []  # ECHOs each confirmed switch took (more than one: the first arrived before the sphere's switch)
             fallbacks_s = []
             t0 = time.monotonic()
             for k in range(args.rounds):
                 if k % 2 == 0:  # up and back, each confirmed
                     for baud in (args.baud, DEFAULT_BAUD):
-                        reply = link.command(SetBaud(baud), timeout_s=1.0, retries=0)
-                        if reply is None or not reply.ok:
+                        done = switch_baud(link, baud, port_to)  # the daemon's own procedure
+                        echoes.append(done.echoes)
+                        if not done.ok:
                             failed += 1
-                            print(f"round {k}: no OK to SET_BAUD {baud}", file=sys.stderr)
-                            break
-                        port_to(baud)
-                        if link.command(Echo(), timeout_s=1.0, retries=0) is None:
-                            failed += 1
-                            print(f"round {k}: no REPLY to ECHO at {baud}", file=sys.stderr)
-                            port_to(DEFAULT_BAUD)
-                            link.pump(1.5)
+                            print(f"round {k}: " + (f"no answer at {baud} ({done.echoes} ECHOs)" if done.echoes else
+                                                    f"SET_BAUD {baud}: {done.why}"), file=sys.stderr)
+                            link.pump(1.5)  # the sphere comes back to 115200 by itself
                             break
                         switches += 1
                         link.pump(0.3)
                 else:  # never confirmed: the sphere must come back by itself
-                    reply = link.command(SetBaud(args.baud), timeout_s=1.0, retries=0)
+                    reply = link.command(SetBaud(args.baud), timeout_s=SET_BAUD_REPLY_S, retries=0)
                     if reply is None or not reply.ok:
                         failed += 1
                         continue
@@ -152,6 +151,7 @@ def run(args) -> int:
               "frames_lost": delta["frames_lost"], "crc_errors": delta["crc_errors"],
               "framing_errors": delta["framing_errors"], "bytes_skipped": delta["bytes_skipped"],
               "stale_frames": counter.stale, "wall_s": wall,
+              "echoes_resent": sum(n - 1 for n in echoes if n > 1),
               "garbled_bytes_to_host": board_stats.get("garbled_bytes_to_host"),
               "garbled_bytes_to_device": board_stats.get("garbled_bytes_to_device")}
     ok = (not failed and not result["frames_lost"] and not result["seq_gaps"] and not result["crc_errors"]
@@ -161,7 +161,9 @@ def run(args) -> int:
           f"fall-backs ({failed} failed) in {wall:.0f} s")
     print(f"frames ok {result['frames_ok']}, seq gaps {result['seq_gaps']} ({result['frames_lost']} lost), "
           f"CRC errors {result['crc_errors']}, framing errors {result['framing_errors']}, bytes skipped "
-          f"{result['bytes_skipped']}, stale frames {result['stale_frames']}")
+          f"{result['bytes_skipped']}, stale frames {result['stale_frames']}; ECHOs sent again "
+          f"{result['echoes_resent']}, garbled bytes to the sphere {result['garbled_bytes_to_device']}, to the host "
+          f"{result['garbled_bytes_to_host']}")
     if fallbacks_s:
         print(f"never confirmed -> next sample at 115200 (the sphere's clock): median {result['fallback_s']['median']:.2f} s, "
               f"max {result['fallback_s']['max']:.2f} s (target <= 2 s)")

@@ -54,16 +54,24 @@ class DeviceLink:
         return LinkLost(f"{self.name} went away ({e}); is the sphere still plugged in (or paired)? "
                         "Run the command again once it is back")
 
-    def send(self, packet) -> int:
-        """Send one command; returns the ``seq`` it went out with (the REPLY echoes it in ``cmd_seq``)."""
+    def send(self, packet, delimit_first: bool = False) -> int:
+        """Send one command; returns the ``seq`` it went out with (the REPLY echoes it in ``cmd_seq``).
+        ``delimit_first``: a 0x00 before it, in the same write (ends whatever garbage the device holds, spec §2)."""
         seq = self.tx_seq
         try:
-            self.port.write(encode_frame(packet, seq))
+            self.port.write(b"\x00" * delimit_first + encode_frame(packet, seq))
         except self._errors as e:
             raise self._lost(e) from None
         self.tx_seq = (seq + 1) & 0xFF
         self.sent += 1
         return seq
+
+    def send_delimiter(self) -> None:
+        """A lone 0x00 (spec §2: any time): the next frame starts clean."""
+        try:
+            self.port.write(b"\x00")
+        except self._errors as e:
+            raise self._lost(e) from None
 
     def read(self) -> list:
         """One read of what has arrived (waiting at most the port's timeout): the packets it completed."""

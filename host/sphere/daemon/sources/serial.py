@@ -24,12 +24,13 @@ import serial
 from serial.tools import list_ports
 
 from sphere.daemon.sources.base import LinkLost, Source, SourceError, reconnect_interval_s, version_problem
+from sphere.link.baud import CONFIRM_S, switch_baud
 from sphere.link.clock import DeviceClock, SampleAges
 from sphere.link.device import DeviceLink
 from sphere.link.device_settings import SettingError, current_from_settings, parse_assignment, plan_settings, show
 from sphere.link.port import (PortBusy, PortError, check_baud, open_port, port_problem, request_low_latency,
                               switchable_port)
-from sphere.protocol import Echo, GetHello, Hello, PacketStream, RawSample, Reply, SetBaud
+from sphere.protocol import Echo, GetHello, Hello, PacketStream, RawSample, Reply
 from sphere.protocol.packets import DEFAULT_BAUD, GetSettings
 from sphere.settings import Param, str_list
 
@@ -45,9 +46,6 @@ ECHO_EVERY_S = 0.5
 #: back to 115200: the sphere went back
 FALLBACK_S = 0.5
 GARBAGE_BYTES = 32
-#: how long the switch waits for the REPLY to SET_BAUD, then for the one to ECHO at the new rate (the sphere's own
-#: confirmation window is 1 s: spec §5.4)
-SWITCH_REPLY_S = 1.0
 
 
 _HEX = frozenset("0123456789abcdefABCDEF")
@@ -385,21 +383,18 @@ class SerialSource(Source):
             self.link.on_packet = None
 
     def _switch_to(self, path: str, target: int) -> bool:
-        self.serial.write(b"\x00")  # ends whatever the sphere took in at another rate, so SET_BAUD arrives whole
-        reply = self.link.command(SetBaud(target), timeout_s=SWITCH_REPLY_S, retries=0)
-        if reply is None or not reply.ok:
-            self.log(f"{path}: the sphere did not take {target} baud "
-                     f"({'no reply' if reply is None else reply.to_json()['result']}); staying at {self.baud}")
+        done = switch_baud(self.link, target, self._set_port_baud)
+        if not done.ok and done.why != "no answer":
+            self.log(f"{path}: the sphere did not take {target} baud ({done.why}); staying at {self.baud}")
             return False
-        self._set_port_baud(target)
-        if self.link.command(Echo(), timeout_s=SWITCH_REPLY_S, retries=0) is None:  # its first frame at the new rate
-            self._set_port_baud(DEFAULT_BAUD)  # the sphere comes back by itself within 1 s (no frame from us)
-            self.log(f"{path}: no answer at {target} baud: back to {DEFAULT_BAUD}")
+        if not done.ok:  # the port is back at 115200; the sphere follows within 1 s, sending nothing meanwhile
+            self.log(f"{path}: no answer at {target} baud ({done.echoes} ECHOs in {CONFIRM_S:g} s): back to "
+                     f"{DEFAULT_BAUD}")
             return False
         self.clock.restart(target)
         self._good_frames, self._good_at = self.stream.stats.frames_ok, time.monotonic()
         self._bytes_at_good = self.stream.stats.bytes_in
-        self.log(f"{path}: link at {target} baud")
+        self.log(f"{path}: link at {target} baud" + (f" (confirmed by ECHO {done.echoes})" if done.echoes > 1 else ""))
         return True
 
     def _take_held(self) -> list:
@@ -411,7 +406,6 @@ class SerialSource(Source):
         if self.low_latency:
             request_low_latency(self.serial)
         self.link_baud = baud
-        self.serial.write(b"\x00")  # a delimiter at the new rate first (spec §2: any time): the next frame starts clean
 
     def _watch_rate(self) -> None:
         """At a rate other than 115200: bytes for FALLBACK_S of which none made an intact frame mean the sphere went
@@ -425,6 +419,7 @@ class SerialSource(Source):
             self.log(f"{self.port_name}: nothing intact at {self.link_baud} baud for {FALLBACK_S:g} s: back to "
                      f"{DEFAULT_BAUD}", logging.WARNING)
             self._set_port_baud(DEFAULT_BAUD)
+            self.link.send_delimiter()  # ends what the sphere took in of ours at the other rate
             self.clock.restart(DEFAULT_BAUD)
             self._good_at, self._bytes_at_good = now, s.bytes_in
             self._heard_at_default = s.frames_ok  # once the sphere is heard at 115200, up again
