@@ -273,3 +273,61 @@ def test_a_driver_without_low_latency_is_said_once_at_debug(caplog):
         serial_mod.open_port = real
     lines = [r for r in caplog.records if "low-latency" in r.getMessage()]
     assert len(opened) == 2 and len(lines) == 1 and lines[0].levelno == logging.DEBUG
+
+
+class UnpluggedDuringTheSwitch(FakeSphere):
+    """A version-3 sphere that answers GET_HELLO and is pulled out the moment SET_BAUD arrives (the host is in its
+    baud switch, spec §5.4)."""
+
+    def _run(self):
+        decoder = FrameDecoder("host")
+        while not self._stop.is_set():
+            try:
+                r, _, _ = select.select([self.master], [], [], 0.05)
+                if not r:
+                    continue
+                data = os.read(self.master, 256)
+            except OSError:
+                time.sleep(0.02)
+                continue
+            for p in decoder.feed(data):
+                if p.NAME == "GET_HELLO":
+                    self.get_hellos += 1
+                    hello = hello_packet()
+                    hello.protocol_version = 3
+                    os.write(self.master, ScriptedSphere().frame(hello))
+                elif p.NAME == "SET_BAUD":
+                    os.close(self.master)  # unplugged: the host's next read finds the port gone
+                    self.master = None
+                    return
+
+    def unplug(self):
+        self._stop.set()
+        self.thread.join(2)
+        if self.master is not None:
+            os.close(self.master)
+        os.unlink(self.link)
+
+
+def test_a_sphere_unplugged_during_the_baud_switch_is_looked_for_again(tmp_path):
+    """Pulled out while the host moves it to 1 Mbaud: the daemon says it lost the sphere and looks for it again, as
+    for any unplug (it ended with a LinkLost traceback from the switch's read)."""
+    link = tmp_path / "sphere"
+    logs = []
+    dev = UnpluggedDuringTheSwitch(link, [])
+    source = fast_serial(str(link), log=logs.append, link_timeout_s=30.0, baud_switch=1000000)
+    daemon, backend, thread = start_daemon(source)
+    try:
+        assert wait_for(lambda: source.losses == 1), logs
+        assert thread.is_alive(), logs
+        assert any("lost the sphere" in m for m in logs), logs
+        assert source.serial is None
+        os.unlink(link)
+        dev = FakeSphere(link, LEFT)  # plugged in again (a version-1 sphere: no switch)
+        assert wait_for(lambda: backend.x <= -238), (backend.x, logs)
+        assert source.connects == 1 and any("sphere found" in m for m in logs)
+    finally:
+        daemon.stop()
+        thread.join(5)
+        dev._stop.set()
+    assert not thread.is_alive()

@@ -162,7 +162,13 @@ class Source:
                     yield []
                     continue
                 last_try = now
-                packets = self._connect()
+                try:
+                    packets = self._connect()
+                except LinkLost as e:  # gone while being set up (unplugged during the hello or the baud switch)
+                    self.connected = True  # half set up: _lose closes what _connect opened
+                    self._lose(str(e))
+                    yield []
+                    continue
                 if packets is None:
                     yield []
                     continue
