@@ -444,17 +444,17 @@ static void uart_byte_arrives(uart_out_t *u, uint8_t byte, double avr_baud, avr_
 		u->garbled_out++;
 	}
 	u->bytes++;
-	double now_s = (double)written / u->avr->frequency; /* when the firmware wrote it into UDR0 */
 	if (byte == 0) {
 		if (u->last_nonzero) {
 			u->frames++;
-			if (u->host_log) /* "U first_byte_s delimiter_s": the firmware wrote them into UDR then */
-				fprintf(u->host_log, "U %.9f %.9f\n", u->frame_start_s, now_s);
+			if (u->host_log) /* "U first_byte_s delimiter_s": the first byte written into UDR0 (its start bit
+			                  * begins), the delimiter's stop bit over (now) */
+				fprintf(u->host_log, "U %.9f %.9f\n", u->frame_start_s, (double)u->avr->cycle / u->avr->frequency);
 		}
 		u->last_nonzero = 0;
 	} else {
 		if (!u->last_nonzero)
-			u->frame_start_s = now_s;
+			u->frame_start_s = (double)written / u->avr->frequency;
 		u->last_nonzero = 1;
 	}
 	if (!u->host_reading) { /* the adapter keeps what fits in its buffer and drops the rest */
