@@ -269,14 +269,15 @@ static void host_deliver(uart_out_t *u)
 			nanosleep(&ts, NULL);
 		}
 	}
+	/* the time is read before the write: a host woken by it (sphere-mouse's loop runs in real time) may run its
+	 * whole frame before this thread gets the core back, and a time read after would leave that out */
+	struct timespec now;
+	clock_gettime(CLOCK_MONOTONIC, &now);
 	ssize_t w = write(u->pty_fd, u->out, u->n_out); /* non-blocking: nobody reading drops, as a full adapter does */
 	if (w < (ssize_t)u->n_out)
 		u->pty_dropped += u->n_out - (w > 0 ? (uint32_t)w : 0);
-	if (u->host_log && u->out_delims) {
-		struct timespec now;
-		clock_gettime(CLOCK_MONOTONIC, &now);
+	if (u->host_log && u->out_delims)
 		fprintf(u->host_log, "P %.9f %lld %u\n", sim_s, (long long)now.tv_sec * 1000000000LL + now.tv_nsec, u->out_delims);
-	}
 	u->n_out = u->out_delims = 0;
 }
 

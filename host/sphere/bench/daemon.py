@@ -7,8 +7,9 @@
    (a steady turn, so every sample moves the pointer); the daemon (SerialSource → SphereMouse) runs in
    another thread with a backend that notes ``time.perf_counter_ns()`` when it is called, with the
    settings a user has by default (the host's gyro-bias estimator on; the 3-D stream, a separate
-   server, off). Reported: from the moment the frame's last byte was written into the pty to the
-   backend call (p50, p99, max), and the part of it after the source's read returned (what the
+   server, off). Reported: from the moment the frame's write into the pty began (the time is read just
+   before the write: a daemon woken by it may finish before the writer runs again) to the backend call (p50,
+   p99, max), and the part of it after the source's read returned (what the
    daemon's own work adds: decoding, duplicate check, bias, fusion filter, smoothing, the move).
    For comparison, the floor: the same pty path read by a bare ``select`` + ``os.read`` loop.
 2. **CPU**, out of process: the real ``sphere-mouse --port PTY --backend log`` as a subprocess fed at
@@ -58,7 +59,7 @@ from sphere.protocol import FrameDecoder
 
 class PtySphere:
     """A sphere behind a pty, in its own process (so it never holds the daemon's GIL): answers GET_HELLO
-    with HELLO, then writes one RAW_SAMPLE per period and notes when each one's last byte was written.
+    with HELLO, then writes one RAW_SAMPLE per period and notes when each one's write began.
     ``time.perf_counter_ns`` is CLOCK_MONOTONIC on Linux, the same clock in both processes."""
 
     def __init__(self, rate_hz: float, seconds: float, orientation: bool = False):
@@ -105,9 +106,12 @@ class PtySphere:
             if wait > 0:
                 time.sleep(wait)
             t_next += period
+            # the time before the write: a daemon the write wakes may run its whole frame before this process gets
+            # the core back (its loop at a raised priority: sphere.daemon.priority), and a time read after it
+            # would leave that out (latencies below zero were seen)
+            written[frames[0][0]] = time.perf_counter_ns()
             for _, f in frames:
                 os.write(self.master, f)
-            written[frames[0][0]] = time.perf_counter_ns()
             self._frames.value += len(frames)
         self._results.put(written)
         self.done.set()
@@ -192,8 +196,8 @@ def baseline(seconds: float, rate: float):
         if wait > 0:
             time.sleep(wait)
         t_next += period
+        written.append(time.perf_counter_ns())  # before the write, as PtySphere
         os.write(master, frame)
-        written.append(time.perf_counter_ns())
     time.sleep(0.1)
     stop.set()
     t.join(2)
@@ -340,7 +344,7 @@ def measure(seconds: float, rate: float, orientation: bool, set_items=()) -> dic
 
 
 def report(r: dict) -> None:
-    print(f"latency, last byte written → backend call ({r['calls']} pointer moves of {r['frames']} frames):")
+    print(f"latency, write into the pty → backend call ({r['calls']} pointer moves of {r['frames']} frames):")
     print(f"  p50 {r['p50_us']:7.0f} µs   p99 {r['p99_us']:7.0f} µs   max {r['max_us']:7.0f} µs")
     print(f"  of which after the read returned: p50 {r['after_read_p50_us']:.0f} µs, p99 {r['after_read_p99_us']:.0f} µs")
     print(f"  floor on this machine now (same pty and writer, a bare os.read loop): p50 {r['floor_p50_us']:.0f} µs, "
