@@ -110,3 +110,20 @@ def test_bench_position_cross_validates_the_stream_position_filter(broad_dir, tm
     assert euro["rmse_lateral_m"] <= 1.3 * none["rmse_lateral_m"]
     assert doc["choice"]["filter"] in ("none", "one-euro")
     assert "chosen on the train stretches" in capsys.readouterr().out
+
+
+def test_bench_tracker_breaks_a_loss_down_frame_by_frame(broad_dir, capsys):
+    """`sphere bench tracker --breakdown` (issue 30): the AR view's drawn centre through the 1 s loss of the fast trial,
+    frame by frame (drawn, the stamp's share, the tracker's), then each cause taken away in turn. On 16:40 the
+    accelerometer's offset from the ball's centre is the cause the defaults now model: taking the accelerometer to be
+    at the centre leaves fewer of the loss's frames within 3 px."""
+    assert main(["bench", "tracker", "--breakdown", "16:40"]) == 0
+    out = capsys.readouterr().out
+    frames = [line.split() for line in out.splitlines() if line.startswith("  ") and line.split()[0][0].isdigit()]
+    assert len(frames) >= 25 and all(len(f) == 4 for f in frames)  # ~30 frames of 1/30 s in the loss
+
+    def share(label):
+        line = next(line for line in out.splitlines() if line.startswith(label))
+        return float(line[len(label):].split("%")[0])
+
+    assert share("the daemon's path (the defaults)") > share("accelerometer at the centre (lever_sigma_m 0)") + 10, out

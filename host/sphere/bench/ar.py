@@ -36,6 +36,8 @@ HELP = "the AR view's drawn centre vs the ball's true centre per stage (stamp, f
 
 TARGET_PX = 3.0
 TARGET_SHARE = 0.95
+#: this tree's rows (beside another revision's with --against)
+THIS = "this"
 
 
 def add_arguments(p) -> None:
@@ -46,6 +48,8 @@ def add_arguments(p) -> None:
     p.add_argument("--lead", type=argtypes.seconds, default=5.0,
                    help="seconds of the sphere before the camera's first frame (default 5)")
     p.add_argument("--json", metavar="OUT", type=argtypes.out_file, help="write the figures as JSON")
+    p.add_argument("--against", metavar="REV", help="also run every stretch with the sphere-mouse of this git revision "
+                   "of the repository (its host/ from git archive), side by side in the same run")
 
 
 def judge(messages, rt, lead_s: float) -> dict:
@@ -99,11 +103,21 @@ def run(args) -> int:
         return code
     tmp = tempfile.TemporaryDirectory(prefix="sphere-bench-ar-")
     folder = Path(tmp.name)
+    sides = [(THIS, None)]
+    if args.against:  # that revision's host/ first: a wrong name is a usage error before any work
+        from sphere.bench._revision import RevisionError, tree_of  # --against only
+        try:
+            (folder / "against").mkdir()
+            sides.append((args.against, tree_of(args.against, str(folder / "against"))))
+        except RevisionError as e:
+            tmp.cleanup()
+            print(f"sphere bench ar: {e}", file=sys.stderr)
+            return 2
     doc = {"speed": args.speed, "seconds": args.seconds, "lead_s": args.lead, "target_px": TARGET_PX,
-           "target_share": TARGET_SHARE, "trials": {}}
+           "target_share": TARGET_SHARE, "against": args.against, "trials": {}}
     print(f"sphere-mouse --replay SESSION --speed {args.speed:g} (default config), the page's frame messages: the "
           f"drawn centre within {TARGET_PX:g} px of the true one, and where the error comes from")
-    worst = 1.0
+    worst = {tree: 1.0 for tree, _ in sides}
     try:
         for name, start in stretches:
             try:
@@ -116,24 +130,34 @@ def run(args) -> int:
             if session.exists():
                 shutil.rmtree(session)
             bases = trials.write_session(rt, session, lead_s=args.lead)
-            fig = judge(replay(session, args.speed, folder, types=("frame",)), rt, bases["lead_s"])
-            doc["trials"][f"{rt.name}:{start:g}"] = fig
-            print(f"\n{rt.name}:{start:g}: {fig['frames']} of {fig['of']} frames drawn")
-            if not fig["frames"]:
-                worst = 0.0
-                continue
-            worst = min(worst, fig["within"])
-            print(f"  within {TARGET_PX:g} px: {100 * fig['within']:.1f} % of the frames; ball seen "
-                  f"{100 * fig['within_seen']:.1f} %, in the 1 s loss {100 * (fig['within_loss'] or 0):.1f} % of "
-                  f"{fig['loss_frames']} (worst {fig['worst_loss_px'] or 0:.1f} px)")
-            print(f"  {'stage':10}{'within':>9}{'median px':>11}{'p95 px':>9}")
-            for stage, s in fig["stages"].items():
-                print(f"  {stage:10}{100 * s['within']:>8.1f}%{_num(s['median_px']):>11}{_num(s['p95_px']):>9}")
+            figs = {}
+            for tree, host_dir in (sides if len(doc["trials"]) % 2 == 0 else sides[::-1]):  # who goes first alternates
+                figs[tree] = judge(replay(session, args.speed, folder, types=("frame",), host_dir=host_dir), rt,
+                                   bases["lead_s"])
+            doc["trials"][f"{rt.name}:{start:g}"] = figs[THIS]
+            if args.against:
+                doc.setdefault("against_trials", {})[f"{rt.name}:{start:g}"] = figs[args.against]
+            for tree, _ in sides:
+                fig = figs[tree]
+                side = f" ({tree})" if args.against else ""
+                print(f"\n{rt.name}:{start:g}{side}: {fig['frames']} of {fig['of']} frames drawn")
+                if not fig["frames"]:
+                    worst[tree] = 0.0
+                    continue
+                worst[tree] = min(worst[tree], fig["within"])
+                print(f"  within {TARGET_PX:g} px: {100 * fig['within']:.1f} % of the frames; ball seen "
+                      f"{100 * fig['within_seen']:.1f} %, in the 1 s loss {100 * (fig['within_loss'] or 0):.1f} % of "
+                      f"{fig['loss_frames']} (worst {fig['worst_loss_px'] or 0:.1f} px)")
+                print(f"  {'stage':10}{'within':>9}{'median px':>11}{'p95 px':>9}")
+                for stage, s in fig["stages"].items():
+                    print(f"  {stage:10}{100 * s['within']:>8.1f}%{_num(s['median_px']):>11}{_num(s['p95_px']):>9}")
     finally:
         tmp.cleanup()
-    state = "met" if worst >= TARGET_SHARE else "MISSED"
-    print(f"\ntarget: ≥ {100 * TARGET_SHARE:.0f} % of the frames within {TARGET_PX:g} px on every stretch: {state} "
-          f"(worst {100 * worst:.1f} %)")
+    for tree, _ in sides:
+        state = "met" if worst[tree] >= TARGET_SHARE else "MISSED"
+        side = f" ({tree})" if args.against else ""
+        print(f"\ntarget{side}: ≥ {100 * TARGET_SHARE:.0f} % of the frames within {TARGET_PX:g} px on every stretch: "
+              f"{state} (worst {100 * worst[tree]:.1f} %)")
     if args.json:
         Path(args.json).write_text(json.dumps(doc, indent=2, default=float))
         print(f"wrote {args.json}", file=sys.stderr)

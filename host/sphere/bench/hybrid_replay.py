@@ -51,15 +51,20 @@ def add_arguments(p) -> None:
     p.add_argument("--json", metavar="OUT", type=argtypes.out_file, help="write the figures as JSON")
 
 
-def replay(session, speed: float, home, extra_args=(), types=("orientation",)) -> list[dict]:
+def replay(session, speed: float, home, extra_args=(), types=("orientation",), host_dir=None) -> list[dict]:
     """Every message of those ``types`` of `sphere-mouse --replay SESSION` on its WebSocket, until it ends (with
-    "frame" among them, the client subscribes to the camera's frames as the page's AR view does)."""
+    "frame" among them, the client subscribes to the camera's frames as the page's AR view does). ``host_dir``: the
+    ``host/`` folder of another revision whose sphere-mouse runs (``--against``), else this tree's."""
     from websockets.asyncio.client import connect  # optional: websockets (the daemon extra)
 
-    proc = subprocess.Popen([sys.executable, "-m", "sphere.mouse", "--replay", str(session), "--speed", f"{speed:g}",
+    env = {**os.environ, "HOME": str(home)}
+    python = [sys.executable]
+    if host_dir is not None:  # -P: that tree's package, never one in the current folder
+        env["PYTHONPATH"] = str(host_dir)
+        python.append("-P")
+    proc = subprocess.Popen([*python, "-m", "sphere.mouse", "--replay", str(session), "--speed", f"{speed:g}",
                              "--backend", "log", "--stream-port", "0", "--quiet", *extra_args],
-                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
-                            env={**os.environ, "HOME": str(home)})
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, env=env)
     try:
         port = None
         lines = []

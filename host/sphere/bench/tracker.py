@@ -56,7 +56,7 @@ LATENCY_S = 0.040  # [camera] latency_ms's default
 #: the tracker's settings as issue 30 left them: the alignment as CameraAlignment solved it, the host filter's
 #: orientation (position_at's use of a fix's own state, a fix, is in every row)
 BEFORE = {"align_sigma_deg": 0.0, "orientation_tau_s": 0.0, "bias_walk": 0.05, "accel_noise": 0.5,
-          "timing_sigma_s": 0.003}
+          "timing_sigma_s": 0.003, "lever_sigma_m": 0.0}
 BEFORE_NAME = "issue 30's settings"
 _PICK = {"align_sigma_deg": 8.0, "align_walk_deg": 0.1, "orientation_tau_s": 2.0, "bias_walk": 0.02}
 #: name → CameraImuTracker settings: structure (each new part alone, then together) and parameters around them
@@ -78,6 +78,23 @@ CANDIDATES = {
     "... accel noise 1": {**BEFORE, **_PICK, "accel_noise": 1.0},
     "... timing 2 ms": {**BEFORE, **_PICK, "timing_sigma_s": 0.002},
     "... timing 4 ms": {**BEFORE, **_PICK, "timing_sigma_s": 0.004},
+    # the accelerometer's offset from the ball's centre in the state (its sd at the start), then the noise around it
+    "+ lever arm 1 cm": {**BEFORE, **_PICK, "lever_sigma_m": 0.01},
+    "+ lever arm 2 cm": {**BEFORE, **_PICK, "lever_sigma_m": 0.02},
+    "... lever, accel noise 0.25": {**BEFORE, **_PICK, "lever_sigma_m": 0.01, "accel_noise": 0.25},
+    "... lever, accel noise 1": {**BEFORE, **_PICK, "lever_sigma_m": 0.01, "accel_noise": 1.0},
+    "... lever, bias walk 0.01": {**BEFORE, **_PICK, "lever_sigma_m": 0.01, "bias_walk": 0.01},
+    # the second round, around the first round's pick (lever 1 cm, accel noise 0.25)
+    "... lever, accel noise 0.125": {**BEFORE, **_PICK, "lever_sigma_m": 0.01, "accel_noise": 0.125},
+    "... lever 0.5 cm, noise 0.25": {**BEFORE, **_PICK, "lever_sigma_m": 0.005, "accel_noise": 0.25},
+    "... lever, 0.25, bias 0.01": {**BEFORE, **_PICK, "lever_sigma_m": 0.01, "accel_noise": 0.25, "bias_walk": 0.01},
+    "... lever, 0.25, tau 4 s": {**BEFORE, **_PICK, "lever_sigma_m": 0.01, "accel_noise": 0.25,
+                               "orientation_tau_s": 4.0},
+    # the third round, around the second's pick (tau 4 s)
+    "... lever, 0.25, tau 8 s": {**BEFORE, **_PICK, "lever_sigma_m": 0.01, "accel_noise": 0.25,
+                               "orientation_tau_s": 8.0},
+    "... lever, 0.125, tau 4 s": {**BEFORE, **_PICK, "lever_sigma_m": 0.01, "accel_noise": 0.125,
+                                "orientation_tau_s": 4.0},
 }
 
 
@@ -123,22 +140,28 @@ def prepare(trial: str, start: float, seconds: float, seed: int = 1, lead_s: flo
     return Stretch(f"{trial}:{start:g}", trial, rt, frames, daemon_imu(rt, lead_s))
 
 
-def replay(st: Stretch, settings: dict, loss=(None, None)) -> np.ndarray:
-    """Per frame (after the warm-up): [t_mid, drawn error (px, inf where nothing is drawn), in the loss]."""
+def replay(st: Stretch, settings: dict, loss=(None, None), imu=None, exact_stamps: bool = False,
+           keep: dict | None = None) -> np.ndarray:
+    """Per frame (after the warm-up): [t_mid, drawn error (px, inf where nothing is drawn), in the loss, the stamp's
+    error (px: the truth at the stamp against the truth), the tracker's (px: drawn against the truth at the stamp)].
+    ``imu``: another feed than the daemon's (:func:`optical_imu`); ``exact_stamps``: each frame stamped with its true
+    exposure (what the frame clock's error costs); ``keep``: gets the tracker at the end ("tracker")."""
     rt = st.rt
     cam = rt.scene.camera
     trk = CameraImuTracker(**settings)
+    if keep is not None:
+        keep["tracker"] = trk
     clock = FrameClock(LATENCY_S, 1.0 / rt.scene.fps)
     a, b = loss
     rows = []
     k = 0
     order = sorted(range(len(st.frames)), key=lambda j: st.frames[j][0])
-    for t, q, acc, gyro in st.imu:
+    for t, q, acc, gyro in (st.imu if imu is None else imu):
         now = t + IMU_LATENCY_S
         while k < len(order) and st.frames[order[k]][0] <= now:
             t_arr, t_mid, fix, truth_px = st.frames[order[k]]
             k += 1
-            t_exp = clock(t_arr)
+            t_exp = t_mid if exact_stamps else clock(t_arr)
             hidden = a is not None and a <= t_mid < b
             status = None
             if fix is not None and not hidden:
@@ -147,10 +170,64 @@ def replay(st: Stretch, settings: dict, loss=(None, None)) -> np.ndarray:
             p = trk.position_at(t_exp + shift) if trk.x is not None else None
             if t_mid < SCORED_FROM_S:
                 continue
-            err = np.inf if p is None or p[2] <= 0 else float(np.linalg.norm(cam.project(p[None])[0] - truth_px))
-            rows.append((t_mid, err, hidden))
+            stamped_px = cam.project(rt.truth_cam(t_exp)[None])[0]
+            drawn_px = None if p is None or p[2] <= 0 else cam.project(p[None])[0]
+            rows.append((t_mid, np.inf if drawn_px is None else float(np.linalg.norm(drawn_px - truth_px)), hidden,
+                         float(np.linalg.norm(stamped_px - truth_px)),
+                         np.inf if drawn_px is None else float(np.linalg.norm(drawn_px - stamped_px))))
         trk.imu(t, q, acc, lead_s=IMU_LATENCY_S, gyro_rad_s=gyro)
-    return np.array(rows, float).reshape(-1, 3)
+    return np.array(rows, float).reshape(-1, 5)
+
+
+def optical_imu(st: Stretch) -> list:
+    """The stretch's IMU in BROAD's own sensor frame with BROAD's optical orientation in place of the host filter's
+    (the orientation's share of the error): (t, q, acceleration m/s², rates rad/s) at each sample."""
+    sl = st.rt.trial
+    q = sl.opt_quat.copy()
+    good = np.all(np.isfinite(q), axis=1)
+    if not good.any():
+        return []
+    idx = np.maximum.accumulate(np.where(good, np.arange(len(q)), 0))  # gaps hold the last optical orientation
+    idx[: np.argmax(good)] = np.argmax(good)
+    q = q[idx]
+    return [(float(t), q[k], sl.acc_m_s2[k], sl.gyr_rad_s[k]) for k, t in enumerate(st.rt.t)]
+
+
+#: the rows of --breakdown: what the drawn centre's error in a loss is made of, each row one cause taken away
+BREAKDOWN = (
+    ("the daemon's path (the defaults)", {}, "daemon", False),
+    ("stamps exact", {}, "daemon", True),
+    ("accelerometer at the centre (lever_sigma_m 0)", {"lever_sigma_m": 0.0}, "daemon", False),
+    ("optical orientation (BROAD's), no own", {"orientation_tau_s": 0.0}, "optical", False),
+    ("optical orientation, stamps exact", {"orientation_tau_s": 0.0}, "optical", True),
+)
+
+
+def breakdown(st: Stretch, loss_start: float) -> None:
+    """Per frame of the 1 s loss at ``loss_start``: the drawn centre's error, the stamp's and the tracker's share;
+    then each cause of BREAKDOWN taken away in turn."""
+    loss = (loss_start, loss_start + LOSS_S)
+    keep = {}
+    rows = replay(st, {}, loss, keep=keep)
+    lost = rows[rows[:, 2] > 0]
+    trk = keep["tracker"]
+    print(f"{st.name}, the hand over the ball {loss[0]:g}-{loss[1]:g} s: the drawn centre per frame (px)")
+    print(f"  {'t s':>6} {'drawn':>7} {'stamp':>7} {'tracker':>8}")
+    for t, d, _, s, f in lost:
+        print(f"  {t:6.3f} {d:7.2f} {s:7.2f} {f:8.2f}")
+    if trk.x is not None and trk.lever_sigma > 0:
+        r, sd = 1000 * trk.x[12:15], 1000 * np.sqrt(np.diag(trk.P)[12:15])
+        print(f"the accelerometer's offset from the ball's centre as the tracker learnt it by the stretch's end "
+              f"(sensor axes, mm): {', '.join(f'{a:.1f} ± {b:.1f}' for a, b in zip(r, sd))}")
+    print(f"\n{'the same loss':48}{'within 3 px':>12}{'median':>8}{'max':>7}")
+    optical = None
+    for label, settings, feed, exact in BREAKDOWN:
+        if feed == "optical":
+            optical = optical_imu(st) if optical is None else optical
+        r = replay(st, settings, loss, imu=optical if feed == "optical" else None, exact_stamps=exact)
+        e = r[r[:, 2] > 0, 1]
+        print(f"{label:48}{100 * np.mean(e <= TARGET_PX):>11.0f}%{np.median(e):>8.2f}{e.max():>7.2f}" if len(e) else
+              f"{label:48}{'no frames':>12}")
 
 
 def scores(st: Stretch, settings: dict) -> dict:
@@ -167,6 +244,12 @@ def add_arguments(p) -> None:
     p.add_argument("--starts", default=",".join(f"{s:g}" for s in STARTS),
                    help="where the 12 s stretches start in each trial, s (default %(default)s)")
     p.add_argument("--json", metavar="OUT", type=argtypes.out_file, help="write every candidate's figures as JSON")
+    p.add_argument("--breakdown", metavar="TRIAL:START",
+                   help="instead: one stretch's 1 s loss frame by frame (the drawn centre's error, the stamp's and the "
+                        "tracker's share) and with each cause taken away in turn (exact stamps, the accelerometer at "
+                        "the centre, BROAD's optical orientation)")
+    p.add_argument("--loss-at", type=argtypes.non_negative, default=7.0,
+                   help="with --breakdown: where the 1 s loss starts in the stretch, s (default 7, hybrid-eval's hand)")
 
 
 def _starts(text: str):
@@ -191,6 +274,8 @@ def choose(scored: dict, trials_in: list) -> str:
 
 
 def run(args) -> int:
+    if args.breakdown:
+        return run_breakdown(args)
     names = [n.strip() for n in args.trials.split(",") if n.strip()]
     try:
         starts = _starts(args.starts)
@@ -242,6 +327,28 @@ def run(args) -> int:
         with open(args.json, "w") as f:
             json.dump(doc, f, indent=2)
         print(f"wrote {args.json}", file=sys.stderr)
+    return 0
+
+
+def run_breakdown(args) -> int:
+    name, _, start = args.breakdown.partition(":")
+    try:
+        start_s = float(start) if start else 40.0
+    except ValueError:
+        start_s = None
+    if not name.strip() or start_s is None or args.loss_at + LOSS_S > SECONDS:
+        print(f"sphere bench tracker: --breakdown {args.breakdown!r} --loss-at {args.loss_at:g}: give TRIAL:START_S "
+              f"(e.g. 16:40) and a loss that ends within the {SECONDS:g} s stretch", file=sys.stderr)
+        return 2
+    code = refused("sphere bench tracker", SECONDS, [name.strip()])
+    if code is not None:
+        return code
+    try:
+        st = prepare(name.strip(), start_s, SECONDS)
+    except ValueError as e:
+        print(f"sphere bench tracker: {e}", file=sys.stderr)
+        return 2
+    breakdown(st, args.loss_at)
     return 0
 
 

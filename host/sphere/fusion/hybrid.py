@@ -260,10 +260,20 @@ TIMING_SIGMA_S = 0.003
 ALIGN_SIGMA_DEG = 8.0
 ALIGN_WALK_DEG = 0.1
 ALIGN_AFTER_PAIRS = 15
-ORIENTATION_TAU_S = 2.0
+ORIENTATION_TAU_S = 4.0
 BIAS_WALK = 0.02
-#: the tracker's state: position, velocity, the acceleration's bias (camera frame) and the alignment's error
-N_STATE = 12
+#: the accelerometer's offset from the ball's centre (sensor frame) in the filter's state: its sd when the tracker starts
+#: (m); 0: not modelled. The camera sees the ball's centre, the accelerometer measures the acceleration of its own
+#: point, which differs by ω̇ × r + ω × (ω × r) while the ball turns (BROAD's IMU sits 7-8 mm off its optical
+#: origin: 0.1-0.4 m/s² at its trials' rates, half of what its acceleration is off the optical one's).
+#: Chosen by `sphere bench tracker`
+LEVER_SIGMA_M = 0.01
+#: the acceleration's noise in the prediction (m/s², white): what the IMU's acceleration is off the centre's after the
+#: offset, the bias and the alignment are taken out. Chosen by `sphere bench tracker` with the offset (0.5 without)
+ACCEL_NOISE = 0.125
+#: the tracker's state: position, velocity, the acceleration's bias (camera frame), the alignment's error and the
+#: accelerometer's offset from the ball's centre (sensor frame)
+N_STATE = 15
 
 
 def _rot(q) -> np.ndarray:
@@ -406,14 +416,18 @@ class CameraAlignment:
 class CameraImuTracker:
     """Position of the ball in the camera's frame from camera fixes (at their exposure times) and the IMU.
 
-    State x = [p, v, b, δ] (camera frame): position, velocity, the acceleration's slowly varying bias and, once
-    the alignment is known, its error δ (a small rotation in the earth frame, folded into R_ce after each fix).
+    State x = [p, v, b, δ, r] (camera frame): position, velocity, the acceleration's slowly varying bias and, once
+    the alignment is known, its error δ (a small rotation in the earth frame, folded into R_ce after each fix); r the
+    accelerometer's offset from the ball's centre (sensor frame).
     - **Predict** at the IMU's rate with its acceleration as the control input (chapter 3's "SF drives the
       process"): a_cam = R_ce Exp(δ) (R(q) a_sensor − g ẑ) with R_ce the estimated :class:`CameraAlignment` and
       q the tracker's own orientation: the gyro integrated and pulled toward the host orientation filter's with
-      a time constant of 2 s (the host filter follows the accelerometer, which swings while a hand shakes the
+      a time constant of 4 s (the host filter follows the accelerometer, which swings while a hand shakes the
       ball; its tilt errors leak gravity into the acceleration). Until the alignment is known the prediction is
       constant-velocity with a hand's acceleration as process noise.
+    - **Learn where the accelerometer sits**: the camera sees the ball's centre, the accelerometer measures the
+      acceleration of its own point r (sensor frame), which is the centre's + ω̇ × r + ω × (ω × r) while the ball
+      turns; r joins the state (1 cm sd at the start, constant) and the fixes correct it while the ball turns.
     - **Refine the alignment** while the ball is seen: from the moment CameraAlignment first solves it, δ joins the
       state (8° sd, a random walk of 0.1°/√s) and every fix corrects it with the rest of the state, so the IMU's
       prediction through a loss of the ball is turned the way the fixes say; CameraAlignment stops then.
@@ -431,13 +445,18 @@ class CameraImuTracker:
       position is reported unknown (None) until the camera finds the ball again.
     """
 
-    def __init__(self, accel_noise: float = 0.5, free_accel_noise: float = 20.0, bias_walk: float = BIAS_WALK,
+    def __init__(self, accel_noise: float = ACCEL_NOISE, free_accel_noise: float = 20.0, bias_walk: float = BIAS_WALK,
                  z_th: float = CAMERA_Z_TH, history_s: float = 0.3, reacquire_after: int = 3,
                  cam_floor_m=(0.0005, 0.0005, 0.002), timing_sigma_s: float = TIMING_SIGMA_S, use_imu: bool = True,
                  max_coast_s: float = 2.0, align_sigma_deg: float = ALIGN_SIGMA_DEG,
                  align_walk_deg: float = ALIGN_WALK_DEG, align_forget_s: float = 0.0, align_min_energy: float = 0.5,
-                 orientation_tau_s: float = ORIENTATION_TAU_S, align_after_pairs: int = ALIGN_AFTER_PAIRS):
+                 orientation_tau_s: float = ORIENTATION_TAU_S, align_after_pairs: int = ALIGN_AFTER_PAIRS,
+                 lever_sigma_m: float = LEVER_SIGMA_M):
         self.use_imu = use_imu
+        # the accelerometer's offset from the ball's centre, estimated from the fixes while the ball turns (needs the
+        # rates, ``gyro_rad_s``); 0: not modelled
+        self.lever_sigma = lever_sigma_m
+        self._w_prev = None  # (t, rates) of the last sample, for the angular acceleration
         # the orientation the acceleration is turned by: the gyro integrated and pulled to the host filter's with this
         # time constant (s), when the caller gives the rates; 0: the host filter's own
         self.orientation_tau_s = orientation_tau_s
@@ -460,7 +479,7 @@ class CameraImuTracker:
         self.g = STANDARD_GRAVITY_M_S2
         self.max_coast_s = max_coast_s
         self.t_fix = -np.inf  # exposure time of the last fix applied
-        self.hist: list = []  # [t, a_earth, x, P, q] after the prediction to t
+        self.hist: list = []  # [t, a_earth, x, P, q, L] after the prediction to t (L: _lever's matrix or None)
         self.heading_offset = 0.0  # rad, about the earth's vertical, kept by the marker
         self.marker_gate_rad = np.radians(10.0)
         self.marker_gain = 0.3
@@ -481,24 +500,46 @@ class CameraImuTracker:
         q_acc = q_sensor_to_earth
         if gyro_rad_s is not None and self.orientation_tau_s > 0:
             q_acc = self._smooth_orientation(t, q_sensor_to_earth, gyro_rad_s)
-        a_earth = _rot(q_acc) @ np.asarray(acc_sensor, float) - np.array([0.0, 0.0, self.g])
+        R_acc = _rot(q_acc)
+        a_earth = R_acc @ np.asarray(acc_sensor, float) - np.array([0.0, 0.0, self.g])
+        L = self._lever(t, R_acc, gyro_rad_s)
         self.alignment.add_imu(t, a_earth)
         if self.x is None:
-            self.hist.append([t, a_earth, None, None, q_sensor_to_earth])
+            self.hist.append([t, a_earth, None, None, q_sensor_to_earth, L])
             self._trim(t)
             self.t = t
             return None
         self._take_over()
-        self._predict(t - self.t, a_earth)
+        self._predict(t - self.t, a_earth, L)
         self.t = t
-        self.hist.append([t, a_earth, self.x.copy(), self.P.copy(), q_sensor_to_earth])
+        self.hist.append([t, a_earth, self.x.copy(), self.P.copy(), q_sensor_to_earth, L])
         self._trim(t)
         if t - self.t_fix > self.max_coast_s:
             return None  # too long on the IMU alone: the position is not known any more
         if lead_s <= 0:
             return self.x[:3].copy()
-        u = self.alignment.R @ a_earth - self.x[6:9] if (self.use_imu and self.alignment.ready) else 0.0
+        u = 0.0
+        if self.use_imu and self.alignment.ready:
+            u = self.alignment.R @ self._centre(a_earth, L, self.x) - self.x[6:9]
         return self.x[:3] + self.x[3:6] * lead_s + 0.5 * u * lead_s * lead_s
+
+    def _lever(self, t: float, R_acc, gyro_rad_s):
+        """L (earth frame, 3×3): the ball's centre accelerates by a − L r where the accelerometer measures a, r its offset
+        from the centre (sensor frame): L = R (ω̇× + ω×ω×), ω̇ from the rates of the last two samples. None without
+        the rates or with the offset not modelled."""
+        if self.lever_sigma <= 0 or gyro_rad_s is None:
+            return None
+        w = np.asarray(gyro_rad_s, float)
+        prev, self._w_prev = self._w_prev, (t, w)
+        dt = None if prev is None else t - prev[0]
+        w_dot = (w - prev[1]) / dt if dt is not None and 0.0 < dt < 0.1 else np.zeros(3)
+        W = _skew(w)
+        return R_acc @ (_skew(w_dot) + W @ W)
+
+    @staticmethod
+    def _centre(a_earth, L, x):
+        """The ball centre's acceleration (earth frame) from the accelerometer's, with the estimated offset."""
+        return a_earth if L is None else a_earth - L @ x[12:15]
 
     def _smooth_orientation(self, t: float, q_host, gyro_rad_s) -> np.ndarray:
         """The gyro integrated from the last sample (its rate over the step), then turned toward the host filter's
@@ -557,23 +598,30 @@ class CameraImuTracker:
             m = self._models[key] = (F, Q, F.T.copy())
         return m
 
-    def _predict(self, dt: float, a_earth) -> None:
-        self.x, self.P = self._step(self.x, self.P, dt, a_earth)
+    def _predict(self, dt: float, a_earth, L=None) -> None:
+        self.x, self.P = self._step(self.x, self.P, dt, a_earth, L)
 
-    def _step(self, x, P, dt: float, a_earth):
-        """(x, P) predicted dt ahead with the earth-frame acceleration a_earth."""
+    def _step(self, x, P, dt: float, a_earth, L=None):
+        """(x, P) predicted dt ahead with the earth-frame acceleration a_earth (of the accelerometer's point; L: see
+        _lever)."""
         if dt <= 0:
             return x, P
         R = self.alignment.R if self.use_imu else None
         F, Q, Ft = self._model(dt, R is not None)
-        if R is not None and self.alignment.frozen:
-            # the alignment's error δ (earth frame) turns the acceleration: R Exp(δ) a ≈ R a − R [a]× δ
-            M = -R @ _skew(a_earth)
+        a_c = self._centre(a_earth, L, x) if R is not None else a_earth
+        if R is not None and (self.alignment.frozen or L is not None):
             F = F.copy()
-            F[0:3, 9:12] = 0.5 * dt * dt * M
-            F[3:6, 9:12] = dt * M
+            if self.alignment.frozen:
+                # the alignment's error δ (earth frame) turns the acceleration: R Exp(δ) a ≈ R a − R [a]× δ
+                M = -R @ _skew(a_c)
+                F[0:3, 9:12] = 0.5 * dt * dt * M
+                F[3:6, 9:12] = dt * M
+            if L is not None:  # the offset r: the centre's acceleration is a − L r
+                N = -R @ L
+                F[0:3, 12:15] = 0.5 * dt * dt * N
+                F[3:6, 12:15] = dt * N
             Ft = F.T
-        x = F @ x
+        x = F @ x  # with L: F's columns moved p and v by −R L r already, the offset's part of the acceleration
         if R is not None:
             u = R @ a_earth
             x[0:3] += 0.5 * dt * dt * u
@@ -603,7 +651,7 @@ class CameraImuTracker:
         # predicted on to the exposure itself (the IMU's samples are 3.5 ms apart: the ball moves 10 mm in that at
         # 3 m/s), with the acceleration of the sample that ends the interval
         nxt = self.hist[k + 1] if k + 1 < len(self.hist) else self.hist[k]
-        x, P = self._step(self.hist[k][2], self.hist[k][3], t_exposure - self.hist[k][0], nxt[1])
+        x, P = self._step(self.hist[k][2], self.hist[k][3], t_exposure - self.hist[k][0], nxt[1], nxt[5])
         # the exposure time is known to a few ms (latency jitter, blur): that much motion is uncertain too
         v = x[3:6]
         Rm = Rm + self.timing_sigma_s ** 2 * np.outer(v, v)
@@ -639,7 +687,7 @@ class CameraImuTracker:
             x[9:12] = 0.0
         if t_exposure > self.hist[k][0]:  # the state at the exposure joins the history, the samples after follow it
             k += 1
-            self.hist.insert(k, [t_exposure, nxt[1], x, P, nxt[4]])
+            self.hist.insert(k, [t_exposure, nxt[1], x, P, nxt[4], nxt[5]])
         else:
             self.hist[k][2], self.hist[k][3] = x, P
         self._repropagate(k)
@@ -717,7 +765,7 @@ class CameraImuTracker:
     def _repropagate(self, k: int) -> None:
         self.x, self.P = self.hist[k][2].copy(), self.hist[k][3].copy()
         for i in range(k + 1, len(self.hist)):
-            self._predict(self.hist[i][0] - self.hist[i - 1][0], self.hist[i][1])
+            self._predict(self.hist[i][0] - self.hist[i - 1][0], self.hist[i][1], self.hist[i][5])
             self.hist[i][2], self.hist[i][3] = self.x.copy(), self.P.copy()
 
     def _consistent(self, fixes) -> bool:
@@ -731,7 +779,7 @@ class CameraImuTracker:
         res = zs - A @ coef
         return bool(np.abs(res).max() < self.z_th * np.linalg.norm(zs[-1]) * 0.5)
 
-    def _init(self, t, z, Rm, v=None, bias=None, P_align=None):
+    def _init(self, t, z, Rm, v=None, bias=None, P_align=None, lever=None):
         self.x = np.zeros(N_STATE)
         self.x[:3] = z
         if v is not None:
@@ -744,11 +792,15 @@ class CameraImuTracker:
         self.P[6:9, 6:9] = np.eye(3) * 0.3 ** 2
         if P_align is not None:  # a loss of the ball does not lose how the camera stands
             self.P[9:12, 9:12] = P_align
+        if lever is not None:  # nor where the accelerometer sits in it
+            self.x[12:15], self.P[12:15, 12:15] = lever
+        else:
+            self.P[12:15, 12:15] = np.eye(3) * self.lever_sigma ** 2
         # from the exposure to now with the IMU samples since (or held where there are none)
         later = [h for h in self.hist if h[0] > t]
         self.t = t
         for h in later:
-            self._predict(h[0] - self.t, h[1])
+            self._predict(h[0] - self.t, h[1], h[5])
             self.t = h[0]
             h[2], h[3] = self.x.copy(), self.P.copy()
         if not later:
@@ -761,6 +813,7 @@ class CameraImuTracker:
         coef, *_ = np.linalg.lstsq(A, zs, rcond=None)
         bias = self.x[6:9].copy() if self.x is not None else np.zeros(3)
         P_align = self.P[9:12, 9:12].copy() if self.P is not None else np.zeros((3, 3))
+        lever = (self.x[12:15].copy(), self.P[12:15, 12:15].copy()) if self.x is not None else None
         t_last, Rm = self.rejected[-1][0], self.rejected[-1][2]
         # restart at the last fix's exposure time, then run the IMU samples since
         keep = [h for h in self.hist if h[0] > t_last]
@@ -768,6 +821,6 @@ class CameraImuTracker:
         self.hist = self.hist[-1:] if self.hist else []
         self.x = None
         self.hist += keep
-        self._init(t_last, coef[0], Rm, v=coef[1], bias=bias, P_align=P_align)
+        self._init(t_last, coef[0], Rm, v=coef[1], bias=bias, P_align=P_align, lever=lever)
         self.rejected.clear()
         self.stats["reacquired"] += 1
