@@ -57,10 +57,16 @@ class FakeSphere:
                 continue
             self.received += len(data)
             for p in decoder.feed(data):
-                if p.NAME == "GET_HELLO" and self.answer:
-                    self.get_hellos += 1
-                    self._stream()
+                if self.on_command(p):
                     return
+
+    def on_command(self, p) -> bool:
+        """A command from the host; True ends the device's loop."""
+        if p.NAME == "GET_HELLO" and self.answer:
+            self.get_hellos += 1
+            self._stream()
+            return True
+        return False
 
     def _stream(self):
         sphere = ScriptedSphere()
@@ -279,27 +285,17 @@ class UnpluggedDuringTheSwitch(FakeSphere):
     """A version-3 sphere that answers GET_HELLO and is pulled out the moment SET_BAUD arrives (the host is in its
     baud switch, spec §5.4)."""
 
-    def _run(self):
-        decoder = FrameDecoder("host")
-        while not self._stop.is_set():
-            try:
-                r, _, _ = select.select([self.master], [], [], 0.05)
-                if not r:
-                    continue
-                data = os.read(self.master, 256)
-            except OSError:
-                time.sleep(0.02)
-                continue
-            for p in decoder.feed(data):
-                if p.NAME == "GET_HELLO":
-                    self.get_hellos += 1
-                    hello = hello_packet()
-                    hello.protocol_version = 3
-                    os.write(self.master, ScriptedSphere().frame(hello))
-                elif p.NAME == "SET_BAUD":
-                    os.close(self.master)  # unplugged: the host's next read finds the port gone
-                    self.master = None
-                    return
+    def on_command(self, p) -> bool:
+        if p.NAME == "GET_HELLO":
+            self.get_hellos += 1
+            hello = hello_packet()
+            hello.protocol_version = 3
+            os.write(self.master, ScriptedSphere().frame(hello))
+        elif p.NAME == "SET_BAUD":
+            os.close(self.master)  # unplugged: the host's next read finds the port gone
+            self.master = None
+            return True
+        return False
 
     def unplug(self):
         self._stop.set()
