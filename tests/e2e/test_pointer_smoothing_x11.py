@@ -49,6 +49,33 @@ def test_every_registry_filter_drives_the_x_pointer(xvfb, tmp_path, name):
     assert abs(x - (640 - 160)) <= 2 and abs(y - 512) <= 2, (name, x, y)
 
 
+def test_the_x_pointer_shows_the_pixel_nearer_the_motion(xvfb, tmp_path):
+    """A turn whose end lies 0.85–0.97 px past a whole pixel (where the daemon's own path puts it with its sub-pixel
+    remainder, `sphere.bench.drift.daemon_path` on the same capture): the X pointer ends on the nearer pixel with the
+    default `step_at_px` (0.8), one pixel short of it with whole pixels only (`step_at_px=1`, as before)."""
+    from sphere.bench.drift import daemon_path
+
+    for centideg in range(500, 560):  # a 10 °/s turn of 5.00–5.59° to the left: 240–268 px at 48 px/°
+        script = [("still", 1.0), ("turn", (0, 0, 1), 10.0, centideg / 1000.0), ("still", 0.6)]
+        end = -float(daemon_path(script_bytes(script))[-1, 3])  # px to the left, with the sub-pixel remainder
+        if 0.85 <= end - math.floor(end) <= 0.97:
+            break
+    else:
+        pytest.fail("no turn of 5.00-5.59 degrees ends 0.85-0.97 px past a pixel")
+    capture = tmp_path / "turn.bin"
+    capture.write_bytes(script_bytes(script))
+    ends = {}
+    for extra in ((), ("--set", "pointer.step_at_px=1")):
+        xdotool(xvfb, "mousemove", "640", "512")
+        r = run_mouse(xvfb, capture, "--speed", "0", "--set", "output.screen_width_px=1920", *extra)
+        assert r.returncode == 0, r.stderr
+        ends[extra] = pointer(xvfb)
+    print(f"a {centideg / 100:.2f}° turn: the daemon's path {end:.2f} px left; the X pointer "
+          f"{640 - ends[()][0]} px left (default), {640 - ends[extra][0]} px (step_at_px=1)")
+    assert ends[()] == (640 - math.ceil(end), 512)
+    assert ends[extra] == (640 - math.floor(end), 512)
+
+
 @pytest.mark.parametrize("setting, says", [
     ("pointer.smoothing=kalmann", "[pointer] smoothing = 'kalmann': must be one of 'none', 'tremor'"),
     ("stream.smoothing=wobble", "[stream] smoothing = 'wobble': must be one of"),

@@ -113,6 +113,7 @@ ROWS = [
     C(["--set", "pointer.hold_slow_window_s=0"], 2, "hold_slow_window_s"),
     C(["--set", "pointer.hold_pass_dps=-4"], 2, "hold_pass_dps"),
     C(["--set", "pointer.hold_pass_spread=lots"], 2, "hold_pass_spread"),
+    C(["--set", "pointer.step_at_px=0.3"], 2, "step_at_px"),
     C(["--set", "pointer.gyro_lowpass_hz=-42"], 2, "gyro_lowpass_hz"),
     C(["--set", "priority.realtime=100"], 2, "realtime"),
     C(["--set", "priority.realtime=2.5"], 2, "realtime"),

@@ -53,6 +53,33 @@ def test_remainders_are_symmetric():
     assert right[0] == -left[0]
 
 
+def test_a_whole_pixel_comes_at_step_at_px_and_a_quiver_inside_the_play_does_not_move_it():
+    """The pointer steps once the sub-pixel remainder reaches `step_at_px` (0.8 by default) either way: a slow move's
+    pixels come 0.2 px earlier than with whole pixels only (1, as before), and after a step the pointer goes back only
+    when the motion comes back past the threshold the other way (a play of 2 × 0.8 − 1 = 0.6 px)."""
+    m = PointerMapper(plain(), 1920)
+    assert m.emit(0.79, -0.79) == (0, 0)
+    assert m.emit(0.02, -0.02) == (1, -1)  # 0.81 px: the nearer pixel
+    for quiver in (-0.55, 0.7, -0.7, 0.55):  # the motion swings 0.55 px back and 0.15 px on: the pointer stays
+        assert m.emit(quiver, -quiver) == (0, 0)
+    assert m.emit(-0.62, 0.62) == (-1, 1)  # 0.62 px back from 0.81 (under 0.2 px): past the threshold the other way
+    old = PointerMapper(plain(step_at_px=1.0), 1920)
+    assert old.emit(0.99, -0.99) == (0, 0) and old.emit(0.02, -0.02) == (1, -1)
+
+
+@pytest.mark.parametrize("step_at, trails", [(0.8, 0.3), (1.0, 0.5), (0.5, 0.0)])
+def test_a_slow_move_shown_in_whole_pixels_trails_by_step_at_px_less_half_a_pixel(step_at, trails):
+    """A steady 1 °/s aim (0.24 px per sample): the whole pixels shown trail where the motion has got to by
+    `step_at_px` − 0.5 px on average (at 1, the old rule, half a pixel: 10 ms at 1 °/s, 3.5 ms at 3 °/s)."""
+    m = PointerMapper(plain(step_at_px=step_at, hold_band_dps=0.0), 1920)
+    x, gaps = 0, []
+    for _ in range(2000):
+        x += m.update((0, 0, -1.0), DT)[0]
+        gaps.append(m.remainder[0])  # where the motion is less the pixel shown
+    assert sum(gaps) / len(gaps) == pytest.approx(trails, abs=0.03)  # (its 25 values are 0.04 px apart)
+    assert x == int(480 - step_at + 1)  # 10 s at 48 px/s: 480 px of motion
+
+
 def test_acceleration_between_thresholds():
     s = plain(slow_deg_per_width=60, fast_deg_per_width=20, accel_low_dps=10, accel_high_dps=100)
     m = PointerMapper(s, 1200)

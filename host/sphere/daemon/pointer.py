@@ -23,7 +23,9 @@
    every stop, which tightening alone does not stop. A move, or a slow steady aim, ends the hold and brings
    what was held back of it at once; a single sample far above what the held hand's tremor reaches
    (``hold_pass_*``) moves the pointer at once, so a sharp move is not a sample late.
-6. **Sub-pixel remainders** carry over to the next sample, so slow motion is not lost to rounding.
+6. **Sub-pixel remainders** carry over to the next sample, so slow motion is not lost to rounding; a whole pixel
+   is stepped once the remainder reaches ``step_at_px`` (0.8: the shown pointer trails a slow move by 0.3 px on
+   average instead of half a pixel, and a quiver under 0.6 px does not move it).
 
 :class:`TiltMapper` makes the tilt from a recentred pose drive pointer *velocity*.
 """
@@ -70,6 +72,11 @@ POINTER_PARAMS = {
                                        "the held samples (time constant `hold_slow_window_s`: the tremor and noise this "
                                        "hand shows) times this must be exceeded too; 0 = `hold_pass_dps` alone",
         lo=0.0, hi=100.0),
+    "step_at_px": Param(0.8, doc="the pointer steps a whole pixel once what has built up below a pixel reaches this "
+                                 "(px, either way): 1 = only whole pixels (the shown pointer trails the motion by half "
+                                 "a pixel on average, 3.5 ms in a 3 °/s aim), 0.5 = the nearest pixel; what lies below "
+                                 "steps back only past the same threshold the other way, so a sub-pixel quiver of "
+                                 "2 × this − 1 px does not move it", lo=0.5, hi=1.0),
     "gyro_lowpass_hz": Param(98.0, doc="the gyro chip's own low-pass as the firmware sets it (ITG-3200 DLPF_CFG 2: "
                                        "98 Hz at its 1 kHz internal rate, firmware 0.3.2; 42 before): its ringing "
                                        "after a hard stop is turned into a critically damped response before the "
@@ -408,10 +415,11 @@ class PointerMapper:
         r = self.remainder
         r[0] += fx
         r[1] += fy
-        # towards zero: symmetric for left and right (a hair's allowance so 19.999999999 after many small
-        # steps of a float sum still gives its 20th pixel)
-        ix = int(r[0] + math.copysign(1e-9, r[0]))
-        iy = int(r[1] + math.copysign(1e-9, r[1]))
+        # a whole pixel from `step_at_px` on, symmetric for left and right (a hair's allowance so 19.799999999
+        # after many small steps of a float sum still gives its 20th pixel)
+        t = self.settings.step_at_px - 1e-9
+        ix = int(r[0] - t) + 1 if r[0] >= t else -(int(-r[0] - t) + 1) if r[0] <= -t else 0
+        iy = int(r[1] - t) + 1 if r[1] >= t else -(int(-r[1] - t) + 1) if r[1] <= -t else 0
         r[0] -= ix
         r[1] -= iy
         return ix, iy
