@@ -29,7 +29,7 @@ def test_bench_latency_rows_and_stages(tmp_path):
     for row in rows.values():
         s = row["stages_ms"]
         assert row["moves"] >= 3, row  # onsets after the daemon found the port, each moved the pointer
-        assert row["pointer_reads_per_s"] >= 1000
+        assert row["pointer"] == "events" and row["pointer_moves_reported"] >= row["moves"]
         # a RAW_SAMPLE frame at 115200 baud (10 bits a byte): its 30-odd bytes take 2.5-2.9 ms, and it pauses for
         # the MARG update (0.59 ms: sent before it, the UART's transmit interrupt held back during it)
         assert 3.0 <= s["wire"]["p50"] <= 3.6
@@ -96,7 +96,7 @@ def test_against_another_revision_runs_each_row_with_both_daemons_side_by_side(t
     need_board()
     out = tmp_path / "latency.json"
     r = subprocess.run([sys.executable, "-m", "sphere.cli", "bench", "latency", "--seconds", "9", "--adapters", "none",
-                        "--bauds", "115200", "--no-monitor", "--against", "HEAD", "--json", str(out)],
+                        "--bauds", "115200", "--no-monitor", "--against", "HEAD", "--pointer", "poll", "--json", str(out)],
                        capture_output=True, text=True, timeout=600)
     assert r.returncode == 0, r.stderr[-2000:]
     result = json.loads(out.read_text())
@@ -105,5 +105,6 @@ def test_against_another_revision_runs_each_row_with_both_daemons_side_by_side(t
     for row in result["rows"]:
         assert row["moves"] >= 3 and row["stages_ms"]["host"]["p50"] > 0, row
         assert row["pointer_read_gap_ms"]["max"] >= row["pointer_read_gap_ms"]["p99"]
+        assert row["pointer"] == "poll" and row["pointer_reads_per_s"] >= 1000
     assert "this tree / HEAD (the same rows, the same run):" in r.stdout
     assert "none at 115200 baud (HEAD)" in r.stderr and "none at 115200 baud (this)" in r.stderr

@@ -1,5 +1,5 @@
-"""A private X server (Xvfb) for benchmarks, and the X pointer read at a high rate: through libX11 (ctypes) or
-sampled in a thread with python-xlib."""
+"""A private X server (Xvfb) for benchmarks, and the X pointer read back: each move as the server reports it
+(libX11's MotionNotify, through ctypes), read at a high rate through libX11, or sampled in a thread with python-xlib."""
 
 from __future__ import annotations
 
@@ -7,6 +7,7 @@ import ctypes
 import ctypes.util
 import math
 import os
+import select
 import shutil
 import subprocess
 import threading
@@ -58,28 +59,39 @@ class Xvfb:
         self.close()
 
 
+def _libx11():
+    path = ctypes.util.find_library("X11")
+    if not path:
+        raise XvfbUnavailable("libX11 is not installed (apt-get install libx11-6)")
+    x = ctypes.CDLL(path)
+    x.XOpenDisplay.restype = ctypes.c_void_p
+    x.XOpenDisplay.argtypes = [ctypes.c_char_p]
+    x.XDefaultRootWindow.restype = ctypes.c_ulong
+    x.XDefaultRootWindow.argtypes = [ctypes.c_void_p]
+    ul, i, u = ctypes.c_ulong, ctypes.c_int, ctypes.c_uint
+    x.XQueryPointer.argtypes = [ctypes.c_void_p, ul, ctypes.POINTER(ul), ctypes.POINTER(ul), ctypes.POINTER(i),
+                                ctypes.POINTER(i), ctypes.POINTER(i), ctypes.POINTER(i), ctypes.POINTER(u)]
+    x.XCloseDisplay.argtypes = [ctypes.c_void_p]
+    x.XSelectInput.argtypes = [ctypes.c_void_p, ul, ctypes.c_long]
+    x.XConnectionNumber.argtypes = [ctypes.c_void_p]
+    x.XPending.argtypes = [ctypes.c_void_p]
+    x.XNextEvent.argtypes = [ctypes.c_void_p, ctypes.c_void_p]
+    x.XSync.argtypes = [ctypes.c_void_p, ctypes.c_int]
+    return x
+
+
 class PointerReader:
     """``XQueryPointer`` on the root window through libX11 directly: one round trip to the server (tens of µs),
     without python-xlib's per-request Python work, so the pointer can be read several thousand times a second."""
 
     def __init__(self, display: str):
-        path = ctypes.util.find_library("X11")
-        if not path:
-            raise XvfbUnavailable("libX11 is not installed (apt-get install libx11-6)")
-        x = ctypes.CDLL(path)
-        x.XOpenDisplay.restype = ctypes.c_void_p
-        x.XOpenDisplay.argtypes = [ctypes.c_char_p]
-        x.XDefaultRootWindow.restype = ctypes.c_ulong
-        x.XDefaultRootWindow.argtypes = [ctypes.c_void_p]
-        ul, i, u = ctypes.c_ulong, ctypes.c_int, ctypes.c_uint
-        x.XQueryPointer.argtypes = [ctypes.c_void_p, ul, ctypes.POINTER(ul), ctypes.POINTER(ul), ctypes.POINTER(i),
-                                    ctypes.POINTER(i), ctypes.POINTER(i), ctypes.POINTER(i), ctypes.POINTER(u)]
-        x.XCloseDisplay.argtypes = [ctypes.c_void_p]
+        x = _libx11()
         self._x = x
         self._d = x.XOpenDisplay(display.encode())
         if not self._d:
             raise XvfbUnavailable(f"cannot open X display {display}")
         self._root = x.XDefaultRootWindow(self._d)
+        ul, i, u = ctypes.c_ulong, ctypes.c_int, ctypes.c_uint
         self._w = (ul(), ul(), i(), i(), i(), i(), u())
         self._refs = tuple(ctypes.byref(v) for v in self._w)
 
@@ -91,6 +103,56 @@ class PointerReader:
         if self._d:
             self._x.XCloseDisplay(self._d)
             self._d = None
+
+
+class _XMotionEvent(ctypes.Structure):
+    """Xlib's XMotionEvent (X.h / Xlib.h), the fields up to the ones read here."""
+    _fields_ = [("type", ctypes.c_int), ("serial", ctypes.c_ulong), ("send_event", ctypes.c_int),
+                ("display", ctypes.c_void_p), ("window", ctypes.c_ulong), ("root", ctypes.c_ulong),
+                ("subwindow", ctypes.c_ulong), ("time", ctypes.c_ulong), ("x", ctypes.c_int), ("y", ctypes.c_int),
+                ("x_root", ctypes.c_int), ("y_root", ctypes.c_int), ("state", ctypes.c_uint),
+                ("is_hint", ctypes.c_char), ("same_screen", ctypes.c_int)]
+
+
+class _XEvent(ctypes.Union):
+    """Xlib's XEvent: a union padded to 24 longs."""
+    _fields_ = [("type", ctypes.c_int), ("xmotion", _XMotionEvent), ("pad", ctypes.c_long * 24)]
+
+
+#: X.h: the event type and the input mask of pointer motion
+MOTION_NOTIFY = 6
+POINTER_MOTION_MASK = 1 << 6
+
+
+class PointerEvents(PointerReader):
+    """Every move of the X pointer as the server reports it: ``MotionNotify`` selected on the root window (any number
+    of clients may select it; on a bare Xvfb the root is the window under the pointer), so the server sends each
+    move when it makes it, XTest's included, and nothing needs to ask. :meth:`wait` blocks on the connection's
+    socket; the time it returns is when the move reached this client."""
+
+    def __init__(self, display: str):
+        super().__init__(display)
+        self._x.XSelectInput(self._d, self._root, POINTER_MOTION_MASK)
+        self._x.XSync(self._d, 0)
+        self._fd = self._x.XConnectionNumber(self._d)
+        self._event = _XEvent()
+
+    def wait(self, timeout_s: float) -> bool:
+        """Whether the server has sent something within ``timeout_s`` (or it is queued already)."""
+        if self._x.XPending(self._d):
+            return True
+        return bool(select.select([self._fd], [], [], timeout_s)[0])
+
+    def moves(self) -> list[tuple[int, int]]:
+        """The pointer's position after each move reported since the last call (events that are not motion are
+        dropped)."""
+        out = []
+        ev = self._event
+        while self._x.XPending(self._d):
+            self._x.XNextEvent(self._d, ctypes.byref(ev))
+            if ev.type == MOTION_NOTIFY:
+                out.append((ev.xmotion.x_root, ev.xmotion.y_root))
+        return out
 
 
 class PointerSampler:

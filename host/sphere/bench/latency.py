@@ -20,8 +20,11 @@ pointer record, and its latency is split where the path can be split (all from t
 - ``wire``: that frame's first byte → its delimiter at the UART (its length at the baud rate; at 115200 with the
   MARG update's 0.6 ms pause in it: RAW_SAMPLE is sent before the update, firmware/README.md);
 - ``adapter``: the delimiter leaves the UART → the adapter hands the packet to the host (the pty write);
-- ``host``: the pty write → the X pointer moved (the daemon's read, decoding, filters, XTest, the X server,
-  and the pointer sampler's own period).
+- ``host``: the pty write → the X pointer moved (the daemon's read, decoding, filters, XTest, the X server). The
+  pointer is watched as any X client can see it move: the server's ``MotionNotify`` for each move, the time being
+  when it reached the watching client (``--pointer events``, the default). ``--pointer poll`` reads the pointer
+  with ``XQueryPointer`` instead, about 3,000 times a second: that adds the reads' period (0.3 ms median, 0.7–0.9
+  ms at p99 on an idle machine) to every host stage and keeps the X server busy answering.
 
 The frame that moved the pointer: of the pty writes before the move, the last one that carried the turn (a
 RAW_SAMPLE sent after the onset with a non-zero gyro reading: the board runs without noise), and in it the first
@@ -65,7 +68,7 @@ from pathlib import Path
 import numpy as np
 
 from sphere import argtypes
-from sphere.bench._xvfb import PointerReader, Xvfb, XvfbUnavailable
+from sphere.bench._xvfb import PointerEvents, PointerReader, Xvfb, XvfbUnavailable
 from sphere.bench._revision import RevisionError, tree_of
 from sphere.daemon.priority import thread_scheduling
 from sphere.errors import SphereError
@@ -91,6 +94,8 @@ class RowFailed(SphereError, RuntimeError):
 INSTRUMENTS_NICE = -10
 #: a row whose pointer sampler went this long without a read is named under the table
 SAMPLER_GAP_NOTE_MS = 5.0
+#: how the pointer's moves are seen (--pointer; PointerRecorder)
+POINTER_WATCH = ("events", "poll")
 #: a move this long after its onset is not this onset's (the next comes PERIOD_S later)
 MOVE_WINDOW_S = 0.25
 
@@ -113,6 +118,10 @@ def add_arguments(p) -> None:
     p.add_argument("--xvfb-nice", type=_nice_value, default=0, metavar="N",
                    help="nice value of Xvfb, the display server's stand-in, -20..0 (default 0: as the bench runs; "
                         "what a desktop's display server gets is the desktop's)")
+    p.add_argument("--pointer", choices=POINTER_WATCH, default=POINTER_WATCH[0],
+                   help="how the X pointer's moves are seen: events (the server's MotionNotify for each move, as it "
+                        "makes it; default) or poll (XQueryPointer about 3,000 times a second: the reads' period is "
+                        "added to the host stage)")
     p.add_argument("--against", metavar="REV", help="also run every row with the sphere-mouse of this git revision "
                                                    "(say main before a change), side by side, in alternating order")
 
@@ -264,24 +273,26 @@ def percentiles(values) -> dict:
 
 
 class PointerRecorder(threading.Thread):
-    """Reads the X pointer every 0.2 ms or so (the sleep plus one round trip) and keeps each change.
+    """Keeps each change of the X pointer with its time: ``watch="events"``, each ``MotionNotify`` the server sends
+    (:class:`PointerEvents`: the time is when the move reached this client, woken by its socket); ``"poll"``, the
+    pointer read every 0.2 ms or so (the sleep plus one round trip), a change timed when the read that saw it returned.
 
-    A move the sampler sees late is timed late, and counted in the wrong stage: the frames written meanwhile make it
-    look like a late frame (``age``). So what it keeps goes into flat arrays of integers (no object per read for
-    Python's garbage collector to count), and :func:`run_row` holds this process's automatic collection off while a
-    row runs (a full one takes ≈20 ms here, idle). What is left, a machine whose cores are all busy, shows: the
-    longest gap between reads is in the JSON and named under the table when over :data:`SAMPLER_GAP_NOTE_MS`."""
+    A move seen late is timed late, and counted in the wrong stage: the frames written meanwhile make it look like
+    a late frame (``age``). So what it keeps goes into flat arrays of integers (no object per read for Python's
+    garbage collector to count), and :func:`run_row` holds this process's automatic collection off while a row runs
+    (a full one takes ≈20 ms here, idle). When polling, the longest gap between reads is in the JSON and named under
+    the table when over :data:`SAMPLER_GAP_NOTE_MS`."""
 
-    def __init__(self, display: str, nice: int = 0):
+    def __init__(self, display: str, nice: int = 0, watch: str = "events"):
         super().__init__(daemon=True)
-
-        self.reader = PointerReader(display)
+        self.watch = watch
+        self.reader = PointerEvents(display) if watch == "events" else PointerReader(display)
         self.nice = nice
         self.scheduling = "unknown"  # how the sampler ran (sphere.daemon.priority.thread_scheduling)
         self.stop = threading.Event()
         self._changes = array.array("q")  # (monotonic ns, x, y) per change, flat
-        self.reads = 0
-        self.gaps_ns = array.array("q")
+        self.reads = 0  # reads (poll) or moves reported (events)
+        self.gaps_ns = array.array("q")  # poll: the time between reads
 
     @property
     def changes(self) -> np.ndarray:
@@ -295,10 +306,29 @@ class PointerRecorder(threading.Thread):
                 os.setpriority(os.PRIO_PROCESS, tid, self.nice)
         self.scheduling = thread_scheduling(os.getpid(), tid)
         pos = self.reader.position()
+        self._changes.extend((time.monotonic_ns(), *pos))
+        try:
+            (self._listen if self.watch == "events" else self._poll)(pos)
+        finally:
+            self.reader.close()
+
+    def _listen(self, pos):
+        keep, reader = self._changes.extend, self.reader
+        while not self.stop.is_set():
+            if not reader.wait(0.05):
+                continue
+            now = time.monotonic_ns()  # when the server's report woke this thread
+            for p in reader.moves():
+                self.reads += 1
+                if p != pos:
+                    pos = p
+                    keep((now, *p))
+        keep((time.monotonic_ns(), *pos))
+
+    def _poll(self, pos):
         last = time.monotonic_ns()
         keep = self._changes.extend
         gap = self.gaps_ns.append
-        keep((last, *pos))
         while not self.stop.is_set():
             p = self.reader.position()
             now = time.monotonic_ns()
@@ -310,7 +340,6 @@ class PointerRecorder(threading.Thread):
                 keep((now, *p))
             time.sleep(0.0002)  # about 3,000 reads a second on an idle machine: the sampler's period stays well under 1 ms
         keep((time.monotonic_ns(), *pos))
-        self.reader.close()
 
 
 @contextlib.contextmanager
@@ -335,9 +364,10 @@ THIS = "this"
 
 
 def run_row(name: str, baud: int, trace: Path, onsets_s, seconds: float, display: str, tmp: Path, elf,
-            tree: str = THIS, host_dir: str | None = None, instruments_nice: int = 0) -> dict:
+            tree: str = THIS, host_dir: str | None = None, instruments_nice: int = 0, pointer: str = "events") -> dict:
     """One row; ``host_dir``: the ``host/`` folder whose sphere-mouse runs (another revision's, --against), else
-    this tree's; ``instruments_nice``: the board's and the sampler's nice value (module docstring)."""
+    this tree's; ``instruments_nice``: the board's and the sampler's nice value (module docstring); ``pointer``: how
+    the pointer's moves are seen (:class:`PointerRecorder`)."""
     adapter, low_latency = ADAPTERS[name]
     log_path, cap_path = tmp / f"{name}-{baud}-{tree}.log", tmp / f"{name}-{baud}-{tree}.cap"
     with niced(instruments_nice):
@@ -345,7 +375,7 @@ def run_row(name: str, baud: int, trace: Path, onsets_s, seconds: float, display
                                                    host_log=log_path))
     board_scheduling = thread_scheduling(board.pid)
     mouse = None
-    recorder = PointerRecorder(display, instruments_nice)
+    recorder = PointerRecorder(display, instruments_nice, pointer)
     collecting = gc.isenabled()
     gc.disable()  # no collection in this process stalls the pointer sampler during the row (PointerRecorder)
     recorder.start()
@@ -392,15 +422,19 @@ def run_row(name: str, baud: int, trace: Path, onsets_s, seconds: float, display
     got = attribute(onsets_s, connected["ns"] + 500_000_000, frames, samples, log.t0_ns)
     gaps = np.asarray(recorder.gaps_ns, dtype=float) / 1e6
     fell_back = any("back to 115200" in line for line in connected.get("lines", []))
-    return {"row": name, "baud": baud, "tree": tree, "daemon_scheduling": scheduling,
-            "board_scheduling": board_scheduling, "sampler_scheduling": recorder.scheduling,
-            "fell_back_to_115200": fell_back, "onsets": len(onsets_s),
-            "moves": len(got["ms"]["total"]),
-            "missed": got["missed"], "unattributed": got["unattributed"], "skipped_before_connect": got["skipped"],
-            "stages_ms": {k: percentiles(v) for k, v in got["ms"].items()},
-            "pointer_reads_per_s": recorder.reads / max(1e-9, gaps.sum() / 1e3),
-            "pointer_read_gap_ms": {"p50": float(np.percentile(gaps, 50)), "p99": float(np.percentile(gaps, 99)),
-                                    "max": float(gaps.max())} if len(gaps) else {}}
+    row = {"row": name, "baud": baud, "tree": tree, "daemon_scheduling": scheduling,
+           "board_scheduling": board_scheduling, "sampler_scheduling": recorder.scheduling,
+           "fell_back_to_115200": fell_back, "onsets": len(onsets_s),
+           "moves": len(got["ms"]["total"]),
+           "missed": got["missed"], "unattributed": got["unattributed"], "skipped_before_connect": got["skipped"],
+           "stages_ms": {k: percentiles(v) for k, v in got["ms"].items()}, "pointer": pointer}
+    if pointer == "events":
+        row["pointer_moves_reported"] = recorder.reads
+    else:
+        row["pointer_reads_per_s"] = recorder.reads / max(1e-9, gaps.sum() / 1e3)
+        row["pointer_read_gap_ms"] = ({"p50": float(np.percentile(gaps, 50)), "p99": float(np.percentile(gaps, 99)),
+                                       "max": float(gaps.max())} if len(gaps) else {})
+    return row
 
 
 def true_ages(frames: list[Frame], log: HostLog, from_ns: int, to_ns: int) -> list[float]:
@@ -493,7 +527,7 @@ def run(args) -> int:
                         print(f"  {name} at {baud} baud{side}: {args.seconds:g} s ...", file=sys.stderr, flush=True)
                         try:
                             rows.append(run_row(name, baud, trace, onsets_s, args.seconds, xvfb.display, tmp, elf,
-                                                tree, host_dir, args.instruments_nice))
+                                                tree, host_dir, args.instruments_nice, args.pointer))
                         except RowFailed as e:
                             failed.append({"row": name, "baud": baud, "tree": tree, "error": str(e)})
                     k += 1
@@ -510,6 +544,7 @@ def run(args) -> int:
             revision.cleanup()
     result = {"seconds_per_row": args.seconds, "seed": args.seed, "load_average": [load_before, os.getloadavg()[0]],
               "instruments_nice": args.instruments_nice, "xvfb_nice": args.xvfb_nice, "xvfb_scheduling": xvfb_scheduling,
+              "pointer": args.pointer,
               "against": args.against, "rows": rows, "failed_rows": failed, "sample_age": monitor}
     report(result)
     if args.json:
@@ -520,6 +555,11 @@ def run(args) -> int:
 
 def _tree(r) -> str:
     return r.get("tree", THIS)
+
+
+def _watch(r) -> str:
+    """The pointer column: how the row saw the pointer (reads a second when it polled)."""
+    return f"{r['pointer_reads_per_s']:.0f}/s" if "pointer_reads_per_s" in r else r.get("pointer", "-")
 
 
 def report(result: dict) -> None:
@@ -538,7 +578,7 @@ def report(result: dict) -> None:
     tree_head = f"{'daemon':<{tw}} " if against else ""
     head = (f"{'adapter':<10} {'baud':>7} {tree_head}{'moves':>7} {'total p50':>9} {'p95':>6} {'p99':>6} {'max':>6} "
             f"{'vs 16ms':>7} | {'age p50':>7} {'p95':>5} | {'wire':>5} | {'adapter p50':>11} {'p95':>5} | "
-            f"{'host p50':>8} {'p95':>5} {'p99':>5} | {'lag p95':>7} {'reads/s':>7} | daemon loop")
+            f"{'host p50':>8} {'p95':>5} {'p99':>5} | {'lag p95':>7} {'pointer':>7} | daemon loop")
     print(head)
     for r in rows:
         s = r["stages_ms"]
@@ -555,7 +595,7 @@ def report(result: dict) -> None:
               f"{f('total', 'p50', 9)} {f('total', 'p95')} {f('total', 'p99')} {f('total', 'max')} {ratio} | "
               f"{f('age', 'p50', 7)} {f('age', 'p95', 5)} | {f('wire', 'p50', 5)} | {f('adapter', 'p50', 11)} "
               f"{f('adapter', 'p95', 5)} | {f('host', 'p50', 8)} {f('host', 'p95', 5)} {f('host', 'p99', 5)} | "
-              f"{f('lag', 'p95', 7)} {r['pointer_reads_per_s']:7.0f} | {r.get('daemon_scheduling', '-')}")
+              f"{f('lag', 'p95', 7)} {_watch(r):>7} | {r.get('daemon_scheduling', '-')}")
     if against:
         side_by_side(rows, against)
     def who(r):
@@ -565,7 +605,7 @@ def report(result: dict) -> None:
              for r in rows if r["missed"] or r["unattributed"]]
     notes += [f"{who(r)}: the daemon fell back to 115200 during the row" for r in rows if r.get("fell_back_to_115200")]
     held = [f"{who(r)} {r['pointer_read_gap_ms']['max']:.1f}" for r in rows
-            if r["pointer_read_gap_ms"].get("max", 0) > SAMPLER_GAP_NOTE_MS]
+            if r.get("pointer_read_gap_ms", {}).get("max", 0) > SAMPLER_GAP_NOTE_MS]
     if held:
         notes.append("the pointer sampler went without a read for longer than "
                      f"{SAMPLER_GAP_NOTE_MS:g} ms (a move in such a gap is seen late), longest in ms: " + ", ".join(held))
