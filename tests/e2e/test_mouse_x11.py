@@ -148,10 +148,12 @@ def test_pointer_mode_position_is_exact(xvfb, tmp_path):
     assert abs(x - (100 + 256)) <= 2 and abs(y - (100 + 102)) <= 2, (x, y)
 
 
-def test_pointer_moves_are_exact_under_x_pointer_acceleration_and_follow_other_moves(xvfb, tmp_path):
+@pytest.mark.parametrize("via", ["libXtst", "python-xlib"])
+def test_pointer_moves_are_exact_under_x_pointer_acceleration_and_follow_other_moves(xvfb, tmp_path, via):
     """The x11 backend moves by relative XTest motion (no read-back of the position on the pointer's path): the X
     server's pointer acceleration (`xset m 10 1`) must not touch it, and a move another client makes in between
-    (a real mouse, a warp) is kept: the next move starts from there."""
+    (a real mouse, a warp) is kept: the next move starts from there. Through libXtst (the default where it is
+    installed) and through python-xlib alike."""
     from Xlib import display
 
     from sphere.daemon.backends.x11 import X11Backend
@@ -170,25 +172,62 @@ def test_pointer_moves_are_exact_under_x_pointer_acceleration_and_follow_other_m
         x, y = pointer(xvfb)  # as in test_pointer_mode_position_is_exact: 10 x 10x accelerated would be far off
         assert abs(x - (100 + 256)) <= 2 and abs(y - (100 + 102)) <= 2, (x, y)
 
-        backend = X11Backend(xvfb)
+        backend = X11Backend(xvfb, via=via)
+        assert backend.via == via
         try:
             backend.move(3, 4)
-            backend.display.sync()
+            backend.sync()
             assert pointer(xvfb) == (x + 3, y + 4)
             xdotool(xvfb, "mousemove", "700", "600")  # another client moves the pointer
             backend.move(-5, 2)
-            backend.display.sync()
+            backend.sync()
             assert pointer(xvfb) == (695, 602)
             backend.move_to(WIDTH - 2, 1)
             backend.move(10, -10)  # clipped at the screen's edge, as the X server clips any motion
             backend.move(-1, 1)
-            backend.display.sync()
+            backend.sync()
             assert pointer(xvfb) == (WIDTH - 2, 1)
         finally:
             backend.close()
     finally:
         d.change_pointer_control(accel=(before.accel_num, before.accel_denom), threshold=before.threshold)
         d.close()
+
+
+def test_x11_backend_clicks_through_either_library_and_a_lost_server_is_an_exception(tmp_path):
+    """A click through each library reaches a client as a button press and release; when the X server goes away
+    the next move raises (Xlib's default would end the whole process from inside the C library)."""
+    from Xlib import X, display
+
+    from sphere.bench._xvfb import Xvfb
+    from sphere.daemon.backends.x11 import X11Backend
+    from sphere.daemon.backends.xlib_ctypes import XConnectionLost
+
+    for via in ("libXtst", "python-xlib"):
+        server = Xvfb()
+        try:
+            d = display.Display(server.display)
+            root = d.screen().root
+            root.change_attributes(event_mask=X.ButtonPressMask | X.ButtonReleaseMask)
+            d.sync()
+            backend = X11Backend(server.display, via=via)
+            backend.move_to(40, 30)
+            backend.click("right")
+            backend.sync()
+            seen = []
+            while d.pending_events() or len(seen) < 2:
+                e = d.next_event()
+                seen.append((e.type, e.detail, e.root_x, e.root_y))
+                if len(seen) >= 2:
+                    break
+            assert seen == [(X.ButtonPress, 3, 40, 30), (X.ButtonRelease, 3, 40, 30)], (via, seen)
+            d.close()
+        finally:
+            server.close()
+        with pytest.raises(XConnectionLost if via == "libXtst" else Exception):
+            for _ in range(20):
+                backend.move(1, 0)
+        backend.close()  # and closing after that is quiet
 
 
 def test_config_error_is_clear(xvfb, tmp_path):

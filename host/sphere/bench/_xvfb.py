@@ -4,7 +4,6 @@
 from __future__ import annotations
 
 import ctypes
-import ctypes.util
 import math
 import os
 import select
@@ -13,6 +12,7 @@ import subprocess
 import threading
 import time
 
+from sphere.daemon.backends.xlib_ctypes import XLibraryMissing, libx11
 from sphere.errors import SphereError
 
 
@@ -60,24 +60,10 @@ class Xvfb:
 
 
 def _libx11():
-    path = ctypes.util.find_library("X11")
-    if not path:
-        raise XvfbUnavailable("libX11 is not installed (apt-get install libx11-6)")
-    x = ctypes.CDLL(path)
-    x.XOpenDisplay.restype = ctypes.c_void_p
-    x.XOpenDisplay.argtypes = [ctypes.c_char_p]
-    x.XDefaultRootWindow.restype = ctypes.c_ulong
-    x.XDefaultRootWindow.argtypes = [ctypes.c_void_p]
-    ul, i, u = ctypes.c_ulong, ctypes.c_int, ctypes.c_uint
-    x.XQueryPointer.argtypes = [ctypes.c_void_p, ul, ctypes.POINTER(ul), ctypes.POINTER(ul), ctypes.POINTER(i),
-                                ctypes.POINTER(i), ctypes.POINTER(i), ctypes.POINTER(i), ctypes.POINTER(u)]
-    x.XCloseDisplay.argtypes = [ctypes.c_void_p]
-    x.XSelectInput.argtypes = [ctypes.c_void_p, ul, ctypes.c_long]
-    x.XConnectionNumber.argtypes = [ctypes.c_void_p]
-    x.XPending.argtypes = [ctypes.c_void_p]
-    x.XNextEvent.argtypes = [ctypes.c_void_p, ctypes.c_void_p]
-    x.XSync.argtypes = [ctypes.c_void_p, ctypes.c_int]
-    return x
+    try:
+        return libx11()
+    except XLibraryMissing as e:
+        raise XvfbUnavailable(str(e)) from None
 
 
 class PointerReader:
