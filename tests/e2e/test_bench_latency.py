@@ -20,9 +20,16 @@ def test_bench_latency_rows_and_stages(tmp_path):
     need_board()
     out = tmp_path / "latency.json"
     r = subprocess.run([sys.executable, "-m", "sphere.cli", "bench", "latency", "--seconds", "9", "--adapters",
-                        "none,ftdi-16ms", "--bauds", "115200", "--no-monitor", "--json", str(out)], capture_output=True, text=True, timeout=600)
+                        "none,ftdi-16ms", "--bauds", "115200", "--no-monitor", "--floor-writes", "200", "--json", str(out)],
+                       capture_output=True, text=True, timeout=600)
     assert r.returncode == 0, r.stderr[-2000:]
     assert "motion onset -> X pointer move" in r.stdout and "ftdi-16ms" in r.stdout and "daemon loop" in r.stdout
+    # the floor: a relay that does nothing between the pty and XTest, every write seen moving the pointer
+    floor = json.loads(out.read_text())["host_floor"]
+    assert floor["writes"] == 200 and floor["ms"]["n"] == 200 and floor["moves"] == 200, floor
+    assert 0 < floor["ms"]["p50"] <= floor["ms"]["max"]
+    assert re.fullmatch(r"SCHED_(FIFO \d+|OTHER nice -?\d+)", floor["relay_scheduling"]), floor
+    assert "host stage's floor (pty -> a relay doing no work" in r.stdout
     assert "scheduling (--instruments-nice -10, --xvfb-nice 0): the virtual board SCHED_OTHER nice " in r.stdout, r.stdout
     rows = {row["row"]: row for row in json.loads(out.read_text())["rows"]}
     assert set(rows) == {"none", "ftdi-16ms"}
@@ -51,7 +58,7 @@ def test_bench_latency_checks_sphere_monitor_against_the_board(tmp_path):
     need_board()
     out = tmp_path / "latency.json"
     r = subprocess.run([sys.executable, "-m", "sphere.cli", "bench", "latency", "--seconds", "8", "--adapters", "none",
-                        "--bauds", "115200", "--json", str(out)], capture_output=True, text=True, timeout=600)
+                        "--bauds", "115200", "--floor-writes", "0", "--json", str(out)], capture_output=True, text=True, timeout=600)
     assert r.returncode == 0, r.stderr[-2000:]
     age = json.loads(out.read_text())["sample_age"]
     assert age["truth_ms"]["n"] >= 100 and age["monitor_ms"]["p50"] is not None
@@ -78,7 +85,7 @@ def test_a_row_that_cannot_be_measured_is_reported_and_the_others_kept(tmp_path,
     monkeypatch.setattr(latency, "run_row", flaky)
     out = tmp_path / "latency.json"
     rc = main(["bench", "latency", "--seconds", "9", "--adapters", "none,ftdi-16ms", "--bauds", "115200",
-               "--no-monitor", "--json", str(out)])
+               "--no-monitor", "--floor-writes", "0", "--json", str(out)])
     printed = capsys.readouterr().out
     assert rc == 1
     assert "ftdi-16ms at 115200: FAILED, not measured: sphere-mouse did not find the virtual board" in printed
@@ -96,7 +103,8 @@ def test_against_another_revision_runs_each_row_with_both_daemons_side_by_side(t
     need_board()
     out = tmp_path / "latency.json"
     r = subprocess.run([sys.executable, "-m", "sphere.cli", "bench", "latency", "--seconds", "9", "--adapters", "none",
-                        "--bauds", "115200", "--no-monitor", "--against", "HEAD", "--pointer", "poll", "--json", str(out)],
+                        "--bauds", "115200", "--no-monitor", "--against", "HEAD", "--pointer", "poll", "--floor-writes", "0",
+                        "--json", str(out)],
                        capture_output=True, text=True, timeout=600)
     assert r.returncode == 0, r.stderr[-2000:]
     result = json.loads(out.read_text())

@@ -366,6 +366,7 @@ ROWS = [
     S(["bench", "latency", "--instruments-nice", "fast"], 2, "not a whole number"),
     S(["bench", "latency", "--xvfb-nice", "-21"], 2, "a nice value from -20 to 0"),
     S(["bench", "latency", "--pointer", "sample"], 2, "invalid choice: 'sample'"),
+    S(["bench", "latency", "--floor-writes", "-1"], 2, "give a whole number of at least 0"),
     S(["bench", "latency", "--json", "{tmp}"], 2, "is a folder"),
     S(["bench", "latency", "--against", "no-such-revision"], 2, "not a commit of the repository"),
     S(["bench", "daemon", "--set", "nope.x=1"], 2, "nope"),

@@ -68,8 +68,9 @@ from pathlib import Path
 import numpy as np
 
 from sphere import argtypes
-from sphere.bench._xvfb import PointerEvents, PointerReader, Xvfb, XvfbUnavailable
+from sphere.bench import _latency_floor as F
 from sphere.bench._revision import RevisionError, tree_of
+from sphere.bench._xvfb import PointerEvents, PointerReader, Xvfb, XvfbUnavailable
 from sphere.daemon.priority import thread_scheduling
 from sphere.errors import SphereError
 from sphere.protocol import FrameDecoder, RawSample
@@ -96,6 +97,8 @@ INSTRUMENTS_NICE = -10
 SAMPLER_GAP_NOTE_MS = 5.0
 #: how the pointer's moves are seen (--pointer; PointerRecorder)
 POINTER_WATCH = ("events", "poll")
+#: writes of the host stage's floor (sphere.bench._latency_floor) before the rows
+FLOOR_WRITES = 1000
 #: a move this long after its onset is not this onset's (the next comes PERIOD_S later)
 MOVE_WINDOW_S = 0.25
 
@@ -122,6 +125,9 @@ def add_arguments(p) -> None:
                    help="how the X pointer's moves are seen: events (the server's MotionNotify for each move, as it "
                         "makes it; default) or poll (XQueryPointer about 3,000 times a second: the reads' period is "
                         "added to the host stage)")
+    p.add_argument("--floor-writes", type=argtypes.count, default=FLOOR_WRITES, metavar="N",
+                   help="writes of the host stage's floor measured before the rows (a relay doing no work between the "
+                        f"pty and XTest; default {FLOOR_WRITES}, 0 = leave it out)")
     p.add_argument("--against", metavar="REV", help="also run every row with the sphere-mouse of this git revision "
                                                    "(say main before a change), side by side, in alternating order")
 
@@ -437,6 +443,25 @@ def run_row(name: str, baud: int, trace: Path, onsets_s, seconds: float, display
     return row
 
 
+def host_floor(display: str, writes: int, instruments_nice: int, pointer: str) -> dict:
+    """The host stage with none of the daemon's work (:mod:`sphere.bench._latency_floor`), seen by the same pointer
+    watch as the rows, the writer at the board's nice value."""
+
+    def watch(d):
+        recorder = PointerRecorder(d, instruments_nice, pointer)
+        recorder.start()
+        return recorder
+
+    collecting = gc.isenabled()
+    gc.disable()
+    try:
+        with niced(instruments_nice):
+            return F.measure(display, watch, writes)
+    finally:
+        if collecting:
+            gc.enable()
+
+
 def true_ages(frames: list[Frame], log: HostLog, from_ns: int, to_ns: int) -> list[float]:
     """The true age (ms) of each RAW_SAMPLE written to the pty between ``from_ns`` and ``to_ns``: its pty write's wall
     time minus the moment its sample period began (the sample clock's interrupt; the firmware stamps t_us right
@@ -512,9 +537,12 @@ def run(args) -> int:
         return 1
     xvfb_scheduling = thread_scheduling(xvfb.proc.pid)
     rows, failed = [], []
-    monitor = None
+    monitor = floor = None
     load_before = os.getloadavg()[0]
     try:
+        if args.floor_writes:
+            print(f"  the host stage's floor: {args.floor_writes} writes ...", file=sys.stderr, flush=True)
+            floor = host_floor(xvfb.display, args.floor_writes, args.instruments_nice, args.pointer)
         with tempfile.TemporaryDirectory(prefix="sphere-latency-") as tmp:
             tmp = Path(tmp)
             trace = T.to_chips(O.onsets(args.seconds, args.seed), gyro_rate_hz=1000.0).write(tmp / "onsets.bin")
@@ -545,7 +573,7 @@ def run(args) -> int:
     result = {"seconds_per_row": args.seconds, "seed": args.seed, "load_average": [load_before, os.getloadavg()[0]],
               "instruments_nice": args.instruments_nice, "xvfb_nice": args.xvfb_nice, "xvfb_scheduling": xvfb_scheduling,
               "pointer": args.pointer,
-              "against": args.against, "rows": rows, "failed_rows": failed, "sample_age": monitor}
+              "against": args.against, "host_floor": floor, "rows": rows, "failed_rows": failed, "sample_age": monitor}
     report(result)
     if args.json:
         with open(args.json, "w") as f:
@@ -574,6 +602,12 @@ def report(result: dict) -> None:
         print(f"scheduling (--instruments-nice {result.get('instruments_nice', 0)}, --xvfb-nice "
               f"{result.get('xvfb_nice', 0)}): " + "; ".join(seen)
               + f"; Xvfb {result.get('xvfb_scheduling', 'unknown')}; the daemon's loop: the last column")
+    floor = result.get("host_floor")
+    if floor and floor["ms"].get("n"):
+        m = floor["ms"]
+        print(f"host stage's floor (pty -> a relay doing no work, {floor['relay_scheduling']} -> XTest -> the pointer "
+              f"watch; {m['n']} writes): p50 {m['p50']:.2f}  p95 {m['p95']:.2f}  p99 {m['p99']:.2f}  max "
+              f"{m['max']:.2f} ms")
     tw = max([len(THIS)] + [len(_tree(r)) for r in rows]) if against else 0
     tree_head = f"{'daemon':<{tw}} " if against else ""
     head = (f"{'adapter':<10} {'baud':>7} {tree_head}{'moves':>7} {'total p50':>9} {'p95':>6} {'p99':>6} {'max':>6} "
