@@ -15,12 +15,14 @@ from __future__ import annotations
 import ctypes
 import ctypes.util
 
+from sphere.errors import SphereError
 
-class XLibraryMissing(OSError):
+
+class XLibraryMissing(SphereError, OSError):
     """libX11 or libXtst is not installed."""
 
 
-class XConnectionLost(ConnectionError):
+class XConnectionLost(SphereError, ConnectionError):
     """The X server closed the connection."""
 
 
