@@ -127,7 +127,8 @@ def add_arguments(p) -> None:
                         "added to the host stage)")
     p.add_argument("--floor-writes", type=argtypes.count, default=FLOOR_WRITES, metavar="N",
                    help="writes of the host stage's floor measured before the rows (a relay doing no work between the "
-                        f"pty and XTest; default {FLOOR_WRITES}, 0 = leave it out)")
+                        f"pty and XTest, through libXtst and through python-xlib; default {FLOOR_WRITES}, 0 = leave it "
+                        "out)")
     p.add_argument("--against", metavar="REV", help="also run every row with the sphere-mouse of this git revision "
                                                    "(say main before a change), side by side, in alternating order")
 
@@ -443,9 +444,14 @@ def run_row(name: str, baud: int, trace: Path, onsets_s, seconds: float, display
     return row
 
 
-def host_floor(display: str, writes: int, instruments_nice: int, pointer: str) -> dict:
-    """The host stage with none of the daemon's work (:mod:`sphere.bench._latency_floor`), seen by the same pointer
-    watch as the rows, the writer at the board's nice value."""
+#: the XTest libraries the floor is measured through, in the order printed (X11Backend's ``via``)
+FLOOR_VIA = ("libXtst", "python-xlib")
+
+
+def host_floor(display: str, writes: int, instruments_nice: int, pointer: str) -> list[dict]:
+    """The host stage with none of the daemon's work (:mod:`sphere.bench._latency_floor`), once through each library
+    the x11 backend can send XTest with (:data:`FLOOR_VIA`), seen by the same pointer watch as the rows, the writer
+    at the board's nice value; the write → move times as :func:`percentiles`."""
 
     def watch(d):
         recorder = PointerRecorder(d, instruments_nice, pointer)
@@ -455,8 +461,12 @@ def host_floor(display: str, writes: int, instruments_nice: int, pointer: str) -
     collecting = gc.isenabled()
     gc.disable()
     try:
-        with niced(instruments_nice):
-            return F.measure(display, watch, writes)
+        out = []
+        for via in FLOOR_VIA:
+            with niced(instruments_nice):
+                m = F.measure(display, watch, writes, via)
+            out.append(dict(m, ms=percentiles(m["ms"])))
+        return out
     finally:
         if collecting:
             gc.enable()
@@ -602,12 +612,12 @@ def report(result: dict) -> None:
         print(f"scheduling (--instruments-nice {result.get('instruments_nice', 0)}, --xvfb-nice "
               f"{result.get('xvfb_nice', 0)}): " + "; ".join(seen)
               + f"; Xvfb {result.get('xvfb_scheduling', 'unknown')}; the daemon's loop: the last column")
-    floor = result.get("host_floor")
-    if floor and floor["ms"].get("n"):
+    for floor in result.get("host_floor") or ():
         m = floor["ms"]
-        print(f"host stage's floor (pty -> a relay doing no work, {floor['relay_scheduling']} -> XTest -> the pointer "
-              f"watch; {m['n']} writes): p50 {m['p50']:.2f}  p95 {m['p95']:.2f}  p99 {m['p99']:.2f}  max "
-              f"{m['max']:.2f} ms")
+        if m.get("n"):
+            print(f"host stage's floor (pty -> a relay doing no work, {floor['relay_scheduling']} -> XTest through "
+                  f"{floor['via']} -> the pointer watch; {m['n']} writes): p50 {m['p50']:.2f}  p95 {m['p95']:.2f}  "
+                  f"p99 {m['p99']:.2f}  max {m['max']:.2f} ms")
     tw = max([len(THIS)] + [len(_tree(r)) for r in rows]) if against else 0
     tree_head = f"{'daemon':<{tw}} " if against else ""
     head = (f"{'adapter':<10} {'baud':>7} {tree_head}{'moves':>7} {'total p50':>9} {'p95':>6} {'p99':>6} {'max':>6} "
