@@ -183,6 +183,7 @@ class SphereMouse:
         self.actions.moved(t_us, dx, dy)
 
     def _tilt_step(self, t_us, dt: float) -> None:
+        self.motion.update_orientation()  # tilt is the orientation itself: this sample's, not the last
         q = self.motion.quat
         if q is None:
             return
@@ -200,6 +201,7 @@ class SphereMouse:
         if typ == RawSample.TYPE:
             self._raw_sample(p, t)  # the pointer move first: what the hand feels
             motion = self.motion
+            motion.update_orientation()  # the host filter's update, left until the move was out
             if self.stream is not None and motion.uses_host_filter and getattr(self.stream, "wants_pose", True):
                 self._publish_pose(t)
             if self._publish_motion is not None:

@@ -108,13 +108,16 @@ class MotionTracker:
         if orientation_source in ("auto", "host"):
             self.filter = host_filter(filter_name, filter_settings, 1.0 / imu_rate_hz)
         inner = getattr(self.filter, "inner", self.filter)
-        # the work that may wait until the sample's pointer move is out: SphereFilter's bias step (every 10th
-        # sample) and GyroBias's still detection (but on a window's last sample); ``raw()`` leaves it, the daemon calls run_deferred() after the move
-        # (bit-identical to doing it inside). Off by default: a caller that sets ``defer = True`` calls
-        # run_deferred() after each raw() (the daemon does).
+        # the work that may wait until the sample's pointer move is out: the host filter's update (the orientation,
+        # ``quat`` and ``up``), SphereFilter's bias step (every 10th sample) and GyroBias's still detection (but on
+        # a window's last sample). With ``defer = True`` ``raw()`` leaves them; the caller runs update_orientation()
+        # before it reads ``quat`` and run_deferred() after the move (the daemon does). Meanwhile ``up`` (the
+        # vertical the pointer's mapping uses) is the last sample's turned by this sample's rate. Off by default:
+        # ``raw()`` then does everything itself, as before.
         self._filter_deferred = getattr(inner, "run_deferred", None)
         self._defer = {"defer_bias": True} if self._filter_deferred is not None else {}
         self.defer = False
+        self._pending = None  # the filter update raw() left: (sample, gyro, accel, mag, dt, accel_ok, tap_active)
         self.quat = None  # (w, x, y, z) sensor-to-NWU, or None until known
         self.up = None  # earth up in sensor axes
         self.accel_g = None  # the last RAW_SAMPLE's acceleration (g, sensor axes) when the chip answered
@@ -146,6 +149,8 @@ class MotionTracker:
 
     def raw(self, sample, t_us) -> float:
         """Take a RAW_SAMPLE; returns its dt in seconds."""
+        if self._pending is not None:  # a caller that deferred and did not come back: the last sample's first
+            self.update_orientation()
         self.raw_seen = True
         dt = self._dt(t_us, self._last_raw_t)
         self._last_raw_t = t_us
@@ -183,22 +188,43 @@ class MotionTracker:
                 u = self._accel_up
                 self._accel_up = (u[0] + k * (ax / anorm - u[0]), u[1] + k * (ay / anorm - u[1]), u[2] + k * (az / anorm - u[2]))
         if self.filter is not None and self.orientation_source != "device":
-            if not self._filter_started and accel_ok:
-                self._start_filter(ax, ay, az, sample)
-            if not self.use_mag:
-                mag = None
             gd = self.gyro_dps
-            q = self.filter.update((gd[0] * DEG, gd[1] * DEG, gd[2] * DEG), (ax * G_M_S2, ay * G_M_S2, az * G_M_S2),
-                                   mag, dt, acc_valid=accel_ok and not tap_active, **(self._defer if self.defer else {}))
-            # _NwuFilter gives a tuple of floats (quaternion.mul's); another filter's output is made one
-            self.quat = q if type(q) is tuple and type(q[0]) is float else tuple(float(v) for v in q)
-            self.up = up_from_quat(self.quat)
+            self._pending = (sample, gd, ax, ay, az, mag if self.use_mag else None, dt, accel_ok,
+                             accel_ok and not tap_active)
+            if not self.defer:
+                self.update_orientation()
+            elif self.up is not None:
+                # until the filter's update: the last vertical turned by this sample's rate (what the filter's
+                # own prediction step does; its accelerometer correction comes with the update). The vertical is
+                # fixed in the world, so in the sensor's axes it turns against the sensor: d(up)/dt = up × ω.
+                ux, uy, uz = self.up
+                k = dt * DEG
+                wx, wy, wz = gd[0] * k, gd[1] * k, gd[2] * k
+                self.up = (ux + uy * wz - uz * wy, uy + uz * wx - ux * wz, uz + ux * wy - uy * wx)
         elif self.quat is None:
             self.up = self._accel_up
         return dt
 
+    def update_orientation(self) -> None:
+        """The host filter's update for the last ``raw()``, when it was left (``defer``): ``quat`` and ``up`` are
+        then this sample's. Nothing when there is none pending."""
+        pending = self._pending
+        if pending is None:
+            return
+        self._pending = None
+        sample, gd, ax, ay, az, mag, dt, accel_ok, acc_valid = pending
+        if not self._filter_started and accel_ok:
+            self._start_filter(ax, ay, az, sample)
+        q = self.filter.update((gd[0] * DEG, gd[1] * DEG, gd[2] * DEG), (ax * G_M_S2, ay * G_M_S2, az * G_M_S2),
+                               mag, dt, acc_valid=acc_valid, **(self._defer if self.defer else {}))
+        # _NwuFilter gives a tuple of floats (quaternion.mul's); another filter's output is made one
+        self.quat = q if type(q) is tuple and type(q[0]) is float else tuple(float(v) for v in q)
+        self.up = up_from_quat(self.quat)
+
     def run_deferred(self) -> None:
         """What the last ``raw()`` left for after the move (see ``defer``)."""
+        if self._pending is not None:
+            self.update_orientation()
         if self.bias._queued is not None:
             self.bias.run_deferred()
         if self._filter_deferred is not None:

@@ -14,7 +14,8 @@ A subclass says how to reach its device and nothing else:
 - :meth:`Source._read` — the bytes that arrived (``b""`` when none within a short wait); raise
   :class:`LinkLost` (or OSError / serial.SerialException) when the device went away;
 - :meth:`Source._disconnect` — close what ``_connect`` opened;
-- optionally :meth:`Source._batch` (a source that is not a byte stream, e.g. a paced replay) and
+- optionally :meth:`Source._batch` (a source that is not a byte stream, e.g. a paced replay),
+  :meth:`Source._after_batch` (what it notes of a batch once the daemon has handled it, off the pointer's path) and
   :meth:`Source._over` (a finite source: the iteration ends instead of looking again).
 """
 
@@ -131,6 +132,10 @@ class Source:
         """True when the source has ended for good (not lost: finished)."""
         return False
 
+    def _after_batch(self, batch: list[DecodedPacket]) -> None:
+        """What a source notes of a batch once the daemon has handled it (its pointer move is out), before the next
+        read: bookkeeping that need not wait in front of the move. Nothing here."""
+
     def _batch(self) -> list[DecodedPacket]:
         data = self._read()
         if data:
@@ -188,6 +193,8 @@ class Source:
                 yield []
                 continue
             yield batch
+            if batch:
+                self._after_batch(batch)
 
     #: what the log and the status line call the device
     DEVICE = "the sphere"

@@ -194,6 +194,7 @@ class SerialSource(Source):
         self._good_frames, self._good_at, self._bytes_at_good = 0, 0.0, 0
         self._switch_again = False  # a sphere that restarted (HELLO seq 0) is moved to the faster rate again
         self._heard_at_default: int | None = None  # frames_ok when the port fell back: heard again, up again
+        self._fresh = ()  # the last batch read (_batch), for _after_batch
         self._held: list = []  # packets read while switching, for the next batch
         self.device_settings = list(device_settings)  # [device] settings: sent at every connect
         self.serial = None
@@ -428,10 +429,26 @@ class SerialSource(Source):
         batch = super()._batch()
         if self.link is None:
             return batch
+        self._fresh = batch  # what _after_batch notes: the packets read, not those held during a switch
+        if not batch and self.link_baud != DEFAULT_BAUD:
+            self._watch_rate()  # bytes that make no frame: a sphere at another rate (a batch's are in _after_batch)
+        if self._switch_again:  # a restart or a fall-back seen in the last batch (_after_batch)
+            self._switch_again = False
+            self._switch_baud(self.port_name)
+            batch = batch + self._take_held()
+        return batch
+
+    def _after_batch(self, batch) -> None:
+        """The link's bookkeeping, once the daemon has handled the batch (its pointer move is out): the rate's
+        watch, the device clock (sample ages, ECHO round trips) and a restarted sphere's switch to the faster rate,
+        which the next read then makes."""
+        if self.link is None:
+            return
+        fresh, self._fresh = self._fresh, ()
         if self.link_baud != DEFAULT_BAUD:
             self._watch_rate()
-        arrival = self.arrival_ns / 1e9 if batch else 0.0  # perf_counter: the clock the round trips are timed with
-        for dp in batch:
+        arrival = self.arrival_ns / 1e9  # perf_counter: the clock the round trips are timed with
+        for dp in fresh:
             p = dp.packet
             if p.TYPE == RawSample.TYPE:
                 self.clock.note_sample(dp.t_us)
@@ -447,17 +464,12 @@ class SerialSource(Source):
         if self._heard_at_default is not None and self.stream.stats.frames_ok > self._heard_at_default + 2:
             self._heard_at_default = None
             self._switch_again = bool(self.baud_switch) and self.link_baud == DEFAULT_BAUD
-        if self._switch_again:
-            self._switch_again = False
-            self._switch_baud(self.port_name)
-            batch = batch + self._take_held()
         hello = self.stream.hello
         if hello is not None and hello.protocol_version >= 3:
             now = time.perf_counter()
             if now >= self._next_echo:
                 self._next_echo = now + ECHO_EVERY_S
                 self.clock.echo(lambda: self.link.send(Echo()), time.perf_counter)
-        return batch
 
     def sample_age_ms(self) -> tuple[float, float] | None:
         """(median, p95) of the last 2 s of RAW_SAMPLE ages on arrival, ms; None before the clock is known."""
