@@ -33,6 +33,7 @@ def test_bench_latency_rows_and_stages(tmp_path):
         assert re.fullmatch(r"SCHED_(FIFO \d+|OTHER nice -?\d+)", floor["relay_scheduling"]), floor
         assert f"XTest through {floor['via']} -> the pointer watch; 200 writes" in r.stdout
     assert "scheduling (--instruments-nice -10, --xvfb-nice 0): the virtual board SCHED_OTHER nice " in r.stdout, r.stdout
+    assert re.search(r"^  ftdi-16ms\s+115200\s+\d+ onsets: [\d.]+ / [\d.]+ / [\d.]+ \| ", r.stdout, re.M), r.stdout
     rows = {row["row"]: row for row in json.loads(out.read_text())["rows"]}
     assert set(rows) == {"none", "ftdi-16ms"}
     for row in rows.values():
@@ -43,6 +44,11 @@ def test_bench_latency_rows_and_stages(tmp_path):
         # the MARG update (0.59 ms: sent before it, the UART's transmit interrupt held back during it)
         assert 3.0 <= s["wire"]["p50"] <= 3.6
         assert s["age"]["p50"] > 0 and s["host"]["p50"] > 0
+        # the host stage split by the daemon's --move-log: every onset's move was logged after the frame's write
+        split = [s[k] for k in ("host_to_read", "host_daemon", "host_display")]
+        assert [p["n"] for p in split] == [s["host"]["n"]] * 3, row
+        assert all(0 <= p["p50"] <= p["max"] <= s["host"]["max"] for p in split), row
+        assert s["host_daemon"]["p50"] > 0
         # how the kernel scheduled the daemon's loop, read from /proc while it ran (sphere.daemon.priority)
         for who in ("daemon", "board", "sampler"):
             assert re.fullmatch(r"SCHED_(FIFO \d+|OTHER nice -?\d+)", row[f"{who}_scheduling"]), row
@@ -116,5 +122,7 @@ def test_against_another_revision_runs_each_row_with_both_daemons_side_by_side(t
         assert row["moves"] >= 3 and row["stages_ms"]["host"]["p50"] > 0, row
         assert row["pointer_read_gap_ms"]["max"] >= row["pointer_read_gap_ms"]["p99"]
         assert row["pointer"] == "poll" and row["pointer_reads_per_s"] >= 1000
+        # the host stage's split needs the daemon's --move-log: only this tree's daemon is asked for it
+        assert ("host_daemon" in row["stages_ms"]) == (row["tree"] == "this"), row
     assert "this tree / HEAD (the same rows, the same run):" in r.stdout
     assert "none at 115200 baud (HEAD)" in r.stderr and "none at 115200 baud (this)" in r.stderr

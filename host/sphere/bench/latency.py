@@ -24,7 +24,10 @@ pointer record, and its latency is split where the path can be split (all from t
   pointer is watched as any X client can see it move: the server's ``MotionNotify`` for each move, the time being
   when it reached the watching client (``--pointer events``, the default). ``--pointer poll`` reads the pointer
   with ``XQueryPointer`` instead, about 3,000 times a second: that adds the reads' period (0.3 ms median, 0.7–0.9
-  ms at p99 on an idle machine) to every host stage and keeps the X server busy answering.
+  ms at p99 on an idle machine) to every host stage and keeps the X server busy answering. This tree's daemon
+  writes each move's read and call times (``sphere-mouse --move-log``), so its rows split the host stage in
+  three (:data:`HOST_SPLIT`): the wake-up to the daemon's read, the daemon's work and XTest call, the display
+  server's part up to the watch.
 
 The frame that moved the pointer: of the pty writes before the move, the last one that carried the turn (a
 RAW_SAMPLE sent after the onset with a non-zero gyro reading: the board runs without noise), and in it the first
@@ -71,6 +74,7 @@ from sphere import argtypes
 from sphere.bench import _latency_floor as F
 from sphere.bench._revision import RevisionError, tree_of
 from sphere.bench._xvfb import PointerEvents, PointerReader, Xvfb, XvfbUnavailable
+from sphere.daemon.move_log import read_move_log
 from sphere.daemon.priority import thread_scheduling
 from sphere.errors import SphereError
 from sphere.protocol import FrameDecoder, RawSample
@@ -86,6 +90,10 @@ HELP = ("motion onset -> X pointer move through the virtual board: each USB adap
 ADAPTERS = {"none": (None, True), "ch340": ("ch340", True), "ftdi": ("ftdi", True), "ftdi-16ms": ("ftdi", False)}
 BASELINE = "ftdi-16ms"
 STAGES = ("age", "wire", "adapter", "host")
+#: the host stage split by the daemon's --move-log (this tree's rows): the pty write → the daemon's read returned;
+#: → its XTest call returned (decoding, the filters, the mapping, the call); → the pointer watch saw the move (the
+#: X server, its report to the watch)
+HOST_SPLIT = ("host_to_read", "host_daemon", "host_display")
 class RowFailed(SphereError, RuntimeError):
     """One row could not be measured (its daemon never reported the link, e.g. a baud switch that fell back on a
     loaded machine): the run goes on with the other rows and says which one failed."""
@@ -235,9 +243,15 @@ def pointer_moves(samples: np.ndarray, after_ns: int, until_ns: int):
     return None if t[k] > until_ns else (int(t[k]), int(samples[k, 1]), int(samples[k, 2]))
 
 
-def attribute(onsets_s, connected_ns: int, frames: list[Frame], samples: np.ndarray, t0_ns: int) -> dict:
-    """Per onset: the pointer's first move and the stages of the frame that moved it (module docstring)."""
+def attribute(onsets_s, connected_ns: int, frames: list[Frame], samples: np.ndarray, t0_ns: int,
+              moves=None) -> dict:
+    """Per onset: the pointer's first move and the stages of the frame that moved it (module docstring). With the
+    daemon's ``moves`` (its --move-log: read ns, moved ns per move) the host stage splits too (:data:`HOST_SPLIT`):
+    the daemon's last move call before the pointer was seen to move, when its read came after the frame's write."""
     stages = {k: [] for k in (*STAGES, "total", "lag")}
+    if moves is not None:
+        stages.update({k: [] for k in HOST_SPLIT})
+        moved_ns = np.array([m[1] for m in moves], dtype=np.int64)
     missed = unattributed = skipped = 0
     pty_ns = np.array([f.pty_ns for f in frames], dtype=np.int64)
     for t_on in onsets_s:
@@ -264,6 +278,12 @@ def attribute(onsets_s, connected_ns: int, frames: list[Frame], samples: np.ndar
         for k, v in parts.items():
             stages[k].append(v * 1e3)
         stages["total"].append(sum(parts.values()) * 1e3)
+        if moves is not None:
+            m = int(np.searchsorted(moved_ns, move[0], side="right")) - 1
+            if m >= 0 and moves[m][0] >= trigger.pty_ns:
+                read, called = moves[m]
+                for k, a, b in zip(HOST_SPLIT, (trigger.pty_ns, read, called), (read, called, move[0])):
+                    stages[k].append((b - a) / 1e6)
         stages["lag"].append((trigger.pty_ns - t0_ns) / 1e6 - trigger.pty_s * 1e3)
     return {"ms": stages, "missed": missed, "unattributed": unattributed, "skipped": skipped}
 
@@ -377,6 +397,7 @@ def run_row(name: str, baud: int, trace: Path, onsets_s, seconds: float, display
     the pointer's moves are seen (:class:`PointerRecorder`)."""
     adapter, low_latency = ADAPTERS[name]
     log_path, cap_path = tmp / f"{name}-{baud}-{tree}.log", tmp / f"{name}-{baud}-{tree}.cap"
+    moves_path = tmp / f"{name}-{baud}-{tree}.moves" if host_dir is None else None  # another revision may lack it
     with niced(instruments_nice):
         board, pty = start_pty_board(board_command(elf, trace, seconds, capture=cap_path, pty=True, adapter=adapter,
                                                    host_log=log_path))
@@ -394,6 +415,8 @@ def run_row(name: str, baud: int, trace: Path, onsets_s, seconds: float, display
                      "--display", display, "--no-stream", "--quiet", "--config", os.devnull,
                      "--set", f"source.low_latency={'true' if low_latency else 'false'}",
                      "--set", f"source.baud_switch={0 if baud == 115200 else baud}"]
+        if moves_path is not None:
+            mouse_cmd += ["--move-log", str(moves_path)]
         mouse = subprocess.Popen(mouse_cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, env=env)
         connected = {}
 
@@ -426,7 +449,8 @@ def run_row(name: str, baud: int, trace: Path, onsets_s, seconds: float, display
     frames = frames_of(cap_path.read_bytes(), log)
     samples = recorder.changes
     # from 0.5 s after the daemon found the port: its start-up (HELLO, gyro bias) is not the steady state
-    got = attribute(onsets_s, connected["ns"] + 500_000_000, frames, samples, log.t0_ns)
+    moves = read_move_log(moves_path) if moves_path is not None and moves_path.exists() else None
+    got = attribute(onsets_s, connected["ns"] + 500_000_000, frames, samples, log.t0_ns, moves)
     gaps = np.asarray(recorder.gaps_ns, dtype=float) / 1e6
     fell_back = any("back to 115200" in line for line in connected.get("lines", []))
     row = {"row": name, "baud": baud, "tree": tree, "daemon_scheduling": scheduling,
@@ -640,8 +664,18 @@ def report(result: dict) -> None:
               f"{f('age', 'p50', 7)} {f('age', 'p95', 5)} | {f('wire', 'p50', 5)} | {f('adapter', 'p50', 11)} "
               f"{f('adapter', 'p95', 5)} | {f('host', 'p50', 8)} {f('host', 'p95', 5)} {f('host', 'p99', 5)} | "
               f"{f('lag', 'p95', 7)} {_watch(r):>7} | {r.get('daemon_scheduling', '-')}")
+    split = [r for r in rows if r["stages_ms"].get(HOST_SPLIT[0], {}).get("n")]
+    if split:
+        print("the host stage split (sphere-mouse --move-log), ms p50/p95/p99: pty write -> the daemon's read | "
+              "-> its XTest call returned | -> the watch saw the move")
+        for r in split:
+            tree = f" {_tree(r):<{tw}}" if against else ""
+            cells = [" / ".join(f"{r['stages_ms'][k][p]:.2f}" for p in ("p50", "p95", "p99")) for k in HOST_SPLIT]
+            print(f"  {r['row']:<10} {r['baud']:>7}{tree} {r['stages_ms'][HOST_SPLIT[0]]['n']:>4} onsets: "
+                  + " | ".join(cells))
     if against:
         side_by_side(rows, against)
+
     def who(r):
         return f"{r['row']} at {r['baud']}" + (f" ({_tree(r)})" if against else "")
 

@@ -111,6 +111,7 @@ class SphereMouse:
         self._publish_motion = getattr(stream, "publish_motion", None)
         #: the garbage collector, run between batches (after the move) while the loop runs
         self.collector = BetweenBatches()
+        self.move_log = None  # sphere.daemon.move_log.MoveLog: each move's read and call times (--move-log)
         #: the loop's scheduling priority, raised while it reads a live source (sphere.daemon.priority)
         self.priority = LoopPriority(**cfg["priority"].as_dict())
         self.priority.on_demoted = lambda: self.request("demoted")
@@ -179,6 +180,8 @@ class SphereMouse:
     # -- packets --
     def _move(self, t_us, dx: int, dy: int) -> None:
         self.backend.move(dx, dy)
+        if self.move_log is not None:
+            self.move_log.moved(self.source.arrival_ns)
         self.moves += 1
         self.actions.moved(t_us, dx, dy)
 
@@ -348,8 +351,12 @@ class SphereMouse:
                 if self._stopped:
                     break
                 collector.step()
+                if self.move_log is not None:
+                    self.move_log.step()
         finally:
             collector.stop()
+            if self.move_log is not None:
+                self.move_log.close()
             priority.restore()
             if self.status is not None:
                 self.status.tick(self, force=True)

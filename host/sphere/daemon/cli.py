@@ -20,6 +20,7 @@ from sphere.daemon.app import SphereMouse
 from sphere.daemon.backends import BackendUnavailable, open_backend
 from sphere.daemon.config import ConfigError
 from sphere.daemon.outputs.fanout import attach
+from sphere.daemon.move_log import MoveLog, MoveLogError
 from sphere.daemon.print_config import defaults_toml
 from sphere.daemon.sources.base import SourceError
 from sphere.daemon.status import StatusLine, run_stats
@@ -61,6 +62,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--quiet", action="store_true", help="no status line")
     p.add_argument("--print-stats", action="store_true", help="when the daemon stops, print the run's figures on "
                    "stdout: frames, errors, losses, each sample's age on arrival (median, p95, p99, max), pointer moves")
+    p.add_argument("--move-log", metavar="FILE", help="write each pointer move's times to FILE, a line each: when the "
+                   "read that brought its sample returned and when the backend's move call returned (CLOCK_MONOTONIC "
+                   "ns; sphere bench latency splits the host's part of the latency with it)")
     p.add_argument("-v", "--verbose", action="store_true", help="also log details: e.g. a serial driver that "
                    "offers no low-latency mode")
     p.add_argument("--check-config", action="store_true", help="validate the config and exit")
@@ -222,6 +226,13 @@ def _main(argv=None) -> int:
     if args.check_config:
         print(f"sphere-mouse: config OK ({cfg.origin})")
         return 0
+    move_log = None
+    if args.move_log:
+        try:
+            move_log = MoveLog(args.move_log)
+        except MoveLogError as e:
+            logger.error(str(e))
+            return 2
 
     try:
         source = open_source(cfg, log)
@@ -247,6 +258,7 @@ def _main(argv=None) -> int:
     if not args.quiet and (args.status or sys.stderr.isatty()):
         status = StatusLine(sys.stderr, cfg.status.interval_s)
     daemon = SphereMouse(cfg, source, backend, stream=stream, status=status, camera=camera)
+    daemon.move_log = move_log
     log(f"source {source.state}, backend {backend.NAME}, mode {daemon.mode}, "
         f"{cfg.pointer.slow_deg_per_width:g}° per screen width ({daemon.screen_width_px} px)")
 
