@@ -94,6 +94,8 @@ STAGES = ("age", "wire", "adapter", "host")
 #: → its XTest call returned (decoding, the filters, the mapping, the call); → the pointer watch saw the move (the
 #: X server, its report to the watch)
 HOST_SPLIT = ("host_to_read", "host_daemon", "host_display")
+
+
 class RowFailed(SphereError, RuntimeError):
     """One row could not be measured (its daemon never reported the link, e.g. a baud switch that fell back on a
     loaded machine): the run goes on with the other rows and says which one failed."""

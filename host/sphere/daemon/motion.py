@@ -117,7 +117,7 @@ class MotionTracker:
         self._filter_deferred = getattr(inner, "run_deferred", None)
         self._defer = {"defer_bias": True} if self._filter_deferred is not None else {}
         self.defer = False
-        self._pending = None  # the filter update raw() left: (sample, gyro, accel, mag, dt, accel_ok, tap_active)
+        self._pending = None  # the filter update raw() left: its inputs (update_orientation)
         self.quat = None  # (w, x, y, z) sensor-to-NWU, or None until known
         self.up = None  # earth up in sensor axes
         self.accel_g = None  # the last RAW_SAMPLE's acceleration (g, sensor axes) when the chip answered
