@@ -189,7 +189,7 @@ class MotionTracker:
                 self._accel_up = (u[0] + k * (ax / anorm - u[0]), u[1] + k * (ay / anorm - u[1]), u[2] + k * (az / anorm - u[2]))
         if self.filter is not None and self.orientation_source != "device":
             gd = self.gyro_dps
-            self._pending = (sample, gd, ax, ay, az, mag if self.use_mag else None, dt, accel_ok,
+            self._pending = (gd, ax, ay, az, mag if self.use_mag else None, dt, accel_ok,
                              accel_ok and not tap_active)
             if not self.defer:
                 self.update_orientation()
@@ -212,9 +212,9 @@ class MotionTracker:
         if pending is None:
             return
         self._pending = None
-        sample, gd, ax, ay, az, mag, dt, accel_ok, acc_valid = pending
+        gd, ax, ay, az, mag, dt, accel_ok, acc_valid = pending
         if not self._filter_started and accel_ok:
-            self._start_filter(ax, ay, az, sample)
+            self._start_filter(ax, ay, az)
         q = self.filter.update((gd[0] * DEG, gd[1] * DEG, gd[2] * DEG), (ax * G_M_S2, ay * G_M_S2, az * G_M_S2),
                                mag, dt, acc_valid=acc_valid, **(self._defer if self.defer else {}))
         # _NwuFilter gives a tuple of floats (quaternion.mul's); another filter's output is made one
@@ -230,7 +230,7 @@ class MotionTracker:
         if self._filter_deferred is not None:
             self._filter_deferred()
 
-    def _start_filter(self, ax, ay, az, sample) -> None:
+    def _start_filter(self, ax, ay, az) -> None:
         """Start the host filter at the accelerometer's tilt (no slow convergence from identity)."""
         self._filter_started = True
         if ax or ay or az:  # a reading of 0 has no tilt: the filter starts level and finds it
