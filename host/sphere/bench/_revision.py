@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import statistics
 import subprocess
 
 from sphere.errors import SphereError
@@ -29,3 +30,23 @@ def tree_of(rev: str, into: str) -> str:
         raise RevisionError(f"--against {rev}: git archive failed: {archive.stderr.decode(errors='replace').strip()}")
     subprocess.run(["tar", "-x", "-C", into], input=archive.stdout, check=True)
     return os.path.join(into, "host")
+
+
+def take_turns(sides: dict[str, str], pairs: int, run_one, describe) -> dict[str, list]:
+    """``pairs`` runs of every side (name → its ``host/``), the sides taking turns at going first (pair 1 in the
+    given order, pair 2 reversed, …) so that a machine warming up or getting busier weighs on both alike.
+    ``run_one(name, host_dir)`` measures one run; ``describe(result)`` is printed after it. Returns name → runs."""
+    runs: dict[str, list] = {name: [] for name in sides}
+    for i in range(pairs):
+        for name in list(sides) if i % 2 == 0 else list(reversed(sides)):
+            result = run_one(name, sides[name])
+            runs[name].append(result)
+            print(f"  pair {i + 1}/{pairs} {name:>12}: {describe(result)}", flush=True)
+    return runs
+
+
+def medians(runs: dict[str, list], this: str, other: str, get) -> tuple[float, float, float]:
+    """The median of ``get(run)`` over each side's runs, and their ratio this / other."""
+    a = statistics.median(get(r) for r in runs[this])
+    b = statistics.median(get(r) for r in runs[other])
+    return a, b, a / b

@@ -38,7 +38,6 @@ import json
 import multiprocessing as mp
 import os
 import select
-import statistics
 import subprocess
 import sys
 import tempfile
@@ -381,29 +380,23 @@ DEFAULT_SIDE = "default"
 
 
 def against(args) -> int:
-    from sphere.bench._revision import tree_of  # --against: not in the older sphere a side runs with
+    from sphere.bench._revision import medians, take_turns, tree_of  # --against: not in the older sphere a side runs with
 
     here = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))  # .../host
     with tempfile.TemporaryDirectory(prefix="sphere-bench-") as tmp:
         # "default": this tree without the --set settings (what a setting, say an output switched on, costs)
         other = here if args.against == DEFAULT_SIDE else tree_of(args.against, tmp)
-        sides = {"this": here, args.against: other}
-        runs: dict[str, list[dict]] = {k: [] for k in sides}
-        for i in range(args.pairs):
-            order = list(sides) if i % 2 == 0 else list(reversed(sides))  # alternate who goes first
-            for name in order:
-                r = run_side(sides[name], args, [] if name == DEFAULT_SIDE else None)
-                runs[name].append(r)
-                print(f"  pair {i + 1}/{args.pairs} {name:>12}: p50 {r['p50_us']:.0f} µs, p99 {r['p99_us']:.0f} µs, "
-                      f"after read p50 {r['after_read_p50_us']:.0f} / p99 {r['after_read_p99_us']:.0f} µs, "
-                      f"CPU {r['cpu_pct']:.2f} %, work {r['work_us']:.1f} µs/frame", flush=True)
+        runs = take_turns({"this": here, args.against: other}, args.pairs,
+                          lambda name, host_dir: run_side(host_dir, args, [] if name == DEFAULT_SIDE else None),
+                          lambda r: f"p50 {r['p50_us']:.0f} µs, p99 {r['p99_us']:.0f} µs, after read p50 "
+                                    f"{r['after_read_p50_us']:.0f} / p99 {r['after_read_p99_us']:.0f} µs, CPU "
+                                    f"{r['cpu_pct']:.2f} %, work {r['work_us']:.1f} µs/frame")
     print(f"medians of {args.pairs} runs each ({args.seconds:g} s per run), this tree beside {args.against}; "
           f"load average after {os.getloadavg()[0]:.2f}:")
     print(f"  {'':24} {'this tree':>10} {args.against:>12} {'ratio':>7}")
     for key, label in COMPARED:
-        a = statistics.median(r[key] for r in runs["this"])
-        b = statistics.median(r[key] for r in runs[args.against])
-        print(f"  {label:24} {a:10.2f} {b:12.2f} {a / b:7.2f}")
+        a, b, ratio = medians(runs, "this", args.against, lambda r: r[key])
+        print(f"  {label:24} {a:10.2f} {b:12.2f} {ratio:7.2f}")
     return 0
 
 

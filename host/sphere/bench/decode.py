@@ -12,7 +12,6 @@ from __future__ import annotations
 import json
 import os
 import random
-import statistics
 import subprocess
 import sys
 import tempfile
@@ -108,21 +107,16 @@ def _side(host_dir: str, args) -> dict:
 
 
 def against(args) -> int:
-    from sphere.bench._revision import tree_of  # --against: not in the older sphere a side runs with
+    from sphere.bench._revision import medians, take_turns, tree_of  # --against: not in the older sphere a side runs with
 
     here = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))  # .../host
     this = "this tree"
     with tempfile.TemporaryDirectory(prefix="sphere-bench-") as tmp:
-        sides = {this: here, args.against: tree_of(args.against, tmp)}
-        runs: dict[str, list[dict]] = {k: [] for k in sides}
-        for i in range(args.pairs):
-            for name in list(sides) if i % 2 == 0 else list(reversed(sides)):  # alternate who goes first
-                r = _side(sides[name], args)
-                runs[name].append(r)
-                fps = r["frames_per_s"]
-                print(f"  pair {i + 1}/{args.pairs} {name:>12}: " + ", ".join(
-                    f"{_label(k)}{' B' if k != '0' else ''} {v:,.0f}" for k, v in fps.items()) + " frames/s; empty method "
-                    f"{r['empty_method_byte_fed_frames_per_s']:,.0f}", flush=True)
+        runs = take_turns({this: here, args.against: tree_of(args.against, tmp)}, args.pairs,
+                          lambda name, host_dir: _side(host_dir, args),
+                          lambda r: ", ".join(f"{_label(k)}{' B' if k != '0' else ''} {v:,.0f}"
+                                              for k, v in r["frames_per_s"].items())
+                          + f" frames/s; empty method {r['empty_method_byte_fed_frames_per_s']:,.0f}")
     print(f"medians of {args.pairs} runs each (each the median of {args.repeat}), frames/s by this process's CPU "
           f"time, this tree beside {args.against}; load average after {os.getloadavg()[0]:.2f}:")
     print(f"{'feed size (bytes)':>18} {'this tree':>12} {args.against:>12} {'ratio':>7}")
@@ -130,9 +124,8 @@ def against(args) -> int:
     rows = [(lambda r, k=k: r["frames_per_s"][k], label) for k, label in keys]
     rows.append((lambda r: r["empty_method_byte_fed_frames_per_s"], "empty method, 1"))
     for get, label in rows:
-        a = statistics.median(get(r) for r in runs[this])
-        b = statistics.median(get(r) for r in runs[args.against])
-        print(f"{label:>18} {a:12,.0f} {b:12,.0f} {a / b:7.2f}")
+        a, b, ratio = medians(runs, this, args.against, get)
+        print(f"{label:>18} {a:12,.0f} {b:12,.0f} {ratio:7.2f}")
     return 0
 
 
