@@ -8,7 +8,7 @@ import sys
 
 from sphere import argtypes
 from sphere.daemon.sources.base import version_problem
-from sphere.errors import SphereError
+from sphere.errors import LinkLost, SphereError
 from sphere.link.device import DeviceLink
 from sphere.link.device_settings import (
     SETTINGS,
@@ -146,6 +146,9 @@ def run(args) -> int:
     except _Failed as e:
         print(f"sphere device: {e}", file=sys.stderr)
         return e.code
+    except LinkLost as e:  # unplugged (or the board gone) while a command waited for its REPLY
+        print(f"sphere device: {e}", file=sys.stderr)
+        return 1
 
 
 def _run(args) -> int:

@@ -1,0 +1,87 @@
+"""`sphere device`, `sphere calibrate` and `sphere flash` as a person at a desk runs them, as programs (a
+subprocess each), against the real firmware image on the virtual board (`sphere sim --pty`): the defects a
+tour of the device tools found, each checked through the command line. Asserted every time: one line on
+stderr saying what was wrong and what to do, the documented exit status, no traceback, and what the board
+holds afterwards."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+
+from simscenarios import need_board, need_firmware, stop_simulator
+
+pytestmark = pytest.mark.slow
+
+
+def sphere(*argv, timeout=60):
+    return subprocess.run([sys.executable, "-m", "sphere.cli", *argv], capture_output=True, text=True, timeout=timeout)
+
+
+def one_line(r, code: int, *words) -> str:
+    """The run's stderr, checked: exit status ``code``, no traceback, a one-line message with ``words``."""
+    err = r.stderr.strip()
+    assert r.returncode == code, (r.returncode, r.stdout, r.stderr)
+    assert "Traceback" not in err and len(err.splitlines()) == 1, err
+    for w in words:
+        assert w in err, (w, err)
+    return err
+
+
+@pytest.fixture(scope="module")
+def board():
+    """The virtual sphere lying still, its UART on a pty: (process of `sphere sim`, pty path)."""
+    from sphere.daemon.sources.base import SourceError
+    from sphere.daemon.sources.simulated import start_simulator
+
+    need_board()
+    need_firmware()
+    try:
+        proc, pty = start_simulator("synthetic:still", seconds=600)
+    except SourceError as e:
+        pytest.fail(str(e))
+    yield proc, pty
+    stop_simulator(proc)
+
+
+def _children(pid: int) -> list[int]:
+    try:
+        with open(f"/proc/{pid}/task/{pid}/children") as f:
+            return [int(c) for c in f.read().split()]
+    except OSError:
+        return []
+
+
+def test_unplugged_while_a_command_waits_is_one_line():
+    """The board goes away while `sphere device get` waits for it (its process frozen, then killed: the pty
+    closes as when a USB cable is pulled): one line saying so, exit 1. Before: a LinkLost traceback."""
+    from sphere.daemon.sources.base import SourceError
+    from sphere.daemon.sources.simulated import start_simulator
+    from sphere.link.port import holders
+
+    need_board()
+    need_firmware()
+    try:
+        proc, pty = start_simulator("synthetic:still", seconds=120)
+    except SourceError as e:
+        pytest.fail(str(e))
+    try:
+        boards = _children(proc.pid)
+        assert len(boards) == 1, boards  # `sphere sim` runs one board program
+        os.kill(boards[0], signal.SIGSTOP)  # the board answers nothing from now on
+        cmd = subprocess.Popen([sys.executable, "-m", "sphere.cli", "device", "--port", pty, "--timeout", "5", "get"],
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        deadline = time.monotonic() + 30
+        while cmd.pid not in [pid for pid, _ in holders(pty)] and time.monotonic() < deadline:
+            time.sleep(0.05)  # until it has the port open (and waits for the board)
+        time.sleep(0.3)
+        os.kill(boards[0], signal.SIGKILL)  # unplugged
+        out, err = cmd.communicate(timeout=30)
+        one_line(subprocess.CompletedProcess(cmd.args, cmd.returncode, out, err), 1, "went away", "plugged in")
+    finally:
+        stop_simulator(proc)
