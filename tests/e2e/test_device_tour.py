@@ -85,3 +85,28 @@ def test_unplugged_while_a_command_waits_is_one_line():
         one_line(subprocess.CompletedProcess(cmd.args, cmd.returncode, out, err), 1, "went away", "plugged in")
     finally:
         stop_simulator(proc)
+
+
+def _get(pty) -> dict:
+    r = sphere("device", "--port", pty, "get")
+    assert r.returncode == 0, r.stderr
+    return dict(line.split(" = ", 1) for line in r.stdout.splitlines() if " = " in line)
+
+
+def test_a_rate_for_a_stream_that_is_off_is_refused_not_reported_as_set(board):
+    """With RAW_SAMPLE off, `set stream.raw_rate_hz=50` printed 'set: stream.raw_rate_hz = 50 Hz', exit 0, while
+    the board got rate 0 (SET_STREAM: a stream that is off has no rate) and stayed off. Now: one line saying
+    the stream is off and to give stream.raw=on, exit 2, nothing sent; with stream.raw=on it is set."""
+    _, pty = board
+    try:
+        assert sphere("device", "--port", pty, "set", "stream.raw=off").returncode == 0
+        one_line(sphere("device", "--port", pty, "set", "stream.raw_rate_hz=50"), 2, "stream.raw is off",
+                 "stream.raw=on")
+        now = _get(pty)
+        assert (now["stream.raw"], now["stream.raw_rate_hz"]) == ("off", "0 Hz")
+        r = sphere("device", "--port", pty, "set", "stream.raw=on", "stream.raw_rate_hz=50")
+        assert r.returncode == 0 and "stream.raw_rate_hz = 50 Hz" in r.stdout, r.stderr
+        now = _get(pty)
+        assert (now["stream.raw"], now["stream.raw_rate_hz"]) == ("on", "50 Hz")
+    finally:
+        sphere("device", "--port", pty, "set", "stream.raw=on", "stream.raw_rate_hz=200")

@@ -57,6 +57,13 @@ def test_stream_off_sends_rate_zero_and_on_needs_a_rate():
     assert (p.stream_mode, p.raw_rate_hz, p.orientation_rate_hz) == (0b101, 200, 0)  # spec: 0 when its bit is clear
     with pytest.raises(SettingError, match="needs stream.orientation_rate_hz"):
         plan_settings(["stream.orientation=on"], _hello(stream_mode=1, orientation_rate_hz=0))
+    # a rate for a stream that is off (and stays off) would go out as 0: refused, not reported as set
+    with pytest.raises(SettingError, match="stream.raw is off.*give stream.raw=on too"):
+        plan_settings(["stream.raw_rate_hz=50"], _hello(stream_mode=6, raw_rate_hz=0))
+    with pytest.raises(SettingError, match="stream.orientation is off"):
+        plan_settings(["stream.orientation=off", "stream.orientation_rate_hz=50"], _hello())
+    (p,) = plan_settings(["stream.raw=on", "stream.raw_rate_hz=50"], _hello(stream_mode=6, raw_rate_hz=0)).packets
+    assert (p.stream_mode, p.raw_rate_hz) == (7, 50)
 
 
 def test_board_profile():

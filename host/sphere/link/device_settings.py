@@ -251,17 +251,20 @@ def plan_settings(items: list[str], hello=None, settings: dict | None = None) ->
                 raise SettingError(f"{k} must be given too: the sphere did not say its current value (no HELLO)")
         plan.values.update(values)
         plan.packets.append(_packet(group, values))
-    _check_stream(plan.values)
+    _check_stream(plan.values, given)
     return plan
 
 
-def _check_stream(v: dict) -> None:
+def _check_stream(v: dict, given: dict) -> None:
     for part in ("raw", "orientation"):
         on, rate = v.get(f"stream.{part}"), v.get(f"stream.{part}_rate_hz")
         if on is None:
             continue
         if on and not rate:
             raise SettingError(f"stream.{part}=on needs stream.{part}_rate_hz (one of {', '.join(map(str, RATES_HZ))})")
+        if not on and f"stream.{part}_rate_hz" in given:  # SET_STREAM: a stream that is off has rate 0
+            raise SettingError(f"stream.{part}_rate_hz={rate}: stream.{part} is off, and a stream that is off has no "
+                               f"rate; give stream.{part}=on too")
 
 
 def _packet(group: str, v: dict):
