@@ -64,6 +64,19 @@ def test_a_camera_that_is_not_there(capsys):
     assert "cannot open video file" in capsys.readouterr().err
 
 
+def test_a_camera_index_that_is_not_there_says_one_line():
+    """`sphere-mouse --camera 7` with no /dev/video7: our line alone (OpenCV's own warnings silenced), exit 2."""
+    import subprocess
+    import sys
+
+    code = "import sys; from sphere.daemon.cli import main; sys.exit(main(sys.argv[1:]))"
+    out = subprocess.run([sys.executable, "-c", code, "--camera", "7", "--backend", "log", "--quiet"],
+                         capture_output=True, text=True, timeout=120)
+    assert out.returncode == 2, out.stderr
+    lines = [ln for ln in out.stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1 and "cannot open camera 7" in lines[0] and "ls /dev/video*" in lines[0], out.stderr
+
+
 def test_frame_clock_takes_out_the_arrival_jitter():
     """The virtual camera's frames arrive 35 ms + an exponential tail (mean 5 ms) after the middle of their
     exposure; the clock stamps them from the camera's own regular period, frames the camera dropped included,

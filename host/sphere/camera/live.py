@@ -169,10 +169,21 @@ class CameraSource:
         import cv2  # optional dependency: the camera extra (OpenCV)
 
         src = int(self.spec) if str(self.spec).isdigit() else str(self.spec)
-        cap = cv2.VideoCapture(src)
+        level = cv2.utils.logging.getLogLevel()
+        cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_SILENT)  # our own line says what went wrong
+        try:
+            cap = cv2.VideoCapture(src)
+        finally:
+            cv2.utils.logging.setLogLevel(level)
         if not cap.isOpened():
-            what = f"camera {src}" if isinstance(src, int) else f"video file {src}"
-            raise CameraError(f"cannot open {what}; check the index (ls /dev/video*) or the file's path")
+            if isinstance(src, int) or src.startswith("/dev/"):
+                what = f"camera {src}"
+                hint = ("it is missing, busy in another program, or not readable by this user (the video group); "
+                        "ls /dev/video* lists the cameras")
+            else:
+                what = f"video file {src}"
+                hint = "check the file's path, or give a camera's index (ls /dev/video* lists them)"
+            raise CameraError(f"cannot open {what}: {hint}")
         return cap
 
     def open(self) -> "CameraSource":
