@@ -110,3 +110,29 @@ def test_a_rate_for_a_stream_that_is_off_is_refused_not_reported_as_set(board):
         assert (now["stream.raw"], now["stream.raw_rate_hz"]) == ("on", "50 Hz")
     finally:
         sphere("device", "--port", pty, "set", "stream.raw=on", "stream.raw_rate_hz=200")
+
+
+def test_ctrl_c_in_calibrate_says_the_sphere_is_as_it_was(board):
+    """Ctrl-C (SIGINT) in the middle of `sphere calibrate`: before, 'sphere: interrupted' and nothing about
+    the sphere; now one line saying nothing was changed on it, exit 130, and it reports what it did before."""
+    _, pty = board
+    before = sphere("device", "--port", pty, "get")
+    assert before.returncode == 0, before.stderr
+    cmd = subprocess.Popen([sys.executable, "-m", "sphere.cli", "calibrate", "--port", pty, "--yes", "--timeout", "120"],
+                           stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    lines = []
+    for line in cmd.stderr:  # the board lies still: step 1 passes, step 2 waits for turns that never come
+        lines.append(line)
+        if line.startswith("2/4"):
+            break
+    else:
+        pytest.fail("".join(lines))
+    time.sleep(1.0)
+    cmd.send_signal(signal.SIGINT)
+    out, err = cmd.communicate(timeout=30)
+    assert cmd.returncode == 130, (out, err)
+    assert "Traceback" not in err, err
+    last = err.strip().splitlines()[-1]
+    assert last == "sphere calibrate: interrupted; nothing was changed: the sphere keeps its calibration", err
+    after = sphere("device", "--port", pty, "get")
+    assert after.stdout == before.stdout, (before.stdout, after.stdout)

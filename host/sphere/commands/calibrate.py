@@ -202,6 +202,7 @@ class _Link:
     def __init__(self, port, writer=None):
         self.values = SeriesBuilder()
         self.last_raw_wall = time.monotonic()
+        self.changed = ""  # what the session has changed on the sphere so far ("": nothing)
         self.device = DeviceLink(port, on_bytes=writer.write if writer else None, on_packet=self._packet)
 
     def _packet(self, dp):
@@ -438,6 +439,10 @@ def _run_port(args) -> int:
     link = _Link(port, writer)
     try:
         return _session(args, link)
+    except KeyboardInterrupt:  # Ctrl-C, at a prompt or in a step
+        print(f"\nsphere calibrate: interrupted; {link.changed or 'nothing was changed: the sphere keeps its calibration'}",
+              file=sys.stderr)
+        return 130
     except LinkLost as e:
         print(f"\nsphere calibrate: {e}; nothing more was sent", file=sys.stderr)
         return 1
@@ -526,12 +531,15 @@ def _session(args, link) -> int:
         print(f"sphere calibrate: the sphere did not accept SET_CALIBRATION ({reply})", file=sys.stderr)
         return 1
     print("sent to the sphere (in use now)", file=sys.stderr)
+    link.changed = "the new calibration is in use on the sphere, not saved (--no-save)"
     if not args.no_save:
+        link.changed = "the new calibration is in use on the sphere, perhaps not saved (run `sphere calibrate` again)"
         reply = link.command(SaveCalibration(), timeout_s=2.0)
         if reply is None or not reply.ok:
             print(f"sphere calibrate: SAVE_CALIBRATION failed ({reply})", file=sys.stderr)
             return 1
         print("saved to EEPROM", file=sys.stderr)
+        link.changed = "the new calibration was sent and saved, but not read back"
     reply = link.command(GetCalibration())
     if reply is None or not reply.ok or len(reply.data) < CalibrationBlock.SIZE + 1:
         print(f"sphere calibrate: GET_CALIBRATION did not answer ({reply})", file=sys.stderr)
