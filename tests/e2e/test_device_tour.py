@@ -136,3 +136,21 @@ def test_ctrl_c_in_calibrate_says_the_sphere_is_as_it_was(board):
     assert last == "sphere calibrate: interrupted; nothing was changed: the sphere keeps its calibration", err
     after = sphere("device", "--port", pty, "get")
     assert after.stdout == before.stdout, (before.stdout, after.stdout)
+
+
+@pytest.mark.parametrize("stream, words", [
+    (["stream.raw=off"], "RAW_SAMPLE stream is off"),
+    (["stream.raw_rate_hz=10"], "RAW_SAMPLE at 10 Hz, too few"),
+])
+def test_calibrate_on_a_stream_it_cannot_use_says_how_to_set_it(board, stream, words):
+    """Before: with the raw stream off, 'no RAW_SAMPLE from the sphere; is the raw stream on (SET_STREAM)?'
+    (a wire command, not one a person can type); at 10 Hz, two minutes of 'still 0.0/3 s (moving)' and then 'the
+    sphere was never still ... put it down' about a sphere lying still. Now one line at once naming the
+    `sphere device` command that sets the stream, exit 1, nothing sent."""
+    _, pty = board
+    try:
+        assert sphere("device", "--port", pty, "set", *stream).returncode == 0
+        one_line(sphere("calibrate", "--port", pty, "--yes", "--timeout", "60", timeout=30), 1, words,
+                 f"sphere device --port {pty} set stream.raw=on stream.raw_rate_hz=200", "nothing was sent")
+    finally:
+        sphere("device", "--port", pty, "set", "stream.raw=on", "stream.raw_rate_hz=200")

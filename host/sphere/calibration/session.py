@@ -34,6 +34,9 @@ FACE_S = 2.0  # each face: still this long
 TURN_S = 30.0  # magnetometer: at most this long ...
 TURN_MIN_S = 8.0  # ... and at least this long
 BLOCK_S = 0.25  # stillness is judged per block of this much device time
+BLOCK_MIN_SAMPLES = 3  # ... holding at least this many samples
+#: The slowest RAW_SAMPLE rate whose blocks hold that many: below it the sphere is never found still.
+MIN_RAW_RATE_HZ = BLOCK_MIN_SAMPLES / BLOCK_S
 COVERAGE_BINS = 32
 COVERAGE_TARGET = 0.75  # 24 of 32 direction bins
 FACE_MIN_COS = 0.9  # an axis counts as up within about 25°
@@ -174,7 +177,8 @@ def still_spans(s: Series, min_s: float = 0.0, th: Stillness = STILLNESS, block_
     has_mag = len(s.mag_t) > 0
     if has_mag:
         mn, m_mean, m_std, _ = _block_stats(s.mag_t, s.mag, edges)
-    expected = max(3, int(0.5 * block_s / max(np.median(np.diff(s.t)), 1e-6))) if len(s.t) > 2 else 3
+    expected = (max(BLOCK_MIN_SAMPLES, int(0.5 * block_s / max(np.median(np.diff(s.t)), 1e-6))) if len(s.t) > 2
+                else BLOCK_MIN_SAMPLES)
     quiet = (n >= expected) & np.all(g_std <= th.gyro_std, axis=1) & np.all(a_std <= th.accel_std, axis=1)
     if has_mag:
         quiet &= (mn < 2) | np.all(m_std <= th.mag_std, axis=1)

@@ -30,9 +30,10 @@ from sphere.daemon.sources.base import version_problem
 from sphere.errors import LinkLost, SphereError
 from sphere.link.capture import CaptureError, CaptureFile, CaptureWriter
 from sphere.link.device import DeviceLink
+from sphere.link.device_settings import RATES_HZ
 from sphere.link.port import PortError, open_port
 from sphere.protocol import CalibrationBlock, GetCalibration, GetHello, SaveCalibration, SetCalibration
-from sphere.protocol.packets import CALIBRATION_STATE_BITS, bit_names
+from sphere.protocol.packets import CALIBRATION_STATE_BITS, STREAM_RAW, bit_names
 
 FACES = tuple(f[0] for f in _FACES)
 DEFAULT_TIMEOUT_S = 120.0
@@ -461,6 +462,22 @@ def _run_port(args) -> int:
                 pass
 
 
+def _stream_problem(hello, port: str) -> str | None:
+    """Why the sphere's RAW_SAMPLE stream (as its HELLO says) cannot carry the steps, with the command that
+    sets it, or None."""
+    fix = (f"set it with `sphere device --port {port} set stream.raw=on stream.raw_rate_hz=200`, then run "
+           "`sphere calibrate` again; nothing was sent")
+    if hello is None:
+        return f"no RAW_SAMPLE from the sphere (is its raw stream off?): {fix}"
+    if not hello.stream_mode & STREAM_RAW:
+        return f"the sphere's RAW_SAMPLE stream is off (stream.raw = off), and the steps are judged from it: {fix}"
+    if hello.raw_rate_hz < session.MIN_RAW_RATE_HZ:
+        slowest = min(r for r in RATES_HZ if r >= session.MIN_RAW_RATE_HZ)
+        return (f"the sphere sends RAW_SAMPLE at {hello.raw_rate_hz} Hz, too few to tell whether it lies still "
+                f"(the steps need {slowest} Hz or more; 200 Hz, the default, is best): {fix}")
+    return None
+
+
 def _session(args, link) -> int:
     """The guided steps on an open link (``_run_port`` opens and closes it)."""
     progress = _Progress()
@@ -481,10 +498,13 @@ def _session(args, link) -> int:
         if problem:
             print(f"sphere calibrate: {problem}", file=sys.stderr)
             return 1
-    if not link.values.t:
+    problem = _stream_problem(link.hello, args.port) if link.hello is not None else None
+    if problem is None and not link.values.t:
         link.pump(1.0)
-    if not link.values.t:
-        print("sphere calibrate: no RAW_SAMPLE from the sphere; is the raw stream on (SET_STREAM)?", file=sys.stderr)
+        if not link.values.t:
+            problem = _stream_problem(None, args.port)
+    if problem:
+        print(f"sphere calibrate: {problem}", file=sys.stderr)
         return 1
     reply = link.command(GetCalibration())
     base = block_of(CalibrationBlock.unpack(reply.data[:CalibrationBlock.SIZE])) if (
