@@ -154,3 +154,13 @@ def test_calibrate_on_a_stream_it_cannot_use_says_how_to_set_it(board, stream, w
                  f"sphere device --port {pty} set stream.raw=on stream.raw_rate_hz=200", "nothing was sent")
     finally:
         sphere("device", "--port", pty, "set", "stream.raw=on", "stream.raw_rate_hz=200")
+
+
+@pytest.mark.parametrize("baud", ["115200", "57600"])
+def test_flash_with_a_baud_on_a_port_that_is_no_bootloader(board, baud):
+    """`sphere flash --baud B` on the running firmware's port (no bootloader: on a pty nothing resets the board):
+    before, avrdude's ten 'not in sync' attempts and 'unable to open programmer', 12 lines; now one line, exit 1,
+    and the firmware goes on answering."""
+    _, pty = board
+    one_line(sphere("flash", "--port", pty, "--baud", baud), 1, f"no bootloader answered on {pty} at {baud} baud")
+    assert sphere("device", "--port", pty, "get").returncode == 0

@@ -73,6 +73,22 @@ def test_no_bootloader_is_a_clear_error(board, hex_image, capsys):
     assert "Traceback" not in err
 
 
+def test_a_given_baud_is_checked_before_avrdude_runs(tmp_path, board, hex_image, capsys):
+    """--baud where no bootloader answers at that rate: one line, avrdude not run (before: avrdude's ten sync
+    attempts and 'unable to open programmer'); at the bootloader's rate avrdude runs with it."""
+    log = tmp_path / "argv"
+    fake = tmp_path / "avrdude"
+    fake.write_text(f"#!/bin/sh\nprintf '%s\\n' \"$@\" > {log}\nexit 0\n")
+    fake.chmod(fake.stat().st_mode | stat.S_IEXEC)
+    nano = board(baud=57600)
+    assert main(["flash", "--port", nano.path, "--baud", "115200", "--avrdude", str(fake), "--no-hello"]) == 1
+    err = capsys.readouterr().err
+    assert err.startswith(f"sphere flash: no bootloader answered on {nano.path} at 115200 baud") and "Traceback" not in err
+    assert len(err.strip().splitlines()) == 1 and not log.exists()
+    assert main(["flash", "--port", nano.path, "--baud", "57600", "--avrdude", str(fake), "--no-hello"]) == 0
+    assert log.read_text().split("\n")[6:8] == ["-b", "57600"]
+
+
 def test_avrdude_command_line_and_its_failure(tmp_path, board, hex_image, capsys):
     """A stand-in avrdude records its arguments and fails as a real one does when the board is wrong."""
     log = tmp_path / "argv"

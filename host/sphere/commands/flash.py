@@ -122,19 +122,21 @@ def flash(args, out=None) -> int:
     if avrdude is None:
         raise FlashError(f"{args.avrdude}: not found; install avrdude (Debian: `sudo apt-get install avrdude`)")
     port = find_port(args.port)
-    baud = args.baud
+    # the bootloader is asked for sync also at a --baud given: a port where none answers is one line, not avrdude's
+    # ten attempts
+    bauds = (args.baud,) if args.baud else tuple(b for b, _ in bootloader.BOOTLOADERS)
+    try:
+        ser = open_port(port, bauds[0], timeout_s=0.05)
+    except PortError as e:
+        raise FlashError(str(e)) from None
+    try:
+        baud = bootloader.detect_baud(ser, bauds)
+    finally:
+        ser.close()
     if baud is None:
-        try:
-            ser = open_port(port, 115200, timeout_s=0.05)
-        except PortError as e:
-            raise FlashError(str(e)) from None
-        try:
-            baud = bootloader.detect_baud(ser)
-        finally:
-            ser.close()
-        if baud is None:
-            raise FlashError(f"no bootloader answered on {port} at 115200 or 57600 baud: is it a Nano? Press its "
-                             "reset button just as you run this again, or give --baud", 1)
+        raise FlashError(f"no bootloader answered on {port} at {' or '.join(map(str, bauds))} baud: is it a Nano? "
+                         "Press its reset button just as you run this again"
+                         + (" (or without --baud: both rates are tried)" if args.baud else ", or give --baud"), 1)
     print(f"{port}: {bootloader.bootloader_name(baud)} at {baud} baud; writing {image}", file=out, flush=True)
     cmd = bootloader.avrdude_command(port, baud, image, avrdude=avrdude, verify=not args.no_verify)
     r = subprocess.run(cmd, capture_output=True, text=True)
