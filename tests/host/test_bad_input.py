@@ -161,6 +161,29 @@ def test_mouse_replay_stops_at_once_on_sigterm(tmp_path, home):
     assert time.monotonic() - t0 < 2.0 and p.returncode == 0 and "Traceback" not in err, err
 
 
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["ctrl-c", "sigterm"])
+def test_mouse_stopped_twice_in_quick_succession_still_exits_0(tmp_path, home, sig):
+    """A double Ctrl-C: the second press comes while the first stop finishes. Once the daemon has said its last
+    line ("stopped: ...", then --print-stats) the run is over and the exit status is 0, not a death by signal
+    (it was: the interpreter's teardown after the last line takes ~0.2 s and SIGINT was back to its default)."""
+    cap = tmp_path / "slow.bin"
+    cap.write_bytes(script_bytes([("still", 2.0)]))
+    p = subprocess.Popen([sys.executable, "-m", "sphere.mouse", "--no-stream", "--backend", "log", "--quiet",
+                          "--print-stats", "--replay", str(cap), "--speed", "0.001"], stderr=subprocess.PIPE,
+                         stdout=subprocess.PIPE, text=True, env={**os.environ, **home})
+    first = _started(p, lambda line: ", backend log, " in line)
+    time.sleep(0.2)
+    p.send_signal(sig)
+    rest = _started(p, lambda line: "stopped:" in line, timeout_s=10)
+    alive = p.poll() is None
+    p.send_signal(sig)  # the second press, at once
+    out, err = p.communicate(timeout=10)
+    err = first + rest + err
+    assert alive, "the daemon ended before its second signal: nothing was tested"
+    assert p.returncode == 0 and "Traceback" not in err, (p.returncode, err)
+    assert "sphere-mouse stats: frames" in out, out  # nothing lost: the figures were printed
+
+
 def test_mouse_named_port_that_is_missing_waits_and_stops(home):
     p = subprocess.Popen([sys.executable, "-m", "sphere.mouse", "--no-stream", "--backend", "log", "--status",
                           "--port", "/dev/ttyNOPE7"], stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True,
