@@ -99,6 +99,18 @@ def test_dsu_through_the_daemons_seam():
         Config().with_overrides(parse_set(["outputs.dsu.port=70000"]), "test")
 
 
+def test_the_server_closes_at_once_and_counts_no_datagram_of_its_own():
+    """The daemon's stop waits for each output's close: the server's reader, blocked in its 0.5 s receive, is woken
+    at once (every Ctrl-C of a daemon with DSU on took up to 0.5 s more, 0.37 s measured in one)."""
+    for _ in range(5):
+        server = dsu.DsuServer("127.0.0.1", 0)
+        time.sleep(0.05)  # the reader is in its receive
+        t0 = time.monotonic()
+        server.close()
+        assert time.monotonic() - t0 < 0.1 and not server._thread.is_alive()
+        assert server.received == 0 and not server.bad
+
+
 def test_crc_is_zlibs_over_the_message_with_its_field_zeroed():
     m = dsu.message(dsu.MSG_VERSION, struct.pack("<H", 1001), 0x12345678)
     import binascii

@@ -196,6 +196,8 @@ class DsuServer:
                 if self._stop:
                     return
                 continue  # ICMP unreachable from a client gone, and the like
+            if self._stop:
+                return  # close()'s wake-up
             self.received += 1
             try:
                 self._handle(data, addr)
@@ -262,6 +264,11 @@ class DsuServer:
 
     def close(self) -> None:
         self._stop = True
+        host, port = self.address
+        try:  # wake the reader now, not at its next timeout (up to 0.5 s more for every stop of the daemon)
+            self.sock.sendto(b"", ("127.0.0.1" if host == "0.0.0.0" else host, port))
+        except OSError:
+            pass
         self._thread.join(timeout=2.0)
         self.sock.close()
 
