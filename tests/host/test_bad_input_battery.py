@@ -186,6 +186,9 @@ ROWS = [
     M(["--port", "{tmp}/plain"], 2, "not a serial port", files={"plain": b"x"}),
     M(["--port", "/dev/null"], 2, "not a serial port"),
     M(["--simulate", "--trace", "{tmp}/nope.mat"], 2, "nope.mat"),
+    # an output that cannot start says what to set, and the pointer runs on
+    M(["--replay", "{tmp}/good.cap", "--speed", "0", "--set", "outputs.dsu.enabled=true", "--set",
+       "outputs.dsu.host=192.0.2.1"], 0, "set [outputs.dsu] host to an address of this machine", files=CAP),
     # ---- sphere ----
     S([], 2, "usage"),
     S(["frobnicate"], 2, "invalid choice"),

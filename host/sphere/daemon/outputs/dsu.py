@@ -177,9 +177,11 @@ class DsuServer:
             self.sock.bind((host, port))
         except OSError as e:
             self.sock.close()
-            why = "another DSU server (DS4Windows, BetterJoy, a second sphere-mouse) holds it" \
-                if e.errno == errno.EADDRINUSE else (e.strerror or str(e))
-            raise OutputUnavailable(f"cannot serve UDP on {host}:{port}: {why}; set [outputs.dsu] port") from None
+            if e.errno == errno.EADDRINUSE:
+                why = "another DSU server (DS4Windows, BetterJoy, a second sphere-mouse) holds it; set [outputs.dsu] port"
+            else:  # an address not of this machine, a name that does not resolve
+                why = f"{e.strerror or e}; set [outputs.dsu] host to an address of this machine (127.0.0.1)"
+            raise OutputUnavailable(f"cannot serve UDP on {host}:{port}: {why}") from None
         self.sock.settimeout(0.5)
         self.address = self.sock.getsockname()
         self._stop = False
