@@ -164,3 +164,23 @@ def test_flash_with_a_baud_on_a_port_that_is_no_bootloader(board, baud):
     _, pty = board
     one_line(sphere("flash", "--port", pty, "--baud", baud), 1, f"no bootloader answered on {pty} at {baud} baud")
     assert sphere("device", "--port", pty, "get").returncode == 0
+
+
+def test_the_board_profile_is_said_to_be_kept_and_to_survive_clear(board):
+    """SET_BOARD stores the profile at once and CLEAR_SETTINGS leaves it (spec §5). Before: `set board=gy85`
+    said '`sphere device save` keeps them over power-off' and `clear` said 'the sphere starts with its
+    defaults at the next power-up', yet after a reboot the board was still gy85. Now both say where the
+    profile stands, and a reboot shows exactly that."""
+    _, pty = board
+    try:
+        r = sphere("device", "--port", pty, "set", "board=gy85", "filter.beta=0.2")
+        assert r.returncode == 0, r.stderr
+        assert r.stdout.strip() == ("set: board = gy85, filter.beta = 0.2; the board profile is stored on the sphere at "
+                                    "once; `sphere device save` keeps the others over power-off")
+        r = sphere("device", "--port", pty, "clear")
+        assert r.returncode == 0 and "its board profile (gy85) is stored apart and stays" in r.stdout, r
+        assert sphere("device", "--port", pty, "reboot").returncode == 0
+        now = _get(pty)
+        assert (now["board"], now["filter.beta"]) == ("gy85", "0.041")
+    finally:
+        sphere("device", "--port", pty, "set", "board=aligned")

@@ -183,8 +183,10 @@ def _run(args) -> int:
                               "flash the current one (`sphere flash`)", 1)
             packet = SaveSettings() if args.action == "save" else ClearSettings()
             _ask(link, packet, max(args.timeout, 2.0))  # 17 EEPROM bytes take ~60 ms to write
+            board = show("board", hello.board_profile)  # SET_BOARD stores it apart: neither command touches it
             print("saved: the sphere starts with these settings at every power-up" if args.action == "save" else
-                  "cleared: the sphere starts with its defaults at the next power-up")
+                  f"cleared: the sphere starts with its default settings at the next power-up; its board profile "
+                  f"({board}) is stored apart and stays (`set board=...` changes it)")
             return 0
         if args.action == "identify":
             _ask(link, Identify(seconds), args.timeout)
@@ -206,8 +208,13 @@ def _run(args) -> int:
         for note in plan.notes:
             print(f"note: {note}", file=sys.stderr)
         given = {item.split("=", 1)[0].strip() for item in args.items}
+        kept = []  # what happens at power-off: SET_BOARD stores the profile itself, the others wait for `save`
+        if "board" in given:
+            kept.append("the board profile is stored on the sphere at once")
+        if reported and given - {"board"}:
+            kept.append("`sphere device save` keeps " + ("the others" if "board" in given else "them") + " over power-off")
         print("set: " + ", ".join(f"{k} = {show(k, v)}" for k, v in plan.values.items() if k in given)
-              + ("; `sphere device save` keeps them over power-off" if reported else ""))
+              + "".join(f"; {k}" for k in kept))
         return 0
     finally:
         ser.close()
