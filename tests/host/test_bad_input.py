@@ -161,6 +161,21 @@ def test_mouse_replay_stops_at_once_on_sigterm(tmp_path, home):
     assert time.monotonic() - t0 < 2.0 and p.returncode == 0 and "Traceback" not in err, err
 
 
+def test_mouse_page_port_another_program_holds(home, capture_file):
+    """A second sphere-mouse (or any program) on the page's port: one line saying which flag to change; the pointer
+    runs on (it said only asyncio's bind error, no way out)."""
+    import socket
+
+    with socket.socket() as busy:
+        busy.bind(("127.0.0.1", 0))
+        busy.listen()
+        port = busy.getsockname()[1]
+        r = run("sphere.mouse", "--backend", "log", "--quiet", "--replay", str(capture_file), "--speed", "0",
+                "--stream-port", str(port), env=home)
+    clear(r, 0, f"output page cannot start: cannot listen on 127.0.0.1:{port}: another program")
+    assert "set --stream-port PORT ([outputs.page] port), or --no-stream" in r.stderr and "stopped:" in r.stderr, r.stderr
+
+
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["ctrl-c", "sigterm"])
 def test_mouse_stopped_twice_in_quick_succession_still_exits_0(tmp_path, home, sig):
     """A double Ctrl-C: the second press comes while the first stop finishes. Once the daemon has said its last

@@ -189,6 +189,8 @@ ROWS = [
     # an output that cannot start says what to set, and the pointer runs on
     M(["--replay", "{tmp}/good.cap", "--speed", "0", "--set", "outputs.dsu.enabled=true", "--set",
        "outputs.dsu.host=192.0.2.1"], 0, "set [outputs.dsu] host to an address of this machine", files=CAP),
+    Row("mouse", ["--backend", "log", "--quiet", "--replay", "{tmp}/good.cap", "--speed", "0", "--set",
+                  "outputs.page.host=nonexistent.invalid"], 0, "set [outputs.page] host to an address", files=CAP),
     # ---- sphere ----
     S([], 2, "usage"),
     S(["frobnicate"], 2, "invalid choice"),

@@ -141,7 +141,7 @@ class OrientationStream:
         if not self._started.wait(timeout_s):
             raise RuntimeError("the stream server did not start")
         if self._error is not None:
-            raise RuntimeError(f"cannot listen on {self.host}:{self.port}: {self._error}")
+            raise RuntimeError(f"cannot listen on {self.host}:{self.port}: {self._error}") from self._error
 
     def _run(self) -> None:
         try:

@@ -8,6 +8,8 @@ on as it comes; a port another program holds makes it unavailable, which leaves 
 
 from __future__ import annotations
 
+import errno
+
 from sphere.daemon.outputs.base import Output, OutputUnavailable
 from sphere.daemon.stream3d import OrientationStream
 from sphere.settings import Param, port_number
@@ -34,8 +36,20 @@ class PageOutput(Output):
         try:
             stream.start()
         except Exception as e:  # a taken port must not stop the pointer
-            raise OutputUnavailable(str(e)) from None
+            raise OutputUnavailable(self._why(stream, e)) from None
         self.stream = stream
+
+    @staticmethod
+    def _why(stream: OrientationStream, e: Exception) -> str:
+        """What went wrong and which setting to change."""
+        cause = e.__cause__
+        where = f"cannot listen on {stream.host}:{stream.port}"
+        if getattr(cause, "errno", None) == errno.EADDRINUSE:
+            return (f"{where}: another program (a second sphere-mouse?) holds the port; set --stream-port PORT "
+                    "([outputs.page] port), or --no-stream")
+        if isinstance(cause, OSError):  # a name that does not resolve, an address not of this machine
+            return f"{where}: {cause.strerror or cause}; set [outputs.page] host to an address of this machine (127.0.0.1)"
+        return str(e)
 
     @property
     def url(self) -> str:
