@@ -22,7 +22,7 @@ from sphere.daemon.config import ConfigError
 from sphere.daemon.outputs.fanout import attach
 from sphere.daemon.move_log import MoveLog, MoveLogError
 from sphere.daemon.print_config import defaults_toml
-from sphere.daemon.sources.base import SourceError
+from sphere.daemon.sources.base import SourceError, SourceFailed
 from sphere.daemon.status import StatusLine, run_stats
 from sphere.errors import output_failed
 
@@ -272,7 +272,10 @@ def _main(argv=None) -> int:
     started = time.monotonic()
     try:
         daemon.run()
-    except SourceError as e:
+    except SourceFailed as e:  # a device that failed during the run
+        logger.error(str(e))
+        code = 1
+    except SourceError as e:  # what the user named turned out unusable (a capture, a port, a protocol version)
         logger.error(str(e))
         code = 2
     finally:

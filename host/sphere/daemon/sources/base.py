@@ -39,6 +39,11 @@ class SourceError(SphereError):
     """A source that cannot go on; the message says what to do. The daemon stops with it."""
 
 
+class SourceFailed(SourceError):
+    """The device failed during the run and will not come back (the virtual board killed): the daemon stops with
+    it, exit status 1."""
+
+
 class SourceEnded(Exception):
     """A finite source (a capture, the simulated board's run) has nothing more."""
 

@@ -7,6 +7,7 @@ itself stops when its own parent is gone.
 
 from __future__ import annotations
 
+import collections
 import ctypes
 import importlib.util
 import os
@@ -18,7 +19,7 @@ import threading
 import time
 
 from sphere.broad import BroadMissing, find_trial
-from sphere.daemon.sources.base import SourceError
+from sphere.daemon.sources.base import SourceError, SourceFailed
 from sphere.daemon.sources.scripted import ScriptedSource
 from sphere.daemon.sources.serial import SerialSource, device_settings, serial_timing
 from sphere.settings import Param, Settings
@@ -53,10 +54,12 @@ def die_with_parent() -> None:
         pass
 
 
-def start_simulator(trace: str = "", log=None, timeout_s: float = 120.0, seconds: float = 600.0, extra=()):
+def start_simulator(trace: str = "", log=None, timeout_s: float = 120.0, seconds: float = 600.0, extra=(),
+                    said=None):
     """Start the virtual board; returns (process, pty path). The board prints ``... UART on /dev/pts/N``;
-    the rest of its output is read and dropped so that it never blocks on a full pipe. The first start
-    may build the firmware and the board (make), hence the long timeout."""
+    the rest of its output is read so that it never blocks on a full pipe, its last lines kept in ``said`` (a
+    ``collections.deque`` with a maxlen) when given. The first start may build the firmware and the board
+    (make), hence the long timeout."""
     cmd = simulator_command(trace, seconds, extra)
     parent = os.getpid()
 
@@ -80,7 +83,8 @@ def start_simulator(trace: str = "", log=None, timeout_s: float = 120.0, seconds
             log(line.rstrip()[len("sphere: "):])
         m = PTY_RE.search(line)
         if m and os.path.exists(m.group(1)):
-            threading.Thread(target=lambda: [None for _ in proc.stdout], daemon=True).start()
+            keep = said if said is not None else collections.deque(maxlen=1)
+            threading.Thread(target=lambda: keep.extend(line.rstrip() for line in proc.stdout), daemon=True).start()
             return proc, m.group(1)
     if proc.poll() is None:
         proc.kill()
@@ -126,7 +130,9 @@ class SimulatorSource(SerialSource):
             log(f"simulated sphere: starting the virtual board with {trace} ({seconds:g} s)" if trace else
                 f"simulated sphere: no trace named, playing the tour ({DEFAULT_SIM_TRACE}: the pointer, a click, "
                 f"a double click, tosses through tilt and 3-D mode; --trace to choose another), {seconds:g} s")
-        self.proc, path = start_simulator(trace, log, seconds=seconds)
+        self.seconds = seconds
+        self.said = collections.deque(maxlen=8)  # `sphere sim`'s last lines (why its board ended)
+        self.proc, path = start_simulator(trace, log, seconds=seconds, said=self.said)
         serial_kwargs.setdefault("reset_on_open", False)
         super().__init__(port=path, log=log, **serial_kwargs)
         self.allow_pids = (self.proc.pid,)  # the board holds its own pty
@@ -166,7 +172,13 @@ class SimulatorSource(SerialSource):
         if self.proc.poll() is None:
             return False
         rc = self.proc.returncode
-        self.log("the simulated sphere's run is over" if rc == 0 else f"the simulated sphere stopped (exit status {rc})")
+        if rc != 0:  # killed, crashed: a failed run (exit 1), in the simulator's own words where it gave them
+            why = next((line.rstrip(": ") for line in reversed(self.said) if line.startswith("sphere sim: ")),
+                       f"`sphere sim` killed by {signal.Signals(-rc).name}" if -rc in signal.valid_signals()
+                       else f"`sphere sim` exit status {rc}")
+            raise SourceFailed(f"the simulated sphere stopped before its {self.seconds:g} s were over ({why}); "
+                               "sphere-mouse stops with it: start it again")
+        self.log("the simulated sphere's run is over")
         return True
 
     def close(self):
