@@ -72,6 +72,22 @@ def test_a_growing_age_is_said_once_and_its_end_once():
     assert abs(med - 3.2) < 1e-9 and abs(p95 - 3.2) < 1e-9
 
 
+def test_ages_below_zero_are_the_clocks_error_not_a_faster_link():
+    """A device clock that ran ahead of the fit (a starved simulated board catching up with the wall clock) gives
+    ages below zero for a while; ages of a few ms afterwards are not "growing" (the demo on a loaded machine said
+    'samples arrive 3 ms old (was -117.0 ms): the link is congested'). A real growth from there still is."""
+    ages = SampleAges()
+    said = []
+    t = 0.0
+    for age_ms in [-117.0] * 400 + [3.0] * 1000 + [35.0] * 600:  # 200 samples a second
+        line = ages.add(age_ms / 1e3, t)
+        if line:
+            said.append(line)
+        t += 0.005
+    assert len(said) == 1, said
+    assert "35 ms old (was 0.0 ms)" in said[0] and "congested" in said[0]
+
+
 def test_the_runs_ages_are_kept_over_a_reconnect_and_give_nearest_rank_percentiles():
     import numpy as np
 

@@ -196,12 +196,15 @@ class SampleAges:
         self._second, self._second_start = [], host_s
         if self.best_median_s is None or med < self.best_median_s:
             self.best_median_s = med
-        high = med > self.best_median_s + self.GROWING_S
+        # no sample arrives before it was taken: a median below zero is the clock's fit off (a device clock that
+        # jumped ahead, as a starved simulated board catching up with the wall clock does), not a faster link, so
+        # growth is judged from zero up
+        high = med > max(self.best_median_s, 0.0) + self.GROWING_S
         self._high_seconds = self._high_seconds + 1 if high else 0
         if self._high_seconds >= 2 and not self.growing and host_s - self._ended_at >= QUIET_S:
             self.growing = True
             self.growing_spells += 1
-            return (f"the sphere's samples arrive {med * 1e3:.0f} ms old (was {self.best_median_s * 1e3:.1f} ms): "
+            return (f"the sphere's samples arrive {med * 1e3:.0f} ms old (was {max(self.best_median_s, 0.0) * 1e3:.1f} ms): "
                     "the link is congested (Bluetooth?) or the adapter stalls")
         if self.growing and not high:
             self.growing = False
