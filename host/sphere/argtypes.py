@@ -28,13 +28,53 @@ def seconds_up_to(max_s: float):
 
 
 def out_file(text: str) -> str:
-    """A file to write: not a folder, in a folder that exists (checked before any work is done)."""
+    """A file to write: not a folder, in a folder that exists, and one that can be created or written there
+    (checked before any work is done, so a long run never ends in a file it cannot write)."""
     if os.path.isdir(text):
         raise argparse.ArgumentTypeError(f"{text!r} is a folder: give a file name to write")
     parent = os.path.dirname(os.path.abspath(text))
     if not os.path.isdir(parent):
         raise argparse.ArgumentTypeError(f"{text!r}: the folder {parent} does not exist")
+    _probe(text, lambda: os.close(os.open(text, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)), lambda: os.unlink(text))
     return text
+
+
+def out_dir(text: str) -> str:
+    """A folder to write files into: an existing folder, or one that can be made (checked before any work)."""
+    if os.path.exists(text) and not os.path.isdir(text):
+        raise argparse.ArgumentTypeError(f"{text!r} is a file: give a folder to write into")
+    path = os.path.abspath(text)
+    first_missing = None
+    while not os.path.exists(path):  # the outermost folder that would be made
+        first_missing, path = path, os.path.dirname(path)
+    if not os.path.isdir(path):
+        raise argparse.ArgumentTypeError(f"{text!r}: {path} is a file, not a folder")
+    if first_missing is None:
+        if not os.access(path, os.W_OK | os.X_OK):
+            raise argparse.ArgumentTypeError(f"{text!r} cannot be written: permission denied; give another folder")
+        return text
+    _probe(text, lambda: os.mkdir(first_missing), lambda: os.rmdir(first_missing))
+    return text
+
+
+def _probe(text: str, make, undo) -> None:
+    """Try to create ``text`` (``make``) and take it away again (``undo``); an existing file is tried for
+    writing only. A device or FIFO is left alone (/dev/full, /dev/null: the write itself tells)."""
+    if os.path.exists(text):
+        if os.path.isfile(text) and not os.access(text, os.W_OK):
+            raise argparse.ArgumentTypeError(f"{text!r} cannot be written: permission denied; give another file")
+        return
+    try:
+        make()
+    except FileExistsError:  # made meanwhile by someone else: theirs to keep
+        return
+    except OSError as e:
+        raise argparse.ArgumentTypeError(f"{text!r} cannot be written: {e.strerror or e}; give a path you can "
+                                         "write to") from None
+    try:
+        undo()
+    except OSError:
+        pass
 
 
 def positive(text: str, least: float = 0.0, inclusive: bool = False) -> float:

@@ -288,6 +288,17 @@ def test_sim_bad_flags(argv, words):
     clear(sphere("sim", "--trace", "synthetic:still", *argv), 2, words)
 
 
+def test_output_paths_are_tried_without_leaving_anything(tmp_path):
+    """--json and --plot are tried (made and taken away) while the flags are read: a later bad flag leaves no
+    file or folder behind, and a file that is there already is kept as it was."""
+    kept = tmp_path / "kept.json"
+    kept.write_text("mine")
+    clear(sphere("eval", "--json", str(tmp_path / "new.json"), "--plot", str(tmp_path / "plots" / "a"), "--jobs", "0"),
+          2, "jobs")
+    clear(sphere("eval", "--json", str(kept), "--jobs", "0"), 2, "jobs")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["kept.json"] and kept.read_text() == "mine"
+
+
 # ---- sphere calibrate ----
 
 def test_calibrate_bad_flags(tmp_path):

@@ -430,6 +430,16 @@ ROWS = [
     S(["camera", "render", "--seconds", "1", "-o", "/dev/full"], 1, "cannot write", timeout=60, broad=True),
     S(["service", "install"], 2, "xdg", files={"xdg": b"a file where a folder belongs"}),
     S(["protocol", "explode"], 2, "invalid choice"),
+    # a file or folder that cannot be made is refused before the run, not in a traceback at its end
+    S(["sim", "--trace", "synthetic:still", "--json", "/proc/sphere-x.json"], 2, "cannot be written"),
+    S(["sim", "--trace", "synthetic:still", "--stats", "/proc/sphere-x.json"], 2, "cannot be written"),
+    S(["eval", "--json", "/proc/sphere-x.json"], 2, "cannot be written"),
+    S(["eval", "--plot", "/proc/sphere-x"], 2, "cannot be written"),
+    S(["eval", "--plot", "{tmp}/f"], 2, "is a file", files={"f": b"x"}),
+    S(["eval", "--plot", "{tmp}/f/plots"], 2, "is a file, not a folder", files={"f": b"x"}),
+    S(["hybrid-eval", "--plot", "{tmp}/f"], 2, "is a file", files={"f": b"x"}),
+    S(["bench", "decode", "--json", "/proc/sphere-x.json"], 2, "cannot be written"),
+    S(["bench", "position", "--json", "/proc/sphere-x.json"], 2, "cannot be written"),
 ]
 
 
