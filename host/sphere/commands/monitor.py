@@ -8,7 +8,7 @@ import time
 import numpy as np
 
 from sphere import argtypes
-from sphere.errors import LinkLost
+from sphere.errors import LinkLost, SphereError
 from sphere.link.clock import DeviceClock
 from sphere.link.device import DeviceLink
 from sphere.link.monitor import LinkMonitor
@@ -36,8 +36,13 @@ def add_arguments(p) -> None:
     p.add_argument("--events", type=argtypes.at_least_one, default=None, metavar="N",
                    help="stop after N events (taps, free falls): e.g. to try a tap setting")
     p.add_argument("--plot", action="store_true", help="live curves: accelerometer, gyroscope, magnetometer, orientation")
-    p.add_argument("--plot-out", metavar="PNG", help="with --plot: also write the last view to this image at the end")
+    p.add_argument("--plot-out", metavar="PNG", type=argtypes.out_file,
+                   help="write the plot's last view to this image at the end (implies --plot; works without a display)")
     p.add_argument("--refresh", type=argtypes.seconds, default=0.5, metavar="SECONDS", help="how often the view is redrawn")
+
+
+class PlotUnusable(SphereError, ValueError):
+    """--plot cannot show or write anything as asked (no display, an image format matplotlib cannot write)."""
 
 
 class _Plot:
@@ -50,13 +55,22 @@ class _Plot:
             matplotlib.use("Agg")
         import matplotlib.pyplot as plt  # optional dependency: the plot extra
 
+        if matplotlib.get_backend().lower() == "agg" and not out_path:  # matplotlib found no display to use
+            raise PlotUnusable("--plot has no window to draw in here (no display, or no GUI toolkit for matplotlib); "
+                               "add --plot-out FILE.png to write the view to an image at the end")
         self.plt = plt
         self.out_path = out_path
         self.fig, self.axes = plt.subplots(4, 1, figsize=(9, 8), sharex=True)
+        kinds = self.fig.canvas.get_supported_filetypes()
+        ext = out_path.rpartition(".")[2].lower() if out_path and "." in out_path.rsplit("/", 1)[-1] else ""
+        if out_path and ext not in kinds:
+            plt.close(self.fig)
+            raise PlotUnusable(f"--plot-out {out_path}: end it in one of the image formats "
+                               f"{', '.join('.' + k for k in sorted(kinds))}, e.g. .png")
         self.fig.suptitle("MARG sphere — sphere monitor")
-        if matplotlib.get_backend().lower() != "agg":
-            plt.ion()
-            plt.show(block=False)
+        #: a window to redraw while reading; without one (Agg) only the last view is drawn, into --plot-out
+        self.live = matplotlib.get_backend().lower() != "agg"
+        self.shown = False
 
     def update(self, mon) -> None:
         raw = np.array(mon.raw_history) if mon.raw_history else np.zeros((0, 10))
@@ -75,8 +89,12 @@ class _Plot:
             ax.legend(loc="upper left", fontsize="small", ncol=len(names))
             ax.grid(alpha=0.3)
         self.axes[-1].set_xlabel("device time (s)")
-        self.fig.canvas.draw_idle()
-        if self.plt.get_backend().lower() != "agg":
+        if self.live:
+            if not self.shown:
+                self.shown = True
+                self.plt.ion()
+                self.plt.show(block=False)
+            self.fig.canvas.draw_idle()
             self.plt.pause(0.001)
 
     def close(self) -> None:
@@ -86,6 +104,16 @@ class _Plot:
 
 
 def run(args) -> int:
+    plot = None
+    if args.plot or args.plot_out:  # before the port: what it buffers meanwhile would arrive as one burst
+        try:
+            plot = _Plot(args.plot_out)
+        except ImportError:
+            print("sphere monitor: --plot needs matplotlib (pip install 'marg-sphere[plot]')", file=sys.stderr)
+            return 1
+        except PlotUnusable as e:
+            print(f"sphere monitor: {e}", file=sys.stderr)
+            return 2
     try:
         ser = open_port(args.port, args.baud, timeout_s=0.05, low_latency=True)
     except PortError as e:  # the port named is not there or not usable: a usage error
@@ -94,14 +122,6 @@ def run(args) -> int:
     link = DeviceLink(ser, name=args.port)
     mon = LinkMonitor(link.stream.stats)
     tty = sys.stdout.isatty()
-    plot = None
-    if args.plot:
-        try:
-            plot = _Plot(args.plot_out)
-        except ImportError:
-            print("sphere monitor: --plot needs matplotlib (pip install 'marg-sphere[plot]')", file=sys.stderr)
-            ser.close()
-            return 1
     clock = DeviceClock(args.baud)
     next_echo = 0.0
     start = time.monotonic()
@@ -144,7 +164,7 @@ def run(args) -> int:
                 elif now - start >= 1.0:
                     print(f"{now - start:6.1f} s  {mon.summary(now)}", flush=True)
                     next_draw = now + max(args.refresh, 1.0)
-                if plot is not None:
+                if plot is not None and plot.live:
                     plot.update(mon)
     except LinkLost as e:
         print(f"sphere monitor: {e}", file=sys.stderr)
@@ -152,12 +172,13 @@ def run(args) -> int:
     except KeyboardInterrupt:
         pass
     finally:
+        stopped = time.monotonic()  # the rates are of the time it read, not of the plot's last drawing
         ser.close()
         if plot is not None:
             plot.update(mon)
             plot.close()
     if not tty:
-        print("\n".join(mon.lines(time.monotonic())))
+        print("\n".join(mon.lines(stopped)))
     if not mon.counts:
         print(f"sphere monitor: nothing arrived from {args.port}: is the sphere on, and this its port?", file=sys.stderr)
         return code or 1
