@@ -163,6 +163,13 @@ ROWS = [
     F("pointer = 5\n", 2, "pointer"),
     F("speed = 1\n", 2, "speed"),
     F("[source]\nkind = \"replay\"\n", 2, "needs a capture file"),
+    # the line that sets the key, as file:LINE (tomllib gives none for a value it parsed)
+    F("[pointer]\nslow_deg_per_width = 30\n\n[outputs.osc]\n# OSC\nport = 70000  # too far\n", 2,
+      "c.toml:6: [outputs.osc] port = 70000: must be between 1 and 65535"),
+    F("[outputs]\nosc.enabled = \"yes\"\n", 2, "c.toml:2: [outputs.osc] enabled = 'yes': must be true or false"),
+    F('outputs.osc.enabeld = true\n', 2, "c.toml:1: unknown key [outputs.osc] enabeld (did you mean 'enabled'?)"),
+    F('[pointer]\n\n[ "outputs" . "oscc" ]\nport = 1\n', 2, "c.toml:3: unknown section [outputs.oscc]"),
+    F("[outputs]\nosc = {port = 0}\n", 2, "c.toml: [outputs.osc] port = 0"),  # an inline table: no line
     F("", 0, "config OK"),  # empty: all defaults (valid)
     F(b"\xef\xbb\xbf[pointer]\n", 2, "TOML"),  # a UTF-8 byte-order mark
     C(["--config", "{tmp}"], 2, "is a folder"),

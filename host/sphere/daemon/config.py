@@ -107,7 +107,12 @@ RENAMED = {
 
 
 class ConfigError(SphereError):
-    """A config file, override or flag that cannot be used; the message says which and why."""
+    """A config file, override or flag that cannot be used; the message says which and why. ``section`` and
+    ``key`` say where in a file (:func:`load` adds the line)."""
+
+    def __init__(self, msg: str, section: str | None = None, key: str | None = None):
+        super().__init__(msg)
+        self.section, self.key = section, key
 
 
 # ---- checks a range cannot say -------------------------------------------------------------------
@@ -329,7 +334,7 @@ def check_value(spec: Section, key: str, value, where: str):
         choices = p.allowed()
         if choices is not None and isinstance(value, str) and str(e).startswith("must be one of"):
             hint = _suggest(value, choices)
-        raise ConfigError(f"{where}: [{spec.name}] {key} = {value!r}: {e}{hint}") from None
+        raise ConfigError(f"{where}: [{spec.name}] {key} = {value!r}: {e}{hint}", spec.name, key) from None
 
 
 def flatten(values: dict, where: str, known: dict | None = None) -> dict:
@@ -340,7 +345,8 @@ def flatten(values: dict, where: str, known: dict | None = None) -> dict:
 
     def walk(name, table):
         if not isinstance(table, dict):
-            raise ConfigError(f"{where}: {name} must be a [{name}] table, not a value")
+            raise ConfigError(f"{where}: {name} must be a [{name}] table, not a value",
+                              *(name.rsplit(".", 1) if "." in name else ("", name)))
         for key, value in table.items():
             sub = f"{name}.{key}"
             if isinstance(value, dict) and (sub in known or sub in prefixes):
@@ -349,14 +355,15 @@ def flatten(values: dict, where: str, known: dict | None = None) -> dict:
                 out.setdefault(name, {})[key] = value
             else:
                 raise ConfigError(f"{where}: unknown section [{sub if isinstance(value, dict) else name}]"
-                                  f"{_suggest(sub, known)}; sections are {', '.join(known)}")
+                                  f"{_suggest(sub, known)}; sections are {', '.join(known)}",
+                                  *((sub, None) if isinstance(value, dict) else (name, key)))
         if name in known:
             out.setdefault(name, {})
 
     for name, table in values.items():
         if name not in known and name not in prefixes:
             raise ConfigError(f"{where}: unknown section [{name}]{_suggest(name, known)}; sections are "
-                              f"{', '.join(known)}")
+                              f"{', '.join(known)}", name)
         walk(name, table)
     return out
 
@@ -372,7 +379,7 @@ def validate(values: dict, where: str, together: bool = True, known: dict | None
         spec = known[name]
         for key, value in keys.items():
             if key not in spec.params and (name, key) in MOVED_KEYS:
-                raise ConfigError(f"{where}: [{name}] {key} {MOVED_KEYS[name, key]}")
+                raise ConfigError(f"{where}: [{name}] {key} {MOVED_KEYS[name, key]}", name, key)
             if key not in spec.params and (name, key) in RENAMED and RENAMED[name, key][0] in known:
                 new_name, new_key = RENAMED[name, key]
                 if notes is not None:
@@ -382,7 +389,7 @@ def validate(values: dict, where: str, together: bool = True, known: dict | None
                 continue
             if key not in spec.params:
                 raise ConfigError(f"{where}: unknown key [{name}] {key}{_suggest(key, spec.params)}; keys of "
-                                  f"[{name}] are {', '.join(spec.params)}")
+                                  f"[{name}] are {', '.join(spec.params)}", name, key)
             out.setdefault(name, {})[key] = check_value(spec, key, value, where)
     if together:
         for name, keys in out.items():
@@ -390,7 +397,7 @@ def validate(values: dict, where: str, together: bool = True, known: dict | None
             if spec.check is not None and keys:
                 reason = spec.check(Settings(spec.params, keys, checked=True))
                 if reason:
-                    raise ConfigError(f"{where}: [{name}] {reason}")
+                    raise ConfigError(f"{where}: [{name}] {reason}", name)
     return out
 
 
@@ -406,6 +413,28 @@ def check_config(cfg: Config, where: str) -> None:
             raise ConfigError(f"{where}: {reason}")
 
 
+def line_of(text: str, section: str | None, key: str | None = None) -> int | None:
+    """The line (from 1) of a config file's text that sets ``[section] key`` (``section`` "" for a top-level key;
+    ``key`` None: the section's header), for a message that points at it; None when no line plainly does (a
+    key set through an inline table)."""
+    def dotted(name: str) -> str:  # ' "outputs" . osc ' -> 'outputs.osc'
+        return ".".join(part.strip().strip('"\'') for part in name.split("."))
+
+    want = ".".join(n for n in (section, key) if n)
+    table = ""
+    for n, raw in enumerate(text.splitlines(), 1):
+        line = raw.strip()
+        if line.startswith("[") and not line.startswith("[["):  # a [table] header (an array of tables: not ours)
+            table = dotted(line.split("#")[0].strip().strip("[]"))
+            if key is None and table == want:
+                return n
+        elif key is not None and "=" in line and not line.startswith("#"):
+            lhs = dotted(line.split("=", 1)[0])
+            if (f"{table}.{lhs}" if table else lhs) == want:
+                return n
+    return None
+
+
 def load(path: Path | str | None = None, required: bool = False) -> Config:
     """Read and validate a config file. A missing default file means defaults; a missing named one is an error."""
     explicit = path is not None
@@ -418,7 +447,13 @@ def load(path: Path | str | None = None, required: bool = False) -> Config:
         return Config()
     known = sections()
     notes: list[str] = []
-    checked = validate(data, str(path), known=known, notes=notes)
+    try:
+        checked = validate(data, str(path), known=known, notes=notes)
+    except ConfigError as e:  # where in the file: path:LINE
+        line = line_of(path.read_text(encoding="utf-8"), e.section, e.key) if e.section is not None else None
+        if line is None:
+            raise
+        raise ConfigError(f"{path}:{line}:{str(e)[len(str(path)) + 1:]}", e.section, e.key) from None
     cfg = Config(checked, origin=str(path), _sections=known, notes=notes)
     check_config(cfg, str(path))  # relations between keys: one key in the file, the other a default
     return cfg
