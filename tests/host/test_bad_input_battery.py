@@ -286,6 +286,13 @@ ROWS = [
     S(["calibrate", "--capture", "{tmp}/g.cap"], 2, "0 raw samples", files={"g.cap": GARBAGE}),
     S(["calibrate", "--port", "/dev/ttyNOPE9", "--yes"], 2, "plugged in"),
     S(["calibrate"], 2, "required"),
+    # an output that cannot be written: refused before a guided session starts (it was a traceback at its end)
+    S(["calibrate", "--port", "{port}", "--yes", "--json", "{tmp}/nope/cal.json"], 2, "does not exist", port="silent"),
+    S(["calibrate", "--port", "{port}", "--yes", "--json", "{tmp}"], 2, "is a folder", port="silent"),
+    S(["calibrate", "--port", "{port}", "--yes", "--plot", "{tmp}/nope/m.png"], 2, "does not exist", port="silent"),
+    S(["calibrate", "--port", "{port}", "--yes", "--save-capture", "{tmp}"], 2, "is a folder", port="silent"),
+    S(["calibrate", "--port", "{port}", "--baud", "0"], 2, "baud", port="silent"),
+    S(["calibrate", "--capture", "{tmp}/good.cap", "--json", "/dev/full"], 1, "cannot write /dev/full", files=CAP),
     # eval
     S(["eval", "--trials", "{tmp}/nope"], 2, "nope"),
     S(["eval", "--trials", "{tmp}/empty"], 2, "no BROAD", files={"empty": "dir"}),

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from sphere import chips
-from sphere.argtypes import seconds
+from sphere.argtypes import baud, out_file, seconds
 from sphere.calibration import axis_check
 from sphere.calibration import session as session
 from sphere.calibration.axis_check import TURN_DEG
@@ -73,10 +73,11 @@ def add_arguments(p) -> None:
     src = p.add_mutually_exclusive_group(required=True)
     src.add_argument("--port", help="the sphere's serial port: guided calibration, result sent and saved")
     src.add_argument("--capture", metavar="FILE", help="a capture file (sphere capture): offline, nothing is sent")
-    p.add_argument("--baud", type=int, default=115200)
-    p.add_argument("--json", metavar="OUT", help="write the result as JSON")
-    p.add_argument("--plot", metavar="PNG", help="write the magnetometer cloud before/after as a PNG")
-    p.add_argument("--save-capture", metavar="FILE", help="with --port: also keep the session's bytes as a capture")
+    p.add_argument("--baud", type=baud, default=115200)
+    p.add_argument("--json", metavar="OUT", type=out_file, help="write the result as JSON")
+    p.add_argument("--plot", metavar="PNG", type=out_file, help="write the magnetometer cloud before/after as a PNG")
+    p.add_argument("--save-capture", metavar="FILE", type=out_file,
+                   help="with --port: also keep the session's bytes as a capture")
     p.add_argument("--no-save", action="store_true", help="with --port: apply on the device but do not save to EEPROM")
     p.add_argument("--yes", action="store_true", help="with --port: do not wait for Enter before each step")
     p.add_argument("--no-axis-check", action="store_true",
@@ -143,23 +144,39 @@ def report(cal, block) -> str:
     return "\n".join(lines)
 
 
+def _write(args, path: str, write) -> None:
+    """``write(path)``; a file that cannot be written is one line and loses nothing (the result is printed, and a
+    session goes on to send it); the command's status is then 1."""
+    try:
+        write(path)
+    except OSError as e:
+        args.output_failed = f"cannot write {path}: {e.strerror or e}"
+        print(f"sphere calibrate: {args.output_failed}; the result is printed above", file=sys.stderr)
+        return
+    print(f"wrote {path}", file=sys.stderr)
+
+
 def _finish(args, cal, mag, base=None) -> dict:
     block = block_from(cal, base)
     print(report(cal, block))
     if args.json:
-        Path(args.json).write_text(json.dumps({"calibration": cal.as_dict(), "block": {k: list(v) for k, v in block.items()}},
-                                              indent=2))
-        print(f"wrote {args.json}", file=sys.stderr)
+        _write(args, args.json, lambda path: Path(path).write_text(json.dumps(
+            {"calibration": cal.as_dict(), "block": {k: list(v) for k, v in block.items()}}, indent=2)))
     if args.plot and cal.mag is not None:
-        plot_mag_cloud(mag, cal.mag, args.plot)
-        print(f"wrote {args.plot}", file=sys.stderr)
+        _write(args, args.plot, lambda path: plot_mag_cloud(mag, cal.mag, path))
     return block
 
 
 def run(args) -> int:
-    if args.capture:
-        return _run_capture(args)
-    return _run_port(args)
+    if args.plot:  # checked first: a --port session is not lost to a missing plot library at its end
+        try:
+            import matplotlib  # noqa: F401  # optional dependency: the plot extra
+        except ImportError:
+            print("sphere calibrate: --plot needs matplotlib (pip install 'marg-sphere[plot]')", file=sys.stderr)
+            return 2
+    args.output_failed = None
+    code = _run_capture(args) if args.capture else _run_port(args)
+    return 1 if code == 0 and args.output_failed else code
 
 
 def _run_capture(args) -> int:
