@@ -320,6 +320,10 @@ ROWS = [
     S(["device", "--port", "{port}", "set", "tap.nosuch=1"], 2, "tap.nosuch", port="silent"),
     S(["device", "--port", "{port}", "set", "tap.threshold_g=nan"], 2, "threshold_g", port="silent"),
     S(["device", "--port", "{port}", "set", "tap.threshold_g"], 2, "KEY=VALUE", port="silent"),
+    S(["device", "--port", "{port}", "set", "=3"], 2, "no KEY before '='", port="silent"),  # was ': no such setting'
+    S(["device", "--port", "{port}", "set", "tap.duration_ms=20ms"], 2, "give the number alone", port="silent"),
+    S(["device", "--port", "{port}", "set", "stream.raw_rate_hz=100 Hz"], 2, "stream.raw_rate_hz=100)", port="silent"),
+    S(["device", "--port", "{port}", "set", "stream.raw_rate_hz=50.5"], 2, "not a whole number", port="silent"),
     S(["device", "--port", "{port}", "identify", "-1"], 2, "seconds", port="silent"),
     S(["device", "--port", "{port}", "--timeout", "-1", "get"], 2, "timeout", port="silent"),
     S(["device", "--port", "{port}", "get"], 1, "no HELLO", port="silent"),

@@ -83,6 +83,12 @@ def test_board_profile():
     ("board=uno", "one of aligned"),
     ("tap.threshold=3", "did you mean tap.threshold_g"),
     ("tap.threshold_g", "expected KEY=VALUE"),
+    ("=2", "no KEY before '='"),
+    ("tap.threshold_g=2.5g", "give the number alone, the key says the unit (tap.threshold_g=2.5)"),
+    ("free_fall.time_ms=100 ms", "(free_fall.time_ms=100)"),
+    ("stream.orientation_rate_hz=50Hz", "(stream.orientation_rate_hz=50)"),
+    ("stream.orientation_rate_hz=fast", "not a whole number"),
+    ("tap.threshold_g=2.5kg", "not a number"),
 ])
 def test_bad_values_say_what_is_allowed(item, message):
     with pytest.raises(SettingError, match=None) as e:

@@ -42,6 +42,20 @@ class SettingError(SphereError, ValueError):
     """A key or value that cannot be sent; the message says what is allowed."""
 
 
+def _not_a_number(key: str, text: str, unit: str, what: str = "a number") -> str:
+    """What is wrong with a value that is not a number: its unit written after it (the key names the unit), or
+    anything else."""
+    bare = text.strip()
+    if unit and bare.lower().endswith(unit.lower()):
+        bare = bare[: -len(unit)].strip()
+        try:
+            float(bare)
+            return f"give the number alone, the key says the unit ({key}={bare})"
+        except ValueError:
+            pass
+    return f"not {what}"
+
+
 @dataclass(frozen=True)
 class Setting:
     key: str
@@ -59,7 +73,7 @@ class Setting:
         try:
             value = float(text)
         except ValueError:
-            raise SettingError(f"{self.key}={text}: not a number; {self.describe()}") from None
+            raise SettingError(f"{self.key}={text}: {_not_a_number(self.key, text, self.unit)}; {self.describe()}") from None
         if not math.isfinite(value):
             raise SettingError(f"{self.key}={text}: not a number; {self.describe()}")
         n = round(value / self.lsb)
@@ -139,6 +153,8 @@ def parse_assignment(item: str) -> tuple[str, int]:
     if "=" not in item:
         raise SettingError(f"{item!r}: expected KEY=VALUE, e.g. tap.threshold_g=2.5 (`sphere device keys` lists them)")
     key, text = (s.strip() for s in item.split("=", 1))
+    if not key:
+        raise SettingError(f"{item!r}: no KEY before '=', e.g. tap.threshold_g=2.5 (`sphere device keys` lists them)")
     s = SETTINGS.get(key)
     if s is None:
         raise SettingError(f"{key}: no such setting{_suggest(key)}; `sphere device keys` lists them")
@@ -152,7 +168,7 @@ def parse_assignment(item: str) -> tuple[str, int]:
         try:
             rate = int(text)
         except ValueError:
-            raise SettingError(f"{key}={text}: {s.doc}") from None
+            raise SettingError(f"{key}={text}: {_not_a_number(key, text, s.unit, 'a whole number')}; {s.doc}") from None
         if rate not in RATES_HZ:
             raise SettingError(f"{key}={text}: {s.doc}")
         return key, rate
