@@ -79,6 +79,18 @@ def test_status_line():
     assert out.getvalue().strip() == text
 
 
+def test_with_no_sphere_the_status_says_what_to_do():
+    """Nothing plugged in (no candidate port): the status line says to plug it in, name the port or simulate."""
+    p = subprocess.Popen([sys.executable, "-m", "sphere.mouse", "--config", os.devnull, "--no-stream", "--backend",
+                          "log", "--status", "--set", "source.serial.candidates=[]", "--set", "source.serial.usb_ids=[]"],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    time.sleep(3.0)
+    p.terminate()
+    _, err = p.communicate(timeout=30)
+    assert p.returncode == 0, err
+    assert "no sphere port: plug it in, name it with --port, or try the simulated one: --simulate" in err, err
+
+
 def test_help_lists_the_sources():
     r = mouse("--help")
     assert r.returncode == 0

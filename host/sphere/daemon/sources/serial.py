@@ -317,7 +317,8 @@ class SerialSource(Source):
         else:
             paths = candidate_ports(self.candidates, self.usb_ids, self._comports)
         if not paths:
-            self.state = "looking for the sphere (no sphere port: plug it in, or name it with --port)"
+            self.state = ("looking for the sphere (no sphere port: plug it in, name it with --port, or try the "
+                          "simulated one: --simulate)")
         elif self.port != "auto" and not os.path.exists(self.port):
             self.state = f"waiting for {self.port} to appear"
             if "missing:" + self.port not in self._warned:
