@@ -287,12 +287,12 @@ def _main(argv=None) -> int:
             camera.close()
         if stream is not None:
             stream.stop()
+    if argv is None:  # the program itself (not a caller in-process): stopped and closed, only its last lines and
+        # the interpreter's teardown (~0.2 s) are left; a double Ctrl-C's second press lands there and must not make
+        # a finished run a death by SIGINT (exit status 130). During the closing above it still ends it at once.
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
     log(f"stopped: {daemon.moves} pointer moves, {daemon.clicks} clicks, modes {daemon.mode_changes or [daemon.mode]}")
     if args.print_stats:
         print(run_stats(daemon, time.monotonic() - started), flush=True)
-    if argv is None:  # the program itself (not a caller in-process): stopped, closed and said, only the
-        # interpreter's teardown (~0.2 s) is left; a double Ctrl-C's second press lands there and must not make a
-        # finished run a death by SIGINT (exit status 130). During the closing above it still ends it at once.
-        signal.signal(signal.SIGTERM, signal.SIG_IGN)
-        signal.signal(signal.SIGINT, signal.SIG_IGN)
     return code
