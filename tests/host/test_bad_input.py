@@ -176,6 +176,19 @@ def test_mouse_page_port_another_program_holds(home, capture_file):
     assert "set --stream-port PORT ([outputs.page] port), or --no-stream" in r.stderr and "stopped:" in r.stderr, r.stderr
 
 
+def test_mouse_print_stats_into_a_pipe_closed_early(home, capture_file):
+    """`sphere-mouse --replay … --print-stats | head -1`: the reader went away before the figures; that is no error
+    (it was a BrokenPipeError traceback and exit status 1)."""
+    p = subprocess.Popen([sys.executable, "-m", "sphere.mouse", "--no-stream", "--backend", "log", "--replay",
+                          str(capture_file), "--speed", "0", "--print-stats"], stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE, text=True, env={**os.environ, **home})
+    p.stdout.close()  # as head does once it has its line
+    err = p.stderr.read()
+    p.wait(60)
+    assert p.returncode == 0 and "Traceback" not in err and "Exception ignored" not in err, (p.returncode, err)
+    assert "stopped:" in err, err
+
+
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["ctrl-c", "sigterm"])
 def test_mouse_stopped_twice_in_quick_succession_still_exits_0(tmp_path, home, sig):
     """A double Ctrl-C: the second press comes while the first stop finishes. Once the daemon has said its last

@@ -191,6 +191,12 @@ def main(argv=None) -> int:
     except KeyboardInterrupt:  # Ctrl-C before the signal handlers are in place (while starting)
         print("sphere-mouse: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:  # `sphere-mouse --print-stats ... | head`: the reader has what it wanted
+        try:  # and Python's last flush of stdout must not fail again
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        except (OSError, ValueError, AttributeError):
+            pass
+        return 0
     except OSError as e:  # --print-config or --udev-rule into a full disk
         code = output_failed("sphere-mouse", e)
         if code is None:
