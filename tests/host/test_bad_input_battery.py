@@ -145,6 +145,14 @@ ROWS = [
     C(["--set", "outputs.gamepad.full_tilt_deg=0"], 2, "full_tilt_deg"),
     C(["--set", "camera.hue_deg=nan"], 2, "finite"),
     C(["--udev-rule", "/dev/null"], 2, "not a USB serial port"),
+    # a flag of another source than the one that runs: it would do nothing (sphere-mouse --trace synthetic:tour
+    # looked for a real sphere, without a word)
+    C(["--trace", "synthetic:tour"], 2, "--trace synthetic:tour: the motion the simulated sphere plays, but the source "
+                                        "is serial: use it with --simulate"),
+    C(["--replay", "x.cap", "--trace", "synthetic:tour"], 2, "but the source is replay: use it with --simulate"),
+    C(["--speed", "4"], 2, "--speed 4: the pace of a replay, but the source is serial: use it with --replay FILE"),
+    C(["--simulate", "--speed", "0"], 2, "but the source is simulate: use it with --replay FILE"),
+    C(["--speed", "4", "--set", "source.replay.file=x.cap"], 0, "config OK"),  # kind auto: a replay
     # ---- sphere-mouse config file ----
     F(UTF16, 2, "not a UTF-8"),
     F(bytes(range(256)) * 4, 2, "not a UTF-8"),

@@ -41,7 +41,8 @@ def build_parser() -> argparse.ArgumentParser:
                    "installed, else a built-in scripted sphere)")
     g.add_argument("--hid", action="store_true", help="read frames from a HID receiver (hidapi)")
     src.add_argument("--speed", type=float, help="replay speed: 1 = as recorded (default), 0 = as fast as possible")
-    src.add_argument("--trace", help="motion trace (.mat) for --simulate")
+    src.add_argument("--trace", help="motion the simulated sphere plays (--simulate): a BROAD trial (.mat, name or "
+                     "number) or synthetic:NAME (default synthetic:tour)")
     src.add_argument("--baud", type=int, help="serial baud rate (default 115200)")
     src.add_argument("--camera", metavar="INDEX|FILE", help="a webcam (0, 1 ...) or a video file that sees the ball: "
                      "its position joins the 3-D stream and the outputs ([camera] section; needs the camera extra)")
@@ -138,6 +139,13 @@ def settings_from_args(args) -> config_mod.Config:
     if args.set:
         cfg = cfg.with_overrides(config_mod.parse_set(args.set), "--set")
     config_mod.check_config(cfg, "settings")
+    kind = sources.kind_of(cfg)  # a flag of another source than the one that runs would be dropped without a word
+    if args.trace is not None and kind != "simulate":
+        raise ConfigError(f"--trace {args.trace}: the motion the simulated sphere plays, but the source is {kind}: "
+                          "use it with --simulate")
+    if args.speed is not None and kind != "replay":
+        raise ConfigError(f"--speed {args.speed:g}: the pace of a replay, but the source is {kind}: use it with --replay "
+                          "FILE")
     return cfg
 
 
