@@ -42,7 +42,8 @@ class Row:
     code: int
     words: str
     files: dict = field(default_factory=dict)  # name -> bytes | "dir" | "fifo" | "loop"
-    port: str | None = None  # None | "silent" | "garbage" | "vanish" (streams for 0.5 s, then is unplugged)
+    port: str | None = None  # None | "silent" | "garbage" (streams a capture) | "noise" (streams bytes that are
+    # no frame) | "vanish" (streams for 0.5 s, then is unplugged)
     stdout: str | None = None  # where stdout goes (/dev/full: a full disk); None: a file the test reads
     timeout: float = 20.0
     broad: bool = False  # needs the BROAD trials (skips, saying so, where they are absent)
@@ -247,6 +248,9 @@ ROWS = [
       files={"s": "dir", "s/session.json": b'{"format": "sphere-session", "version": 1}', "s/serial.bin": GOOD,
              "s/serial.bin.rx.csv": b"byte_offset,host_time_s\n0,0.0\n", "s/video.csv": b"frame,host_time_s\n"}),
     S(["capture", "--out", "{tmp}/x.cap"], 2, "required"),
+    S(["capture", "--port", "{port}", "--out", "{tmp}/x.cap", "--seconds", "1"], 1, "nothing arrived", port="silent"),
+    S(["capture", "--port", "{port}", "--out", "{tmp}/x.cap", "--seconds", "1", "--quiet"], 1, "was a sphere frame",
+      port="noise"),
     S(["capture", "--port", "{port}", "--out", "{tmp}/x.cap", "--quiet"], 1, "went away", port="vanish"),
     # sim
     S(["sim", "--trace", "synthetic:still", "--seconds", "1e9"], 2, "at most 86400"),
@@ -495,17 +499,18 @@ class _Port:
         os.close(slave)
         self.stop = threading.Event()
         self.lock = threading.Lock()
-        if kind in ("garbage", "vanish"):
-            threading.Thread(target=self._feed, args=(kind == "vanish",), daemon=True).start()
+        if kind in ("garbage", "noise", "vanish"):
+            threading.Thread(target=self._feed, args=(kind == "vanish", GARBAGE if kind == "noise" else GOOD),
+                             daemon=True).start()
 
-    def _feed(self, vanish):
+    def _feed(self, vanish, data):
         end = time.monotonic() + 0.5
         while not self.stop.is_set():
             if vanish and time.monotonic() > end:
                 self.close()
                 return
             try:
-                os.write(self.master, GOOD[:2000])
+                os.write(self.master, data[:2000])
             except OSError:
                 pass
             time.sleep(0.05)

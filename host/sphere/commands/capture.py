@@ -93,6 +93,15 @@ def run(args) -> int:
             s = stream.stats
             print(f"\r{out.bytes_written} bytes, {s.frames_ok} frames, {s.errors} bad, {s.frames_lost} lost{video}: "
                   f"saved to {args.out}", file=sys.stderr)
+    if status == 0 and out.bytes_written == 0:
+        print(f"sphere capture: nothing arrived from {args.port} in {time.monotonic() - start:.1f} s: is the sphere "
+              f"on, and this its port? ({args.out} is empty)", file=sys.stderr)
+        status = 1
+    elif status == 0 and stream.stats.frames_ok == 0:
+        print(f"sphere capture: none of the {out.bytes_written} bytes from {args.port} was a sphere frame: another "
+              f"device, or the wrong baud rate (the sphere sends {DEFAULT_BAUD} 8N1); they are kept in {args.out}",
+              file=sys.stderr)
+        status = 1
     return status
 
 
