@@ -288,6 +288,15 @@ ROWS = [
     S(["sim", "--trace", "synthetic:still", "--send", "{tmp}/s.txt"], 2, "s.txt", files={"s.txt": b"zz top\n"}),
     S(["sim", "--trace", "synthetic:still", "--clock-ppm", "itg3200"], 2, "clock-ppm"),
     S(["sim", "--soak", "-1"], 2, "soak"),
+    S(["sim", "--trace", "synthetic:still", "--hold", "1e99"], 2, "at most 86400"),  # was an OverflowError
+    S(["sim", "--trace", "synthetic:still", "--glitch", "1e99"], 2, "at most 1000"),  # the board hung
+    S(["sim", "--trace", "synthetic:still", "--clock-ppm", "itg3200:nan"], 2, "PPM from"),  # "Expecting value"
+    S(["sim", "--trace", "synthetic:still", "--clock-ppm", "itg3200:-1e6"], 2, "PPM from"),  # a stopped clock
+    S(["sim", "--trace", "synthetic:still", "--beta", "nan"], 2, "beta"),
+    S(["sim", "--trace", "synthetic:still", "--start", "nan"], 2, "--start"),  # "cannot convert float NaN"
+    S(["sim", "--trace", "synthetic:still", "--start", "-1"], 2, "at least 0"),  # "array of sample points is empty"
+    S(["sim", "--trace", "synthetic:still", "--start", "soon"], 2, "or auto"),
+    S(["sim", "--trace", "07", "--start", "5000", "--seconds", "1"], 2, "only 183.8 s long", broad=True),
     S(["sim", "--trace", "synthetic:still", "--jobs", "0"], 2, "jobs"),
     # calibrate (H2)
     S(["calibrate", "--port", "/dev/ttyNOPE9", "--timeout", "-1"], 2, "greater than 0"),

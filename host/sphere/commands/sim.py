@@ -104,16 +104,46 @@ def _send_file(text: str) -> str:
 MAX_SECONDS = 86400.0  # a simulated day: longer runs are a typo (1e9 s would need terabytes of trace)
 
 
+#: how far --clock-ppm may put a chip's oscillator off: half its rate either way (the datasheets' tolerances are
+#: 1-2 %, 10000-20000 ppm; -1e6 would stop its clock)
+MAX_PPM = 500000.0
+
+#: --glitch's limit: the firmware makes about 700 I2C transactions a second, so more faults than that only fill
+#: the schedule (and at 1e99 a second the board's next-fault time, t + 1/RATE, stopped advancing: it hung)
+MAX_GLITCH_RATE = 1000.0
+
+
 def _chip_ppm(text: str) -> str:
     chip, sep, ppm = text.partition(":")
     try:
-        float(ppm)
-        if chip not in CHIPS or not sep:
+        if chip not in CHIPS or not sep or not abs(float(ppm)) <= MAX_PPM:  # (nan fails too)
             raise ValueError
     except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r}: give CHIP:PPM with CHIP one of {', '.join(CHIPS)}, "
-                                         "e.g. itg3200:20000") from None
+        raise argparse.ArgumentTypeError(f"{text!r}: give CHIP:PPM with CHIP one of {', '.join(CHIPS)} and PPM from "
+                                         f"{-MAX_PPM:g} to {MAX_PPM:g}, e.g. itg3200:20000") from None
     return text
+
+
+def _up_to(kind, limit: float, unit: str):
+    """An argparse type: ``kind`` (an argtypes check), then at most ``limit``."""
+
+    def parse(text: str) -> float:
+        v = kind(text)
+        if v > limit:
+            raise argparse.ArgumentTypeError(f"{text!r}: give at most {limit:g} {unit}")
+        return v
+
+    return parse
+
+
+def _start(text: str):
+    """--start: 'auto' or the seconds into the trial (0 or more)."""
+    if text == "auto":
+        return text
+    try:
+        return _up_to(argtypes.non_negative, MAX_SECONDS, "seconds")(text)
+    except argparse.ArgumentTypeError as e:
+        raise argparse.ArgumentTypeError(f"{e} (or auto: 10 s before the trial's first movement)") from None
 
 
 def add_arguments(p) -> None:
@@ -122,11 +152,11 @@ def add_arguments(p) -> None:
                         "repeatable with --accuracy ('all' = every shipped trial)")
     p.add_argument("--seconds", type=seconds_up_to(MAX_SECONDS), default=None,
                    help="simulated seconds (default: 10; with --accuracy 60 per trial)")
-    p.add_argument("--start", default=None,
+    p.add_argument("--start", type=_start, default=None,
                    help="start this far into a BROAD trial (s), or 'auto': 10 s before its first movement "
                         "(default 0; with --accuracy auto)")
     p.add_argument("--full", action="store_true", help="play the whole BROAD trial (overrides --seconds and --start)")
-    p.add_argument("--hold", type=argtypes.non_negative, default=0.0,
+    p.add_argument("--hold", type=_up_to(argtypes.non_negative, MAX_SECONDS, "seconds"), default=0.0,
                    help="lead-in: hold the first sample still for this long before the motion (s)")
     p.add_argument("--firmware", default=None,
                    help="firmware image (default firmware/build/sphere.elf, built with `make -C firmware`); "
@@ -156,7 +186,8 @@ def add_arguments(p) -> None:
                    help="a chip's oscillator off the Nano's crystal by PPM")
     p.add_argument("--clocks", choices=["random"], default=None,
                    help="every chip's oscillator off by a seeded amount within its datasheet's tolerance")
-    p.add_argument("--glitch", type=argtypes.non_negative, default=None, metavar="RATE",
+    p.add_argument("--glitch", type=_up_to(argtypes.non_negative, MAX_GLITCH_RATE, "a second"), default=None,
+                   metavar="RATE",
                    help="transient I2C faults, RATE a second on average: single NACKs, clock stretching, a reset "
                         "in the middle of a read (the chip then holds SDA low)")
     p.add_argument("--brownout", action="append", type=argtypes.non_negative, default=[], metavar="T",
@@ -183,7 +214,7 @@ def add_arguments(p) -> None:
                    help="the sensor board's pull-ups on SDA and SCL to 3.3 V, for the bus's level check (default 4.7)")
     p.add_argument("--accuracy", action="store_true",
                    help="compare the firmware's quaternions with BROAD's optical reference and the host Madgwick")
-    p.add_argument("--beta", type=float, default=DEFAULT_BETA, help="β of the host Madgwick (default the firmware's)")
+    p.add_argument("--beta", type=argtypes.positive, default=DEFAULT_BETA, help="β of the host Madgwick (default the firmware's)")
     p.add_argument("--host-independent", action="store_true",
                    help="the host Madgwick decides alone (no tap/norm rejections, no start-up gain) instead of "
                         "following the firmware's flags")
@@ -221,6 +252,8 @@ def prepare(source: str, seconds: float | None, start_s, hold_s: float, out: Pat
         start_s = max(0.0, first - 10.0)
     else:
         start_s = float(start_s)
+        if start_s >= total:
+            raise ValueError(f"--start {start_s:g}: trial {trial.name} is only {total:.1f} s long; start within it")
     secs = seconds if seconds is not None else 10.0
     if full:
         start_s, secs = 0.0, hold_s + total
