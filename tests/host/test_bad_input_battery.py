@@ -416,6 +416,11 @@ ROWS = [
     S(["bench", "daemon", "--set", "nope.x=1"], 2, "nope"),
     S(["bench", "daemon", "--against", "default", "--set", "outputs.spacenav.mapping=orbit"], 2, "mapping"),
     S(["sim", "--trace", "synthetic:turn:abc", "--seconds", "9"], 2, "number of degrees"),
+    S(["sim", "--trace", "synthetic:rotation:nan", "--seconds", "2"], 2, "up to 10000"),  # was a still sphere
+    S(["sim", "--trace", "synthetic:rotation:1e99", "--seconds", "2"], 2, "up to 10000"),
+    S(["sim", "--trace", "synthetic:rotation:fast", "--seconds", "2"], 2, "degrees a second"),
+    S(["sim", "--trace", "synthetic:still:5", "--seconds", "2"], 2, "takes no argument"),  # was ignored
+    S(["sim", "--trace", "synthetic:onsets:abc", "--seconds", "2"], 2, "seed must be an integer"),
     S(["sim", "--trace", "synthetic:turn:5000", "--seconds", "9"], 2, "1 to 720 degrees"),
     S(["sim", "--trace", "synthetic:turn", "--seconds", "3"], 2, "--seconds 8.25 or more"),
     S(["bench", "position", "--seconds", "5"], 2, "at least 9"),

@@ -49,4 +49,8 @@ def onsets(seconds: float, seed: int = SEED, rate_dps: float = RATE_DPS, rate_hz
 
 def synthetic(seconds: float, arg: str) -> Motion:
     """``synthetic:onsets[:SEED]``."""
-    return onsets(seconds, int(arg) if arg else SEED)
+    try:
+        seed = int(arg) if arg else SEED
+    except ValueError:
+        raise ValueError(f"the seed must be an integer, not {arg!r}") from None
+    return onsets(seconds, seed)

@@ -154,5 +154,5 @@ def tour(seconds: float, rate_hz: float = SYNTH_RATE_HZ) -> Motion:
 def synthetic(seconds: float, arg: str) -> Motion:
     """The registry's entry (sphere.sim.trace.SYNTHETIC): ``synthetic:tour`` takes no argument."""
     if arg:
-        raise ValueError("synthetic:tour takes no argument")
+        raise ValueError("takes no argument")
     return tour(seconds)

@@ -387,15 +387,43 @@ def calibration(seconds: float = 45.0, rate_hz: float = SYNTH_RATE_HZ, seed: int
     return Motion(rate_hz, acc, gyr, mag, "calibration")
 
 
+#: synthetic:rotation's limit either way, in °/s: the ITG-3200 reads up to ±2000 (its full scale), so a faster
+#: turn only saturates it; a rate past this (1e99, nan) is a typo, not a motion
+MAX_ROTATION_DPS = 10000.0
+
+
+def _rotation(seconds: float, arg: str) -> Motion:
+    """``synthetic:rotation[:DPS]``."""
+    try:
+        dps = float(arg) if arg else 90.0
+    except ValueError:
+        raise ValueError(f"the rate must be a number of degrees a second, not {arg!r}") from None
+    if not abs(dps) <= MAX_ROTATION_DPS:  # (nan fails too)
+        raise ValueError(f"the rate must be a number of degrees a second up to {MAX_ROTATION_DPS:g} either way "
+                         f"(the ITG-3200 reads up to 2000), not {arg}")
+    return rotation(seconds, rate_dps=dps)
+
+
+def _no_arg(fn):
+    """A source that takes no ``:ARG``: one given is refused, not ignored."""
+
+    def entry(seconds: float, arg: str) -> Motion:
+        if arg:
+            raise ValueError("takes no argument")
+        return fn(seconds)
+
+    return entry
+
+
 #: The synthetic sources: NAME -> a function ``(seconds: float, arg: str) -> Motion`` (``arg`` is the text
 #: after ``synthetic:NAME:``, "" when none), or the same as a lazily imported ``"module:function"`` string
 #: (so a source in its own module under sphere/sim may import this one). A new source = its module + one line.
 SYNTHETIC = {
-    "still": lambda seconds, arg: still(seconds),
-    "rotation": lambda seconds, arg: rotation(seconds, rate_dps=float(arg)) if arg else rotation(seconds),
-    "toss": lambda seconds, arg: toss(seconds, toss_at_s=min(2.0, seconds / 2)),
-    "taps": lambda seconds, arg: taps(seconds),
-    "calibration": lambda seconds, arg: calibration(seconds),
+    "still": _no_arg(still),
+    "rotation": _rotation,
+    "toss": _no_arg(lambda seconds: toss(seconds, toss_at_s=min(2.0, seconds / 2))),
+    "taps": _no_arg(taps),
+    "calibration": _no_arg(calibration),
     "hold": "sphere.sim.hold:synthetic",
     "onsets": "sphere.sim.onsets:synthetic",
     "tour": "sphere.sim.tour:synthetic",
