@@ -131,6 +131,22 @@ def in_file(text: str) -> str:
     return text
 
 
+def stretches(text: str) -> list[tuple[str, float]]:
+    """Stretches of BROAD trials, ``TRIAL[:START_S],...``: [(trial, start s)], the start 40 s when not given."""
+    out = []
+    for item in text.split(","):
+        name, sep, start = item.strip().partition(":")
+        try:
+            start_s = float(start) if sep else 40.0
+            if not name or not (math.isfinite(start_s) and start_s >= 0):
+                raise ValueError
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{item.strip()!r}: give TRIAL or TRIAL:START_S (seconds, 0 or more), "
+                                             "comma-separated, e.g. 10:40,16:40") from None
+        out.append((name, start_s))
+    return out
+
+
 def names_of(choices, what: str):
     """An argparse type for a comma-separated list of names out of ``choices`` (a collection, or a function giving
     one, called when the flag is parsed); ``what`` names one of them in the error line."""

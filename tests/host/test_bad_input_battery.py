@@ -426,6 +426,12 @@ ROWS = [
     S(["bench", "position", "--seconds", "5"], 2, "at least 9"),
     S(["bench", "position", "--test", "10:40,banana"], 2, "banana"),
     S(["bench", "position", "--json", "{tmp}"], 2, "is a folder"),
+    # a stretch that is no TRIAL:START_S: argparse's line naming the flag (was exit 1, "sphere hybrid-eval: --trials")
+    S(["bench", "position", "--train", "10:x"], 2, "argument --train: '10:x'"),
+    S(["bench", "position", "--test", "10:nan"], 2, "argument --test"),
+    S(["bench", "ar", "--trials", "16:-4"], 2, "TRIAL:START_S"),
+    S(["bench", "hybrid-replay", "--trials", "10:40,"], 2, "TRIAL:START_S"),
+    S(["hybrid-eval", "--trials", "10:fast"], 2, "TRIAL:START_S"),
     S(["bench", "drift", "--seeds", "one"], 2, "integers"),
     S(["bench", "drift", "--scenarios", "wobble"], 2, "wobble"),
     S(["bench", "drift", "--set", "gyro.stil_dps=1"], 2, "stil_dps"),

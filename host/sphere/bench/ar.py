@@ -30,7 +30,7 @@ import numpy as np
 from sphere import argtypes
 from sphere.bench.hybrid_replay import replay
 from sphere.camera import trials
-from sphere.commands.hybrid_eval import DEFAULT_TRIALS, _parse, refused
+from sphere.commands.hybrid_eval import DEFAULT_TRIALS, refused
 
 HELP = "the AR view's drawn centre vs the ball's true centre per stage (stamp, filter, outline), sphere-mouse --replay"
 
@@ -41,7 +41,7 @@ THIS = "this"
 
 
 def add_arguments(p) -> None:
-    p.add_argument("--trials", default=DEFAULT_TRIALS, help=f"trial:start_s stretches (default {DEFAULT_TRIALS}, hybrid-eval's)")
+    p.add_argument("--trials", type=argtypes.stretches, default=DEFAULT_TRIALS, help=f"trial:start_s stretches (default {DEFAULT_TRIALS}, hybrid-eval's)")
     p.add_argument("--seconds", type=argtypes.seconds, default=12.0, help="length of each stretch (default 12, at least 9)")
     p.add_argument("--speed", type=argtypes.non_negative, default=1.0,
                    help="replay speed (default 1, as recorded: the page gets every frame; faster replays skip some)")
@@ -97,7 +97,7 @@ def judge(messages, rt, lead_s: float) -> dict:
 
 
 def run(args) -> int:
-    stretches = _parse(args.trials)
+    stretches = args.trials
     code = refused("sphere bench ar", args.seconds, [n for n, _ in stretches])
     if code is not None:
         return code

@@ -33,7 +33,7 @@ from sphere import argtypes
 from sphere.camera import evaluation as ev
 from sphere.camera import trials
 from sphere.camera.trials import SESSION_IMU_LATENCY_S
-from sphere.commands.hybrid_eval import DEFAULT_TRIALS, _parse, refused
+from sphere.commands.hybrid_eval import DEFAULT_TRIALS, refused
 
 HELP = "sphere-mouse --replay of rendered sessions (position from the WebSocket) vs sphere hybrid-eval, as ratios"
 
@@ -42,7 +42,7 @@ FIELDS = ("rmse_lateral_m", "rmse_depth_m", "jitter_lateral_m", "jitter_depth_m"
 
 
 def add_arguments(p) -> None:
-    p.add_argument("--trials", default=DEFAULT_TRIALS, help=f"trial:start_s stretches (default {DEFAULT_TRIALS}, hybrid-eval's)")
+    p.add_argument("--trials", type=argtypes.stretches, default=DEFAULT_TRIALS, help=f"trial:start_s stretches (default {DEFAULT_TRIALS}, hybrid-eval's)")
     p.add_argument("--seconds", type=argtypes.seconds, default=12.0, help="length of each stretch (default 12, at least 9)")
     p.add_argument("--speed", type=argtypes.non_negative, default=0.0,
                    help="replay speed (default 0 = as fast as possible; 1 = as recorded: the same positions, each "
@@ -116,7 +116,7 @@ def score_messages(messages, rt, lead_s: float, hybrid_eval_run):
 
 
 def run(args) -> int:
-    stretches = _parse(args.trials)
+    stretches = args.trials
     code = refused("sphere bench hybrid-replay", args.seconds, [n for n, _ in stretches])
     if code is not None:
         return code

@@ -25,7 +25,7 @@ import numpy as np
 from sphere import argtypes, broad
 from sphere.camera import evaluation as ev
 from sphere.camera import trials
-from sphere.commands.hybrid_eval import _parse, refused
+from sphere.commands.hybrid_eval import refused
 from sphere.smoothing.pose import PoseFilter
 from sphere.smoothing.registry import POSITION, POSITION_DEFAULT
 
@@ -46,14 +46,10 @@ def targets(trial_name: str) -> dict:
 
 
 def add_arguments(p) -> None:
-    p.add_argument("--train", default=TRAIN, help=f"trial:start_s stretches to choose on (default {TRAIN})")
-    p.add_argument("--test", default=TEST, help=f"trial:start_s stretches to score on (default {TEST}, hybrid-eval's)")
+    p.add_argument("--train", type=argtypes.stretches, default=TRAIN, help=f"trial:start_s stretches to choose on (default {TRAIN})")
+    p.add_argument("--test", type=argtypes.stretches, default=TEST, help=f"trial:start_s stretches to score on (default {TEST}, hybrid-eval's)")
     p.add_argument("--seconds", type=argtypes.seconds, default=12.0, help="length of each stretch (default 12, at least 9)")
     p.add_argument("--json", metavar="OUT", type=argtypes.out_file, help="write the figures as JSON")
-
-
-def _stretches(text: str):
-    return _parse(text)
 
 
 def render_runs(stretches, seconds: float, seed: int):
@@ -104,13 +100,13 @@ def evaluate(runs, name: str, params: dict):
 
 def run(args) -> int:
     code = refused("sphere bench position", args.seconds,
-                   [n for n, _ in _stretches(args.train) + _stretches(args.test)])
+                   [n for n, _ in args.train + args.test])
     if code is not None:
         return code
 
     try:
-        train = render_runs(_stretches(args.train), args.seconds, TRAIN_SEED)
-        test = render_runs(_stretches(args.test), args.seconds, TEST_SEED)
+        train = render_runs(args.train, args.seconds, TRAIN_SEED)
+        test = render_runs(args.test, args.seconds, TEST_SEED)
     except (broad.BroadMissing, ValueError) as e:
         print(f"sphere bench position: {e}", file=sys.stderr)
         return 2

@@ -40,7 +40,7 @@ TARGETS = {"rmse_lateral_m": 0.01, "rmse_depth_m": 0.03, "jitter_lateral_m": 0.0
 
 
 def add_arguments(p) -> None:
-    p.add_argument("--trials", default=DEFAULT_TRIALS,
+    p.add_argument("--trials", type=argtypes.stretches, default=DEFAULT_TRIALS,
                    help=f"trial:start_s pairs (default {DEFAULT_TRIALS}: slow translation, slow translation with "
                         f"a rest, fast translation)")
     p.add_argument("--seconds", type=argtypes.seconds, default=12.0, help="length of each stretch (default 12, at least 9)")
@@ -53,17 +53,6 @@ def add_arguments(p) -> None:
                         "turned to the camera most of the time): the camera corrects the host filter's heading")
     p.add_argument("--json", metavar="OUT", type=argtypes.out_file, help="write the results as JSON")
     p.add_argument("--plot", metavar="DIR", type=argtypes.out_dir, help="write PNG plots (error over time per trial, summary bars)")
-
-
-def _parse(text: str):
-    out = []
-    for item in text.split(","):
-        name, _, start = item.strip().partition(":")
-        try:
-            out.append((name, float(start) if start else 40.0))
-        except ValueError:
-            raise SystemExit(f"sphere hybrid-eval: --trials item {item!r} must be TRIAL or TRIAL:START_S")
-    return out
 
 
 def refused(prog: str, seconds: float, names=()) -> int | None:
@@ -103,7 +92,7 @@ def run(args) -> int:
                         "imu_latency_s": ev.IMU_LATENCY_S, "nominal_camera_latency_s": ev.NOMINAL_CAMERA_LATENCY_S},
            "targets": TARGETS, "trials": {}}
     runs = {}
-    for name, start in _parse(args.trials):
+    for name, start in args.trials:
         try:
             marker = None
             if args.marker:
