@@ -388,6 +388,9 @@ ROWS = [
     S(["bench", "fusion", "--scenarios", "wobble"], 2, "wobble"),
     S(["bench", "fusion", "--seeds", "0"], 2, "seeds"),
     S(["bench", "fusion", "--at", "-1"], 2, "at"),
+    S(["bench", "fusion", "--at", "1e99"], 2, "at most 3600"),  # was a ValueError traceback after the header
+    S(["bench", "fusion", "--at", "5", "--rest", "10"], 2, "not shorter than --at"),  # judged during the rest
+    S(["bench", "decode", "--seconds", "1e99"], 2, "at most 3600"),  # was a struct.error traceback
     S(["bench", "stress", "--kinds", "wobble"], 2, "wobble"),
     S(["bench", "stress", "--filters", "wobble"], 2, "wobble"),
     S(["bench", "stress", "--seeds", "0"], 2, "seeds"),

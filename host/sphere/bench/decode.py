@@ -25,10 +25,13 @@ HELP = "decoded frames per second on one core (target: 200× the device's highes
 
 #: The highest frame rate the device sends: raw 200 Hz + orientation 200 Hz + status 1 Hz.
 DEVICE_MAX_FRAMES_PER_S = 401
+#: --seconds' limit: an hour of stream (35 MB, built in memory); the device's 32-bit µs clock wraps at 4295 s
+MAX_SECONDS = 3600.0
 
 
 def add_arguments(p) -> None:
-    p.add_argument("--seconds", type=argtypes.seconds, default=60.0, help="simulated seconds of stream to decode (default 60)")
+    p.add_argument("--seconds", type=argtypes.seconds_up_to(MAX_SECONDS), default=60.0,
+                   help=f"simulated seconds of stream to decode (default 60, at most {MAX_SECONDS:g})")
     p.add_argument("--repeat", type=argtypes.at_least_one, default=5, help="timed repetitions; the median is reported")
     p.add_argument("--json", metavar="OUT", type=argtypes.out_file, help="also write the figures as JSON")
     p.add_argument("--against", metavar="REV", help="side by side with the decoder of this git revision of the "

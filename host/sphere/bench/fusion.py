@@ -13,6 +13,7 @@ jobs on a shared machine do not inflate); the target is 20 µs for the daemon's 
 from __future__ import annotations
 
 import argparse
+import sys
 import time
 
 import numpy as np
@@ -65,7 +66,8 @@ HELP = "gyro bias without long rests and µs per sample: SphereFilter beside VQF
 
 def add_arguments(p) -> None:
     p.add_argument("--seeds", type=argtypes.at_least_one, default=3)
-    p.add_argument("--at", type=argtypes.positive, default=30.0, help="seconds into the trace (default 30)")
+    p.add_argument("--at", type=argtypes.seconds_up_to(3600.0), default=30.0,
+                   help="seconds into the trace (default 30, at most an hour)")
     p.add_argument("--rest", type=argtypes.non_negative, default=bias_scenarios.REST_S,
                    help=f"seconds of rest at the start (default {bias_scenarios.REST_S:g}; 0 = moving from the first sample)")
     p.add_argument("--scenarios", type=argtypes.names_of(bias_scenarios.SCENARIOS, "scenario"),
@@ -80,6 +82,10 @@ def main(argv=None) -> int:
 
 
 def run(args) -> int:
+    if args.rest >= args.at:
+        print(f"sphere bench fusion: --rest {args.rest:g} is not shorter than --at {args.at:g}: the bias would be "
+              "judged during the rest; give a shorter --rest or a later --at", file=sys.stderr)
+        return 2
     print(f"gyro bias error at {args.at:g} s (°/s, norm), rest only the first {args.rest:g} s; target < {TARGET_DPS:g}")
     print(f"{'scenario':<10}{'seed':>5}{'sphere':>10}{'vqf':>10}{'sphere/vqf':>12}")
     worst, within = {}, {}
