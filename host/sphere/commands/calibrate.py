@@ -33,11 +33,14 @@ from sphere.link.device import DeviceLink
 from sphere.link.device_settings import RATES_HZ
 from sphere.link.port import PortError, open_port
 from sphere.protocol import CalibrationBlock, GetCalibration, GetHello, SaveCalibration, SetCalibration
-from sphere.protocol.packets import CALIBRATION_STATE_BITS, STREAM_RAW, bit_names
+from sphere.protocol.packets import (CALIBRATION_STATE_BITS, RAW_ACCEL_OK, RAW_GYRO_OK, RAW_MAG_OK, STREAM_RAW,
+                                     bit_names)
 
 FACES = tuple(f[0] for f in _FACES)
 DEFAULT_TIMEOUT_S = 120.0
 NO_DATA_S = 5.0  # a step stops when no RAW_SAMPLE arrives for this long
+MISSING_S = 1.0  # ... or when a sensor has been missing (its RAW_SAMPLE *_ok bit clear) for this long
+SENSORS = ((RAW_ACCEL_OK, "accelerometer"), (RAW_GYRO_OK, "gyroscope"), (RAW_MAG_OK, "magnetometer"))
 
 HELP = "calibrate the sphere's sensors (guided on a port, or offline from a capture)"
 DESCRIPTION = f"""\
@@ -220,13 +223,26 @@ class _Link:
     def __init__(self, port, writer=None):
         self.values = SeriesBuilder()
         self.last_raw_wall = time.monotonic()
+        self.port_name = getattr(port, "port", None) or "PORT"
+        self.missing_since: dict[str, float] = {}  # sensor → wall time since when the RAW_SAMPLEs say it is missing
         self.changed = ""  # what the session has changed on the sphere so far ("": nothing)
         self.device = DeviceLink(port, on_bytes=writer.write if writer else None, on_packet=self._packet)
 
     def _packet(self, dp):
         if dp.packet.NAME == "RAW_SAMPLE":
-            self.last_raw_wall = time.monotonic()
+            self.last_raw_wall = now = time.monotonic()
+            for bit, name in SENSORS:
+                if dp.packet.flags & bit:
+                    self.missing_since.pop(name, None)
+                else:
+                    self.missing_since.setdefault(name, now)
             self.values.add(dp.packet, dp.t_us * 1e-6)
+
+    def missing(self, for_s: float = 0.0) -> list[str]:
+        """The sensors the sphere's RAW_SAMPLEs have said missing for at least ``for_s`` seconds."""
+        now = time.monotonic()
+        return [name for _, name in SENSORS if now - self.missing_since.get(name, now) >= for_s
+                and name in self.missing_since]
 
     @property
     def hello(self):
@@ -300,6 +316,9 @@ def _follow(link, timeout_s: float, poll, on_timeout):
             if r is not None:
                 return r
         now = time.monotonic()
+        gone = link.missing(MISSING_S)
+        if gone:
+            raise _StepFailed(_missing_text(gone, link.port_name) + "Nothing was sent.")
         if now - link.last_raw_wall > NO_DATA_S:
             raise _StepFailed(f"no RAW_SAMPLE from the sphere for {NO_DATA_S:g} s: is it still connected (and the "
                               "raw stream on, SET_STREAM bit 0)? Nothing was sent.")
@@ -479,6 +498,12 @@ def _run_port(args) -> int:
                 pass
 
 
+def _missing_text(names: list[str], port: str) -> str:
+    return (f"the sphere's {' and '.join(names)} {'is' if len(names) == 1 else 'are'} not answering (its RAW_SAMPLEs "
+            f"say so; `sphere device --port {port} get` lists the sensors found): check the wiring and the sensor "
+            "board's power (hardware/README.md), then run `sphere calibrate` again. ")
+
+
 def _stream_problem(hello, port: str) -> str | None:
     """Why the sphere's RAW_SAMPLE stream (as its HELLO says) cannot carry the steps, with the command that
     sets it, or None."""
@@ -516,6 +541,8 @@ def _session(args, link) -> int:
             print(f"sphere calibrate: {problem}", file=sys.stderr)
             return 1
     problem = _stream_problem(link.hello, args.port) if link.hello is not None else None
+    if problem is None and link.missing(0.3):  # each step needs all three sensors (the steps check again)
+        problem = _missing_text(link.missing(0.3), args.port) + "Nothing was sent."
     if problem is None and not link.values.t:
         link.pump(1.0)
         if not link.values.t:
