@@ -25,7 +25,8 @@ FLASH_BYTES = 32 * 1024
 
 
 class Stk500Board:
-    def __init__(self, baud: int = 115200, hello: bytes = b"", hello_period_s: float = 0.3, answers: bool = True):
+    def __init__(self, baud: int = 115200, hello: bytes = b"", hello_period_s: float = 0.3, answers: bool = True,
+                 page_write_s: float = 0.0):
         self.master, self.slave = os.openpty()
         tty.setraw(self.slave)
         self.path = os.ttyname(self.slave)
@@ -33,6 +34,7 @@ class Stk500Board:
         self.flash = bytearray(b"\xff" * FLASH_BYTES)
         self.written = set()  # byte addresses programmed
         self.hello, self.hello_period_s, self.answers = hello, hello_period_s, answers
+        self.page_write_s = page_write_s  # a page write before the reply (ATmega328P datasheet, "SPM programming time": 3.7-4.5 ms)
         self.commands: list[int] = []
         self.app_running = False
         self._stop = threading.Event()
@@ -138,6 +140,7 @@ class Stk500Board:
             if hdr[2:3] == b"F":
                 self.flash[self.address:self.address + n] = data
                 self.written.update(range(self.address, self.address + n))
+                time.sleep(self.page_write_s)
             self._reply()
         elif cmd == 0x74:  # STK_READ_PAGE
             hdr = self._take(3) or b"\0\0F"

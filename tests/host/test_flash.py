@@ -89,6 +89,34 @@ def test_a_given_baud_is_checked_before_avrdude_runs(tmp_path, board, hex_image,
     assert log.read_text().split("\n")[6:8] == ["-b", "57600"]
 
 
+@pytest.mark.slow
+@needs_avrdude
+def test_ctrl_c_while_avrdude_writes_says_so_and_flashing_again_mends_it(board, hex_image):
+    """SIGINT in the middle of the write: before, 'sphere: interrupted' and nothing about the Nano, which held part
+    of the image. Now one line saying so and that flashing again writes the whole image; exit 130; it does."""
+    import signal
+    import sys
+    import time
+
+    nano = board(baud=115200, hello=HELLO_WIRE, page_write_s=0.02)  # about 4 s for the image's pages
+    p = subprocess.Popen([sys.executable, "-m", "sphere.cli", "flash", "--port", nano.path],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 60
+    while not nano.written and time.monotonic() < deadline:
+        time.sleep(0.02)
+    p.send_signal(signal.SIGINT)
+    _, err = p.communicate(timeout=30)
+    assert p.returncode == 130 and "Traceback" not in err, err
+    assert err.strip() == ("sphere flash: interrupted; avrdude was writing: the Nano may hold part of the image; its "
+                           "bootloader is untouched, so `sphere flash` again writes the whole image"), err
+    expected = parse_intel_hex(hex_image.read_text())
+    assert not nano.app_running and not set(expected) <= nano.written  # interrupted half way
+    nano.page_write_s = 0.0
+    assert subprocess.run([sys.executable, "-m", "sphere.cli", "flash", "--port", nano.path],
+                          capture_output=True, text=True, timeout=120).returncode == 0
+    assert all(nano.flash[a] == v for a, v in expected.items()) and nano.app_running
+
+
 def test_avrdude_command_line_and_its_failure(tmp_path, board, hex_image, capsys):
     """A stand-in avrdude records its arguments and fails as a real one does when the board is wrong."""
     log = tmp_path / "argv"

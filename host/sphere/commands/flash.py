@@ -115,7 +115,15 @@ def wait_for_hello(port: str, timeout_s: float = HELLO_TIMEOUT_S):
 
 
 def flash(args, out=None) -> int:
-    out = out or sys.stdout
+    """:func:`_flash`; Ctrl-C says what it left on the Nano (exit 130)."""
+    state = {"now": "nothing was written"}
+    try:
+        return _flash(args, out or sys.stdout, state)
+    except KeyboardInterrupt:
+        raise FlashError(f"interrupted; {state['now']}", 130) from None
+
+
+def _flash(args, out, state) -> int:
 
     image = find_image(args.image)
     avrdude = shutil.which(args.avrdude)
@@ -139,11 +147,14 @@ def flash(args, out=None) -> int:
                          + (" (or without --baud: both rates are tried)" if args.baud else ", or give --baud"), 1)
     print(f"{port}: {bootloader.bootloader_name(baud)} at {baud} baud; writing {image}", file=out, flush=True)
     cmd = bootloader.avrdude_command(port, baud, image, avrdude=avrdude, verify=not args.no_verify)
-    r = subprocess.run(cmd, capture_output=True, text=True)
+    state["now"] = ("avrdude was writing: the Nano may hold part of the image; its bootloader is untouched, so "
+                    "`sphere flash` again writes the whole image")
+    r = subprocess.run(cmd, capture_output=True, text=True)  # on Ctrl-C it ends avrdude (SIGINT, then SIGKILL)
     if r.returncode != 0:
         tail = "\n".join((r.stderr or r.stdout).strip().splitlines()[-8:])
         raise FlashError(f"avrdude failed (exit status {r.returncode}):\n{tail}\ncommand: {' '.join(cmd)}", 1)
     print("written" + ("" if args.no_verify else " and verified"), file=out, flush=True)
+    state["now"] = "the image was written" + ("" if args.no_verify else " and verified")
     if args.no_hello:
         return 0
     hello = wait_for_hello(port)
