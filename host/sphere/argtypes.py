@@ -89,6 +89,23 @@ def positive(text: str, least: float = 0.0, inclusive: bool = False) -> float:
     return v
 
 
+def distance_m(text: str) -> float:
+    """The virtual webcam's distance to the ball, in metres: more than 0 and at most 10 (farther, the 8 cm ball is
+    under 5 px across in its 640x480, 60° view)."""
+    v = positive(text)
+    if v > 10.0:
+        raise argparse.ArgumentTypeError(f"{text!r}: give at most 10 m (farther, the 8 cm ball is under 5 px across)")
+    return v
+
+
+def hue_deg(text: str) -> float:
+    """A hue in degrees, 0 to 360."""
+    v = positive(text, 0.0, inclusive=True)
+    if v > 360.0:
+        raise argparse.ArgumentTypeError(f"{text!r}: give a hue from 0 to 360 degrees")
+    return v
+
+
 def non_negative(text: str) -> float:
     """A finite number, 0 or more (a moment, a length, a rate)."""
     return positive(text, 0.0, inclusive=True)

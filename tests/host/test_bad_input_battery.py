@@ -364,6 +364,14 @@ ROWS = [
     S(["camera", "calibrate", "{tmp}/e", "--square-mm", "-5"], 2, "square-mm", files={"e": "dir"}),
     S(["camera", "calibrate", "{tmp}/e", "--board", "2x2"], 2, "--board", files={"e": "dir"}),
     S(["camera", "explode"], 2, "invalid choice"),
+    S(["camera", "render", "--distance", "nan"], 2, "argument --distance"),  # rendered frames with no ball, exit 0
+    S(["camera", "render", "--distance", "1e99"], 2, "at most 10 m"),
+    S(["camera", "render", "--seconds", "-1"], 2, "argument --seconds"),  # was exit 1 after loading the trial
+    S(["camera", "render", "--start", "nan"], 2, "argument --start"),
+    S(["camera", "track", "{tmp}/v.avi", "--hue", "nan"], 2, "argument --hue", files={"v.avi": b"x"}),  # found no ball
+    S(["camera", "track", "{tmp}/v.avi", "--seconds", "-1"], 2, "argument --seconds", files={"v.avi": b"x"}),
+    S(["bench", "camera", "--distance", "nan"], 2, "argument --distance"),  # timed frames without a ball
+    S(["hybrid-eval", "--distance", "1e99"], 2, "at most 10 m"),
     # hybrid-eval, hybrid-sim, bench, protocol
     S(["hybrid-eval", "--seconds", "1"], 2, "seconds"),
     S(["hybrid-eval", "--trials", "banana"], 2, "banana"),

@@ -16,7 +16,7 @@ import time
 
 import numpy as np
 
-from sphere import broad
+from sphere import argtypes, broad
 from sphere.camera import trials
 from sphere.camera.detect import BallDetector
 from sphere.camera.evaluation import NOMINAL_CAMERA_LATENCY_S
@@ -28,9 +28,10 @@ HELP = "ms per frame of detection + fusion at 640x480 on one core (also `sphere 
 
 def add_arguments(p) -> None:
     p.add_argument("--trial", default="10", help="BROAD trial name or number (default 10)")
-    p.add_argument("--start", type=float, default=40.0, help="seconds into the trial (default 40)")
-    p.add_argument("--seconds", type=float, default=5.0, help="how long (default 5)")
-    p.add_argument("--distance", type=float, default=1.0, help="camera to the mean ball position, m (default 1)")
+    p.add_argument("--start", type=argtypes.non_negative, default=40.0, help="seconds into the trial (default 40)")
+    p.add_argument("--seconds", type=argtypes.seconds, default=5.0, help="how long (default 5)")
+    p.add_argument("--distance", type=argtypes.distance_m, default=1.0,
+                   help="camera to the mean ball position, m (default 1, at most 10)")
 
 
 def run(args) -> int:

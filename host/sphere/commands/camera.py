@@ -7,7 +7,7 @@ import os
 import sys
 import time
 
-from sphere import broad
+from sphere import argtypes, broad
 from sphere.bench import camera as camera_bench
 from sphere.camera import trials
 from sphere.camera.intrinsics import CalibrationError, calibrate, read_views
@@ -34,15 +34,16 @@ def add_arguments(p) -> None:
     c.add_argument("-o", "--output", default="camera.json", help="where to write the camera file")
     r = sub.add_parser("render", help="the virtual webcam's view of a BROAD trial")
     r.add_argument("--trial", default="16", help="BROAD trial name or number (default 16)")
-    r.add_argument("--start", type=float, default=30.0, help="seconds into the trial (default 30)")
-    r.add_argument("--seconds", type=float, default=5.0, help="how long (default 5)")
-    r.add_argument("--distance", type=float, default=1.0, help="camera to the mean ball position, m (default 1)")
+    r.add_argument("--start", type=argtypes.non_negative, default=30.0, help="seconds into the trial (default 30)")
+    r.add_argument("--seconds", type=argtypes.seconds, default=5.0, help="how long (default 5)")
+    r.add_argument("--distance", type=argtypes.distance_m, default=1.0,
+                   help="camera to the mean ball position, m (default 1, at most 10)")
     r.add_argument("-o", "--output", default="virtual-camera.avi", help="the video to write")
     k = sub.add_parser("track", help="the ball's position in a webcam's or a video's frames (camera only)")
     k.add_argument("source", help="webcam index (0, 1 ...) or a video file")
     k.add_argument("--camera-file", help="intrinsics from `sphere camera calibrate` (default: a typical 60° webcam)")
-    k.add_argument("--hue", type=float, default=120.0, help="the ball's hue in degrees (default 120, green)")
-    k.add_argument("--seconds", type=float, default=0.0, help="stop after this long (default: until the end)")
+    k.add_argument("--hue", type=argtypes.hue_deg, default=120.0, help="the ball's hue in degrees (default 120, green)")
+    k.add_argument("--seconds", type=argtypes.non_negative, default=0.0, help="stop after this long (default: until the end)")
     camera_bench.add_arguments(sub.add_parser("bench", help=camera_bench.HELP))
 
 def _board(text: str):
