@@ -57,6 +57,24 @@ def test_pure_noise(tmp_path):
     assert r.stdout == ""
 
 
+def test_a_capture_cut_in_the_middle_of_a_frame_says_so(tmp_path):
+    """The bytes after the last delimiter are a frame the recording stopped in: decoded frames as before, and the
+    summary counts them instead of leaving them out of every figure."""
+    data = EXAMPLE.read_bytes()
+    cut = data[:777]
+    unfinished = len(cut) - cut.rindex(b"\x00") - 1
+    assert unfinished > 0
+    (tmp_path / "cut.cap").write_bytes(cut)
+    r = sphere("decode", str(tmp_path / "cut.cap"), "--jsonl")
+    summary = json.loads(r.stderr.strip().splitlines()[-1])
+    assert r.returncode == 0 and summary["bytes_unfinished"] == unfinished and summary["frames_ok"] == 30
+    r = sphere("decode", str(tmp_path / "cut.cap"))
+    assert r.returncode == 0 and f"the last {unfinished} bytes are a frame the capture ends in the middle of" in r.stderr
+    whole = sphere("decode", str(EXAMPLE), "--jsonl")
+    assert json.loads(whole.stderr.strip().splitlines()[-1])["bytes_unfinished"] == 0
+    assert "middle" not in sphere("decode", str(EXAMPLE)).stderr
+
+
 def test_damaged_capture_still_decodes_what_is_intact(tmp_path):
     data = bytearray(EXAMPLE.read_bytes())
     for i in range(100, len(data), 997):  # a bit flip every ~1 kB

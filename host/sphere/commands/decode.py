@@ -62,7 +62,8 @@ def run(args) -> int:
     if stats.bytes_in == 0:  # what was read, so a FIFO or a pipe is judged by its contents, not its size
         print(f"sphere decode: {args.capture} is empty: nothing was received (is the sphere on, and the port right?)", file=sys.stderr)
         return 1
-    summary = {"summary": True, "packets": count, **stats.as_dict()}
+    cut = len(capture.decoder.pending())  # bytes after the last delimiter: a frame the recording stopped in
+    summary = {"summary": True, "packets": count, **stats.as_dict(), "bytes_unfinished": cut}
     if args.jsonl:
         print(json.dumps(summary), file=sys.stderr)
     else:
@@ -70,7 +71,8 @@ def run(args) -> int:
             f"{stats.frames_ok} frames from {stats.bytes_in} bytes; errors: {stats.crc_errors} CRC, "
             f"{stats.framing_errors} framing, {stats.oversize} oversize, {stats.unknown_types} unknown type, "
             f"{stats.bad_lengths} bad length; {stats.bytes_skipped} bytes skipped; {stats.seq_gaps} sequence "
-            f"gaps ({stats.frames_lost} frames lost); {stats.duplicates} duplicates dropped",
+            f"gaps ({stats.frames_lost} frames lost); {stats.duplicates} duplicates dropped"
+            + (f"; the last {cut} bytes are a frame the capture ends in the middle of" if cut else ""),
             file=sys.stderr,
         )
     if stats.frames_ok == 0:
