@@ -3,6 +3,7 @@ by a test X client, a toss switching to tilt mode."""
 
 from __future__ import annotations
 
+import importlib.util
 import os
 import shutil
 import subprocess
@@ -354,3 +355,40 @@ def test_signal_storm_while_the_pointer_moves(xvfb, tmp_path):
     assert sent >= 2000, sent  # a machine too busy to send them makes this test say so, not pass quietly
     assert p.returncode == 0 and "Traceback" not in err and "RuntimeError" not in err, err
     assert "recentred" in err
+
+
+@pytest.mark.parametrize("backend", ["x11", "pynput"])
+def test_the_x_server_going_away_mid_run_is_one_line_and_exit_1(tmp_path, backend):
+    """The session ends or X restarts while the pointer moves: one line naming the display and what to do, the
+    daemon's last line, exit status 1 (a failed run: the systemd unit restarts it). It was a traceback
+    (XConnectionLost; python-xlib's ConnectionClosedError through pynput)."""
+    from sphere.bench._xvfb import Xvfb, XvfbUnavailable
+
+    if backend == "pynput" and importlib.util.find_spec("pynput") is None:  # (importing it here needs a display)
+        pytest.skip("needs pynput (pip install pynput)")
+    capture = tmp_path / "turning.bin"
+    capture.write_bytes(script_bytes([("still", 0.5), ("turn", (0, 0, 1), 20.0, 30.0)]))  # 30 s of moves
+    try:
+        server = Xvfb(WIDTH, HEIGHT)
+    except XvfbUnavailable as e:
+        pytest.fail(str(e))
+    daemon = None
+    try:
+        daemon = subprocess.Popen([sys.executable, "-m", "sphere.mouse", "--replay", str(capture), "--backend", backend,
+                                   "--no-stream", "--config", os.devnull], env=dict(os.environ, DISPLAY=server.display),
+                                  stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+        start = pointer(server.display)
+        deadline = time.monotonic() + 30
+        while pointer(server.display) == start:  # moving
+            assert time.monotonic() < deadline and daemon.poll() is None, "the pointer never moved"
+            time.sleep(0.1)
+        server.close()  # the X server goes away
+        _, err = daemon.communicate(timeout=20)
+    finally:
+        server.close()
+        if daemon is not None and daemon.poll() is None:
+            daemon.kill()
+            daemon.wait()
+    assert daemon.returncode == 1 and "Traceback" not in err and "Exception ignored" not in err, (daemon.returncode, err)
+    assert f"backend {backend}: " in err and "went away" in err and "start sphere-mouse again" in err, err
+    assert err.rstrip().splitlines()[-1].startswith("sphere-mouse: stopped:"), err

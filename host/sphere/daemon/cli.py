@@ -18,6 +18,7 @@ from sphere.daemon import sources
 from sphere.daemon.backends import REGISTRY as BACKENDS
 from sphere.daemon.app import SphereMouse
 from sphere.daemon.backends import BackendUnavailable, open_backend
+from sphere.daemon.backends.base import BackendLost
 from sphere.daemon.config import ConfigError
 from sphere.daemon.outputs.fanout import attach
 from sphere.daemon.move_log import MoveLog, MoveLogError
@@ -288,6 +289,9 @@ def _main(argv=None) -> int:
         daemon.run()
     except SourceFailed as e:  # a device that failed during the run
         logger.error(str(e))
+        code = 1
+    except BackendLost as e:  # the display the pointer moved on went away
+        logger.error(f"backend {backend.NAME}: {e}")
         code = 1
     except SourceError as e:  # what the user named turned out unusable (a capture, a port, a protocol version)
         logger.error(str(e))

@@ -11,6 +11,11 @@ class BackendUnavailable(SphereError):
     """This backend cannot start here; the message says why and what to do."""
 
 
+class BackendLost(SphereError):
+    """Where the moves went is gone during the run (the X server closed the connection: the session ended or X
+    restarted); the daemon stops with one line saying so, exit status 1."""
+
+
 class Backend:
     NAME = "base"
     #: the settings of ``[backend.NAME]`` (sphere.settings.Param); none for most backends

@@ -6,7 +6,12 @@ import ctypes
 import importlib.util
 import sys
 
-from sphere.daemon.backends.base import Backend, BackendUnavailable
+from sphere.daemon.backends.base import Backend, BackendLost, BackendUnavailable
+
+
+class _ClosedDisplay:
+    def close(self) -> None:
+        pass
 
 
 class PynputBackend(Backend):
@@ -24,21 +29,37 @@ class PynputBackend(Backend):
             self.mouse = controller or mouse.Controller()
         except Exception as e:
             raise BackendUnavailable(f"pynput cannot start here: {e}") from None
+        self._gone: tuple = (BrokenPipeError, ConnectionResetError)
+        try:  # on Linux pynput drives X through python-xlib, which says a closed display with its own error
+            from Xlib.error import ConnectionClosedError  # optional: python-xlib
+            self._gone += (ConnectionClosedError,)
+        except ImportError:
+            pass
+
+    def _do(self, call, *args) -> None:
+        try:
+            call(*args)
+        except self._gone as e:
+            if hasattr(self.mouse, "_display"):  # pynput's X controller closes its display when collected, which
+                # raises again on a dead one (a traceback at exit, "Exception ignored in Controller.__del__")
+                self.mouse._display = _ClosedDisplay()
+            raise BackendLost(f"pynput's display went away ({e}: the session ended or X restarted); start "
+                              "sphere-mouse again in the new session") from None
 
     def move(self, dx: int, dy: int) -> None:
-        self.mouse.move(dx, dy)
+        self._do(self.mouse.move, dx, dy)
 
     def move_to(self, x: int, y: int) -> None:
-        self.mouse.position = (int(x), int(y))
+        self._do(setattr, self.mouse, "position", (int(x), int(y)))
 
     def press(self, button: str) -> None:
-        self.mouse.press(self._buttons[button])
+        self._do(self.mouse.press, self._buttons[button])
 
     def release(self, button: str) -> None:
-        self.mouse.release(self._buttons[button])
+        self._do(self.mouse.release, self._buttons[button])
 
     def click(self, button: str = "left", count: int = 1) -> None:
-        self.mouse.click(self._buttons[button], count)
+        self._do(self.mouse.click, self._buttons[button], count)
 
     def screen_size(self):
         return main_screen_size()

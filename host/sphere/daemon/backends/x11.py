@@ -6,7 +6,7 @@ from __future__ import annotations
 import os
 
 from sphere.daemon.backends.base import Backend, BackendUnavailable
-from sphere.daemon.backends.xlib_ctypes import XLibraryMissing, XTest
+from sphere.daemon.backends.xlib_ctypes import XLibraryMissing, XTest, lost_display
 from sphere.settings import Param
 
 _BUTTON = {"left": 1, "middle": 2, "right": 3}
@@ -24,6 +24,7 @@ class _PythonXlibXTest:
     def __init__(self, name: str):
         try:
             from Xlib import X, display as xdisplay  # optional: python-xlib (the daemon extra)
+            from Xlib.error import ConnectionClosedError  # optional: python-xlib
             from Xlib.ext import xtest  # optional: python-xlib
         except ImportError:
             raise BackendUnavailable("neither libX11 + libXtst (apt-get install libx11-6 libxtst6) nor python-xlib "
@@ -35,25 +36,34 @@ class _PythonXlibXTest:
         if not self.display.has_extension("XTEST"):
             self.display.close()
             raise BackendUnavailable(f"X display {name} has no XTEST extension")
+        self.name = name
         self._X = X
         self._fake = xtest.fake_input
+        self._closed = ConnectionClosedError
         screen = self.display.screen()
         self.size = (screen.width_in_pixels, screen.height_in_pixels)
 
+    def _send(self, *request, **fields) -> None:
+        try:
+            self._fake(self.display, *request, **fields)
+            self.display.flush()
+        except (self._closed, BrokenPipeError, ConnectionResetError):
+            raise lost_display(self.name) from None
+
     def move(self, dx: int, dy: int) -> None:
-        self._fake(self.display, self._X.MotionNotify, detail=True, x=dx, y=dy)
-        self.display.flush()
+        self._send(self._X.MotionNotify, detail=True, x=dx, y=dy)
 
     def move_to(self, x: int, y: int) -> None:
-        self._fake(self.display, self._X.MotionNotify, x=x, y=y)
-        self.display.flush()
+        self._send(self._X.MotionNotify, x=x, y=y)
 
     def button(self, number: int, down: bool) -> None:
-        self._fake(self.display, self._X.ButtonPress if down else self._X.ButtonRelease, number)
-        self.display.flush()
+        self._send(self._X.ButtonPress if down else self._X.ButtonRelease, number)
 
     def sync(self) -> None:
-        self.display.sync()
+        try:
+            self.display.sync()
+        except (self._closed, BrokenPipeError, ConnectionResetError):
+            raise lost_display(self.name) from None
 
     def close(self) -> None:
         self.display.close()

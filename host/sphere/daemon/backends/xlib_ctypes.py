@@ -15,6 +15,7 @@ from __future__ import annotations
 import ctypes
 import ctypes.util
 
+from sphere.daemon.backends.base import BackendLost
 from sphere.errors import SphereError
 
 
@@ -22,8 +23,14 @@ class XLibraryMissing(SphereError, OSError):
     """libX11 or libXtst is not installed."""
 
 
-class XConnectionLost(SphereError, ConnectionError):
+class XConnectionLost(BackendLost, ConnectionError):
     """The X server closed the connection."""
+
+
+def lost_display(name: str) -> XConnectionLost:
+    """The one line for a display that went away."""
+    return XConnectionLost(f"X display {name} went away (the X server closed the connection: the session ended or X "
+                           "restarted); start sphere-mouse again in the new session")
 
 
 _cache: dict[str, ctypes.CDLL] = {}
@@ -101,6 +108,7 @@ class XTest:
     def __init__(self, display: str):
         x, t = libx11(), libxtst()
         self._x, self._t = x, t
+        self.name = display
         self._d = x.XOpenDisplay(display.encode())
         if not self._d:
             raise ConnectionRefusedError(f"cannot connect to X display {display}")
@@ -120,7 +128,7 @@ class XTest:
 
     def _check(self) -> None:
         if self._d is None or self._d in _lost:
-            raise XConnectionLost("the X server closed the connection")
+            raise lost_display(self.name)
 
     def move(self, dx: int, dy: int) -> None:
         self._check()
