@@ -27,10 +27,9 @@ HELP = "run the firmware on the simulated board (simavr) fed by a BROAD trial or
 DESCRIPTION = (
     "Run the firmware image on a simulated ATmega328P at 16 MHz with register-level ADXL345, ITG-3200 "
     "and HMC5883L models fed by motion: a BROAD trial (a .mat path, a name or its number, e.g. 24), a "
-    "synthetic source (synthetic:still, synthetic:rotation[:DPS], synthetic:toss, synthetic:taps, "
-    "synthetic:calibration) or a "
-    "prepared trace (.bin). The UART goes into a capture file (--capture, readable by `sphere decode`) "
-    "and/or a pseudo-terminal (--pty, for `sphere capture` or sphere-mouse). Prints the run's figures; "
+    f"synthetic motion (synthetic:NAME[:ARG], NAME one of {', '.join(T.SYNTHETIC)}; e.g. synthetic:tour, "
+    "synthetic:rotation:200 in °/s, synthetic:turn:45 in degrees) or a prepared trace (.bin). The UART goes "
+    "into a capture file (--capture, readable by `sphere decode`) and/or a pseudo-terminal (--pty, for `sphere capture` or sphere-mouse). Prints the run's figures; "
     "--stats writes them as JSON. The I2C bus runs at its real 400 kHz timing (--simavr-i2c-timing: simavr's "
     "1 us per step); the MARG update's cycle counts (from the timing pin D13) are exact. The board can be "
     "one of several variants (--board), its chips noisy and on their own clocks (--noise, --clocks random), and "
