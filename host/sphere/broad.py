@@ -73,8 +73,12 @@ def trial_paths(directory: Path | str | None = None) -> list[Path]:
 def find_trial(name: str, directory: Path | str | None = None) -> Path:
     """A trial by file name, stem, or number prefix (``24`` finds ``24_disturbed_tapping_A.mat``)."""
     p = Path(name)
-    if p.suffix == ".mat" and p.exists():
+    if p.suffix == ".mat" and p.is_file():
         return p
+    if p.exists() or "/" in name:  # a path, not a name: say what is wrong with it rather than look it up
+        what = "is a folder" if p.is_dir() else "is not a .mat file" if p.exists() else "does not exist"
+        raise BroadMissing(f"{name} {what}: give a BROAD trial's .mat file, or a trial's name or number (e.g. 07) "
+                           f"in {directory or broad_dir()}")
     for path in trial_paths(directory):
         if path.stem == name or path.name == name or path.stem.split("_", 1)[0] == name:
             return path
