@@ -263,6 +263,9 @@ ROWS = [
     S(["sim", "--trace", "synthetic:wobble"], 2, "wobble"),
     S(["sim", "--trace", "{tmp}/nope.mat"], 2, "nope.mat"),
     S(["sim", "--trace", "{tmp}/g.bin"], 2, "g.bin", files={"g.bin": GARBAGE}),
+    S(["sim", "--trace", "{tmp}/good.cap"], 2, "is not a .mat file", files=CAP),  # was "no BROAD trial named"
+    S(["sim", "--trace", "{tmp}"], 2, "is a folder"),
+    S(["sim", "--trace", "synthetic:still", "--accuracy", "--seconds", "2"], 2, "BROAD's optical reference"),  # ran, exit 0
     S(["sim", "--trace", "synthetic:still", "--nack", "gpu:1:2"], 2, "CHIP:T0:T1"),
     S(["sim", "--trace", "synthetic:still", "--nack", "adxl345:x"], 2, "CHIP:T0:T1"),
     S(["sim", "--trace", "synthetic:still", "--nack", "adxl345:2:1"], 2, "T0 < T1"),

@@ -297,12 +297,9 @@ def _one(args, source: str, elf, tmp: Path, index: int, multi: bool):
             # the firmware's own figure: the longest period's work in each second / the period (per mille)
             stats["device_cpu_load_max"] = max(x.cpu_load for x in summary.status) / 1000.0
     acc = None
-    if args.accuracy:
-        if trial is None:
-            print(f"sphere sim: --accuracy needs a BROAD trial, not {source}", file=sys.stderr)
-        elif summary is not None:
-            acc = accuracy(summary, trial, args.hold, args.beta, bias_s=min(args.hold, 2.0),
-                           follow_firmware=not args.host_independent)
+    if args.accuracy and trial is not None and summary is not None:  # (run() lets only BROAD trials through)
+        acc = accuracy(summary, trial, args.hold, args.beta, bias_s=min(args.hold, 2.0),
+                       follow_firmware=not args.host_independent)
     if stats_out and run.stats:
         Path(stats_out).write_text(json.dumps(stats, indent=2) + "\n")
     return source, run, stats, acc
@@ -373,6 +370,11 @@ def run(args) -> int:
         sources = [str(p) for p in trial_paths()]
     if len(sources) > 1 and not args.accuracy:
         print("sphere sim: several --trace only with --accuracy", file=sys.stderr)
+        return 2
+    not_broad = [s for s in sources if s.startswith("synthetic:") or s in T.SYNTHETIC or s.endswith(".bin")]
+    if args.accuracy and not_broad:
+        print(f"sphere sim: --accuracy compares with BROAD's optical reference, which {', '.join(not_broad)} has "
+              "not: give BROAD trials (a .mat, a name or a number, or all)", file=sys.stderr)
         return 2
     try:
         if args.firmware == "testfw":
