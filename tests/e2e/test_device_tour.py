@@ -14,7 +14,7 @@ import time
 
 import pytest
 
-from simscenarios import need_board, need_firmware, stop_simulator
+from simscenarios import children, need_board, need_firmware, stop_simulator
 
 pytestmark = pytest.mark.slow
 
@@ -33,8 +33,7 @@ def one_line(r, code: int, *words) -> str:
     return err
 
 
-@pytest.fixture(scope="module")
-def board():
+def start(seconds: float, extra=()):
     """The virtual sphere lying still, its UART on a pty: (process of `sphere sim`, pty path)."""
     from sphere.daemon.sources.base import SourceError
     from sphere.daemon.sources.simulated import start_simulator
@@ -42,36 +41,26 @@ def board():
     need_board()
     need_firmware()
     try:
-        proc, pty = start_simulator("synthetic:still", seconds=600)
+        return start_simulator("synthetic:still", seconds=seconds, extra=extra)
     except SourceError as e:
         pytest.fail(str(e))
+
+
+@pytest.fixture(scope="module")
+def board():
+    proc, pty = start(600)
     yield proc, pty
     stop_simulator(proc)
-
-
-def _children(pid: int) -> list[int]:
-    try:
-        with open(f"/proc/{pid}/task/{pid}/children") as f:
-            return [int(c) for c in f.read().split()]
-    except OSError:
-        return []
 
 
 def test_unplugged_while_a_command_waits_is_one_line():
     """The board goes away while `sphere device get` waits for it (its process frozen, then killed: the pty
     closes as when a USB cable is pulled): one line saying so, exit 1. Before: a LinkLost traceback."""
-    from sphere.daemon.sources.base import SourceError
-    from sphere.daemon.sources.simulated import start_simulator
     from sphere.link.port import holders
 
-    need_board()
-    need_firmware()
+    proc, pty = start(120)
     try:
-        proc, pty = start_simulator("synthetic:still", seconds=120)
-    except SourceError as e:
-        pytest.fail(str(e))
-    try:
-        boards = _children(proc.pid)
+        boards = children(proc.pid)
         assert len(boards) == 1, boards  # `sphere sim` runs one board program
         os.kill(boards[0], signal.SIGSTOP)  # the board answers nothing from now on
         cmd = subprocess.Popen([sys.executable, "-m", "sphere.cli", "device", "--port", pty, "--timeout", "5", "get"],
@@ -192,15 +181,7 @@ def test_calibrate_names_a_sensor_that_is_not_answering():
     turning ('the sensors' axes could not be told apart ... away from magnets and iron'); a new session did the
     same. Now: the step stops within a second or two naming the magnetometer, and a new session says so at once;
     exit 1, nothing sent."""
-    from sphere.daemon.sources.base import SourceError
-    from sphere.daemon.sources.simulated import start_simulator
-
-    need_board()
-    need_firmware()
-    try:
-        proc, pty = start_simulator("synthetic:still", seconds=120, extra=("--nack", "hmc5883l:6:inf"))
-    except SourceError as e:
-        pytest.fail(str(e))
+    proc, pty = start(120, ("--nack", "hmc5883l:6:inf"))
     try:
         t0 = time.monotonic()
         r = sphere("calibrate", "--port", pty, "--yes", "--timeout", "100", timeout=90)
