@@ -201,6 +201,10 @@ ROWS = [
     M(["--port", "{tmp}"], 2, "not a serial port"),
     M(["--port", "{tmp}/plain"], 2, "not a serial port", files={"plain": b"x"}),
     M(["--port", "/dev/null"], 2, "not a serial port"),
+    # the terminal itself: it was set raw at 1 Mbaud and written GET_HELLO frames, and stayed raw after the exit
+    M(["--port", "/dev/tty"], 2, "/dev/tty is the terminal this runs in, not a serial port"),
+    M(["--port", "/dev/console"], 2, "is the system console, not a serial port"),
+    S(["monitor", "--port", "/dev/tty", "--seconds", "1"], 2, "not a serial port"),
     M(["--simulate", "--trace", "{tmp}/nope.mat"], 2, "nope.mat"),
     # an output that cannot start says what to set, and the pointer runs on
     M(["--replay", "{tmp}/good.cap", "--speed", "0", "--set", "outputs.dsu.enabled=true", "--set",

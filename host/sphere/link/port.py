@@ -39,6 +39,11 @@ def check_baud(baud) -> str | None:
     return None
 
 
+#: the terminal devices of Linux's major 5 (devices.txt): never the sphere's port
+TERMINALS = {(5, 0): "the terminal this runs in", (5, 1): "the system console",
+             (5, 2): "the pseudo-terminal multiplexer"}
+
+
 def port_problem(port: str) -> str | None:
     """Why ``port`` cannot be a serial port although it exists (a folder, a file, /dev/null), or None (also
     for a port that does not exist yet: it may be plugged in)."""
@@ -51,6 +56,9 @@ def port_problem(port: str) -> str | None:
         return f"{port} is a folder, not a serial port: {hint}"
     if not stat.S_ISCHR(st.st_mode):
         return f"{port} is not a serial port (not a character device): {hint}"
+    if (os.major(st.st_rdev), os.minor(st.st_rdev)) in TERMINALS:  # opened, it would be the user's own terminal,
+        # set raw at the sphere's rate and written frames (left so after exit: a shell that echoes nothing)
+        return f"{port} is {TERMINALS[os.major(st.st_rdev), os.minor(st.st_rdev)]}, not a serial port: {hint}"
     try:  # a character device of another kind (/dev/null, /dev/zero: class mem); pseudo-terminals have no entry
         subsystem = os.path.basename(os.path.realpath(f"/sys/dev/char/{os.major(st.st_rdev)}:{os.minor(st.st_rdev)}/subsystem"))
     except (OSError, ValueError):
