@@ -96,10 +96,19 @@ HELD = [("rest", 3.0, "", 0.0, ""), ("held", 5.5, "", 0.0, ""), ("turn", 1.0, "f
         ("held", 2.0, "", 0.0, ""), ("turn", 0.1, "fast", -120.0, "yaw"), ("held", 1.5, "", 0.0, "")]
 
 
+def _window_mean(t, x, a, b):
+    """The mean of the X pointer over [a, b) as a step function (it stays where the last read found it): a gap in
+    the reads (the sampler waiting on a loaded machine's X server) leaves the window's mean defined."""
+    grid = np.arange(a, b, 0.001)
+    k = np.searchsorted(t, grid, side="right") - 1
+    assert k[0] >= 0, "the X trace starts after the window"
+    return float(x[k].mean())
+
+
 def _half_travel_s(t, x, start_s, end_s):
     """When x first gets half way between its means over 0.25 s before start_s and 0.4 s from end_s + 0.5 s."""
-    pre = x[(t >= start_s - 0.3) & (t < start_s - 0.05)].mean()
-    post = x[(t >= end_s + 0.5) & (t < end_s + 0.9)].mean()
+    pre = _window_mean(t, x, start_s - 0.3, start_s - 0.05)
+    post = _window_mean(t, x, end_s + 0.5, end_s + 0.9)
     level = pre + 0.5 * (post - pre)
     after = (t >= start_s - 0.05) & (np.sign(post - pre) * (x - level) >= 0)
     return float(t[after][0]), post - pre
