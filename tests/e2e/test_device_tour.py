@@ -196,3 +196,15 @@ def test_calibrate_names_a_sensor_that_is_not_answering():
         assert time.monotonic() - t0 < 10
     finally:
         stop_simulator(proc)
+
+
+def test_get_says_a_new_sphere_has_no_calibration_saved_not_eeprom_invalid(board):
+    """Before, a new board's `get` said 'calibration: gyro_bias_valid, eeprom_invalid, gyro_bias_estimated' (bit names:
+    'eeprom_invalid' reads as a fault). Now it says what that means and what to do, the bits after it."""
+    _, pty = board
+    r = sphere("device", "--port", pty, "get")
+    assert r.returncode == 0, r.stderr
+    line = next(x for x in r.stdout.splitlines() if x.startswith("calibration: "))
+    assert line.startswith(f"calibration: accelerometer and magnetometer not calibrated (none saved on the sphere: "
+                           f"`sphere calibrate --port {pty}` makes and saves one); gyro bias "), line
+    assert line.endswith("]") and "eeprom_invalid" in line.rsplit("[", 1)[1], line  # the bits, after the words

@@ -129,3 +129,19 @@ def test_settings_state_is_said(state, words):
     from sphere.link.device_settings import settings_state_text
 
     assert words in settings_state_text(state)
+
+
+@pytest.mark.parametrize("state, words", [
+    (0x31, "accelerometer and magnetometer not calibrated (none saved on the sphere: `sphere calibrate --port P` "
+           "makes and saves one); gyro bias measured on the sphere [gyro_bias_valid, eeprom_invalid, gyro_bias_estimated]"),
+    (0x37, "accelerometer and magnetometer calibrated, not saved on the sphere; gyro bias measured"),
+    (0x0F, "accelerometer and magnetometer calibrated, loaded from the sphere's EEPROM; gyro bias set ["),
+    (0x12, "accelerometer calibrated, not saved on the sphere; gyro bias not measured yet"),
+])
+def test_calibration_state_is_said_in_words(state, words):
+    """`sphere device get`'s calibration line: what HELLO's calibration_state means (spec §4.1), then its bits; a new
+    sphere's eeprom_invalid reads as 'none saved', not as a fault."""
+    from sphere.commands.device import _calibration
+    from sphere.protocol.packets import CALIBRATION_STATE_BITS, bit_names
+
+    assert words in _calibration(state, bit_names(state, CALIBRATION_STATE_BITS), "P")

@@ -22,7 +22,19 @@ from sphere.link.device_settings import (
 )
 from sphere.link.port import PortError, open_port
 from sphere.protocol import Identify, Reboot
-from sphere.protocol.packets import REBOOT_MAGIC, ClearSettings, GetSettings, Result, SaveSettings
+from sphere.protocol.packets import (
+    CAL_ACCEL_CALIBRATED,
+    CAL_EEPROM_INVALID,
+    CAL_FROM_EEPROM,
+    CAL_GYRO_BIAS_ESTIMATED,
+    CAL_GYRO_BIAS_VALID,
+    CAL_MAG_CALIBRATED,
+    REBOOT_MAGIC,
+    ClearSettings,
+    GetSettings,
+    Result,
+    SaveSettings,
+)
 
 HELP = "read, change and save the sphere's settings (tap, free fall, stream, filter, board), identify, reboot"
 DESCRIPTION = """\
@@ -104,11 +116,26 @@ def _read_settings(link, hello, timeout_s: float) -> tuple[dict, int] | None:
     return current_from_settings(packets), state
 
 
-def _describe(hello, settings) -> list[str]:
+def _calibration(state: int, names: list[str], port: str) -> str:
+    """HELLO's ``calibration_state`` (spec §4.1) in words, its bit names after them."""
+    done = [w for w, bit in (("accelerometer", CAL_ACCEL_CALIBRATED), ("magnetometer", CAL_MAG_CALIBRATED)) if state & bit]
+    parts = [" and ".join(done) + " calibrated" if done else "accelerometer and magnetometer not calibrated"]
+    if state & CAL_FROM_EEPROM:
+        parts[0] += ", loaded from the sphere's EEPROM"
+    elif state & CAL_EEPROM_INVALID:  # blank or damaged: the firmware cannot tell which
+        parts[0] += (", not saved on the sphere" if done else
+                     f" (none saved on the sphere: `sphere calibrate --port {port}` makes and saves one)")
+    parts.append("gyro bias measured on the sphere" if state & CAL_GYRO_BIAS_ESTIMATED else
+                 "gyro bias set" if state & CAL_GYRO_BIAS_VALID else
+                 "gyro bias not measured yet (the sphere measures it once it lies still)")
+    return "; ".join(parts) + f" [{', '.join(names) or 'none'}]"
+
+
+def _describe(hello, settings, port: str) -> list[str]:
     j = hello.to_json()
     out = [f"firmware {j['firmware_version']} (protocol {hello.protocol_version}); sensors found: "
-           f"{', '.join(j['sensors_found']) or 'none'}; IMU {hello.imu_rate_hz} Hz, magnetometer {hello.mag_rate_hz} Hz; "
-           f"calibration: {', '.join(j['calibration_state']) or 'none'}"]
+           f"{', '.join(j['sensors_found']) or 'none'}; IMU {hello.imu_rate_hz} Hz, magnetometer {hello.mag_rate_hz} Hz",
+           "calibration: " + _calibration(hello.calibration_state, j["calibration_state"], port)]
     values = {**current_from_hello(hello), **(settings[0] if settings else {})}
     for key in SETTINGS:
         if key in values:
@@ -175,7 +202,7 @@ def _run(args) -> int:
     ser, link, hello = _open(args)
     try:
         if args.action == "get":
-            print("\n".join(_describe(hello, _read_settings(link, hello, args.timeout))))
+            print("\n".join(_describe(hello, _read_settings(link, hello, args.timeout), args.port)))
             return 0
         if args.action in ("save", "clear"):
             if hello.protocol_version < 3:
