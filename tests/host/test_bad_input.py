@@ -212,6 +212,32 @@ def test_mouse_stopped_twice_in_quick_succession_still_exits_0(tmp_path, home, s
     assert "sphere-mouse stats: frames" in out, out  # nothing lost: the figures were printed
 
 
+@pytest.mark.parametrize("nohup", [False, True], ids=["terminal-closed", "under-nohup"])
+def test_mouse_sighup_is_a_clean_stop_unless_ignored(tmp_path, home, nohup):
+    """Its terminal closed (SIGHUP): the daemon stops as on SIGTERM, the outputs closed (the 3-D mouse's socket
+    removed), exit 0; it was a death by SIGHUP with nothing closed. Started under nohup (SIGHUP ignored) it runs on."""
+    cap = tmp_path / "slow.bin"
+    cap.write_bytes(script_bytes([("still", 2.0)]))
+    sock = tmp_path / "spnav.sock"
+    p = subprocess.Popen([sys.executable, "-m", "sphere.mouse", "--no-stream", "--backend", "log", "--quiet",
+                          "--replay", str(cap), "--speed", "0.001", "--set", "outputs.spacenav.enabled=true", "--set",
+                          f"outputs.spacenav.socket={sock}"], stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True,
+                         env={**os.environ, **home},
+                         preexec_fn=(lambda: signal.signal(signal.SIGHUP, signal.SIG_IGN)) if nohup else None)
+    first = _started(p, lambda line: ", backend log, " in line)  # the last line before the handlers go in
+    time.sleep(0.2)
+    assert sock.exists()
+    p.send_signal(signal.SIGHUP)
+    if nohup:
+        time.sleep(1.0)
+        assert p.poll() is None, "sphere-mouse under nohup ended on SIGHUP"
+        p.send_signal(signal.SIGTERM)
+    _, err = p.communicate(timeout=10)
+    err = first + err
+    assert p.returncode == 0 and "Traceback" not in err and "stopped:" in err, (p.returncode, err)
+    assert not sock.exists(), "the 3-D mouse's socket was left behind"
+
+
 def test_mouse_named_port_that_is_missing_waits_and_stops(home):
     p = subprocess.Popen([sys.executable, "-m", "sphere.mouse", "--no-stream", "--backend", "log", "--status",
                           "--port", "/dev/ttyNOPE7"], stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True,

@@ -278,8 +278,11 @@ def _main(argv=None) -> int:
         f"{cfg.pointer.slow_deg_per_width:g}° per screen width ({daemon.screen_width_px} px)")
 
     # the handlers only set flags; the loop acts on them between batches (no X, serial or log call in a handler)
-    signal.signal(signal.SIGTERM, lambda s, f: daemon.request("stop"))
-    signal.signal(signal.SIGINT, lambda s, f: daemon.request("stop"))
+    stops = [signal.SIGTERM, signal.SIGINT]
+    if hasattr(signal, "SIGHUP") and signal.getsignal(signal.SIGHUP) is not signal.SIG_IGN:  # (nohup: left ignored)
+        stops.append(signal.SIGHUP)  # its terminal closed: a stop as any other, the port and outputs closed
+    for sig in stops:
+        signal.signal(sig, lambda s, f: daemon.request("stop"))
     if hasattr(signal, "SIGUSR1"):
         signal.signal(signal.SIGUSR1, lambda s, f: daemon.request("recentre"))
         signal.signal(signal.SIGUSR2, lambda s, f: daemon.request("pause"))
@@ -297,8 +300,8 @@ def _main(argv=None) -> int:
         logger.error(str(e))
         code = 2
     finally:
-        signal.signal(signal.SIGTERM, signal.SIG_DFL)
-        signal.signal(signal.SIGINT, signal.SIG_DFL)
+        for sig in stops:
+            signal.signal(sig, signal.SIG_DFL)
         source.close()
         backend.close()
         if camera is not None:
@@ -308,8 +311,8 @@ def _main(argv=None) -> int:
     if argv is None:  # the program itself (not a caller in-process): stopped and closed, only its last lines and
         # the interpreter's teardown (~0.2 s) are left; a double Ctrl-C's second press lands there and must not make
         # a finished run a death by SIGINT (exit status 130). During the closing above it still ends it at once.
-        signal.signal(signal.SIGTERM, signal.SIG_IGN)
-        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        for sig in stops:
+            signal.signal(sig, signal.SIG_IGN)
     log(f"stopped: {daemon.moves} pointer moves, {daemon.clicks} clicks, modes {daemon.mode_changes or [daemon.mode]}")
     if args.print_stats:
         print(run_stats(daemon, time.monotonic() - started), flush=True)
