@@ -39,6 +39,21 @@ def out_file(text: str) -> str:
     return text
 
 
+def image_file(text: str) -> str:
+    """An image for matplotlib to write: :func:`out_file`, its name ending in a format matplotlib writes (.png,
+    .svg, .pdf ...), so a long run does not end in matplotlib's ValueError."""
+    out_file(text)
+    try:
+        from matplotlib.backend_bases import FigureCanvasBase  # optional: matplotlib (the plot extra)
+    except ImportError:  # the command says that matplotlib is missing when it needs it
+        return text
+    kinds = FigureCanvasBase.get_supported_filetypes()
+    if os.path.splitext(text)[1].lstrip(".").lower() not in kinds:
+        raise argparse.ArgumentTypeError(f"{text!r}: end the name in an image format matplotlib writes: "
+                                         f"{', '.join('.' + k for k in sorted(kinds))}, e.g. .png")
+    return text
+
+
 def out_dir(text: str) -> str:
     """A folder to write files into: an existing folder, or one that can be made (checked before any work)."""
     if os.path.exists(text) and not os.path.isdir(text):

@@ -338,6 +338,14 @@ def test_output_paths_are_tried_without_leaving_anything(tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["kept.json"] and kept.read_text() == "mine"
 
 
+def test_an_image_name_matplotlib_cannot_write_is_refused_before_the_run(tmp_path):
+    """hybrid-sim --plot (and monitor --plot-out) named x.jpgg: argparse's line, exit 2, nothing run (it was
+    matplotlib's ValueError traceback once the run was done)."""
+    pytest.importorskip("matplotlib")
+    r = clear(sphere("hybrid-sim", "--plot", str(tmp_path / "signals.jpgg")), 2, "image format matplotlib writes")
+    assert "wrote" not in r.stderr and not list(tmp_path.iterdir())
+
+
 # ---- sphere calibrate ----
 
 def test_calibrate_bad_flags(tmp_path):

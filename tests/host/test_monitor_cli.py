@@ -89,8 +89,8 @@ def test_plot_out_alone_writes_the_image_and_the_rates_are_of_the_stream(sphere_
 
 @pytest.mark.parametrize("argv, words", [
     (["--plot"], "no window to draw in"),  # no display: nothing would show
-    (["--plot-out", "{tmp}/view.pngg"], "image formats"),
-    (["--plot", "--plot-out", "{tmp}/view"], "image formats"),
+    (["--plot-out", "{tmp}/view.pngg"], "image format matplotlib writes"),
+    (["--plot", "--plot-out", "{tmp}/view"], "image format matplotlib writes"),
     (["--plot-out", "/proc/sphere-view.png"], "cannot be written"),
     (["--plot-out", "{tmp}"], "is a folder"),
 ])

@@ -20,7 +20,7 @@ the dissertation's Tables 2-3, with why the numbers differ."""
 def add_arguments(p) -> None:
     p.add_argument("--seed", type=int, help="random seed (default: the fixed one, so runs repeat exactly)")
     p.add_argument("--json", metavar="OUT", type=argtypes.out_file, help="write the tables as JSON")
-    p.add_argument("--plot", metavar="PNG", type=argtypes.out_file, help="write the simulated and estimated signals as a PNG")
+    p.add_argument("--plot", metavar="PNG", type=argtypes.image_file, help="write the simulated and estimated signals as a PNG")
 
 
 EXPLANATION = """\

@@ -36,13 +36,13 @@ def add_arguments(p) -> None:
     p.add_argument("--events", type=argtypes.at_least_one, default=None, metavar="N",
                    help="stop after N events (taps, free falls): e.g. to try a tap setting")
     p.add_argument("--plot", action="store_true", help="live curves: accelerometer, gyroscope, magnetometer, orientation")
-    p.add_argument("--plot-out", metavar="PNG", type=argtypes.out_file,
+    p.add_argument("--plot-out", metavar="PNG", type=argtypes.image_file,
                    help="write the plot's last view to this image at the end (implies --plot; works without a display)")
     p.add_argument("--refresh", type=argtypes.seconds, default=0.5, metavar="SECONDS", help="how often the view is redrawn")
 
 
 class PlotUnusable(SphereError, ValueError):
-    """--plot cannot show or write anything as asked (no display, an image format matplotlib cannot write)."""
+    """--plot has no window to draw in and no --plot-out to draw into."""
 
 
 class _Plot:
@@ -61,12 +61,6 @@ class _Plot:
         self.plt = plt
         self.out_path = out_path
         self.fig, self.axes = plt.subplots(4, 1, figsize=(9, 8), sharex=True)
-        kinds = self.fig.canvas.get_supported_filetypes()
-        ext = out_path.rpartition(".")[2].lower() if out_path and "." in out_path.rsplit("/", 1)[-1] else ""
-        if out_path and ext not in kinds:
-            plt.close(self.fig)
-            raise PlotUnusable(f"--plot-out {out_path}: end it in one of the image formats "
-                               f"{', '.join('.' + k for k in sorted(kinds))}, e.g. .png")
         self.fig.suptitle("MARG sphere — sphere monitor")
         #: a window to redraw while reading; without one (Agg) only the last view is drawn, into --plot-out
         self.live = matplotlib.get_backend().lower() != "agg"
