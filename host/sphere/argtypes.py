@@ -39,18 +39,32 @@ def out_file(text: str) -> str:
     return text
 
 
+PLOT_EXTRA = "it needs matplotlib, the plot extra: pip install 'marg-sphere[plot]'"
+
+
 def image_file(text: str) -> str:
     """An image for matplotlib to write: :func:`out_file`, its name ending in a format matplotlib writes (.png,
-    .svg, .pdf ...), so a long run does not end in matplotlib's ValueError."""
+    .svg, .pdf ...), and matplotlib installed, so a long run does not end in matplotlib's ValueError or an
+    ImportError."""
     out_file(text)
     try:
         from matplotlib.backend_bases import FigureCanvasBase  # optional: matplotlib (the plot extra)
-    except ImportError:  # the command says that matplotlib is missing when it needs it
-        return text
+    except ImportError:
+        raise argparse.ArgumentTypeError(f"{text!r}: {PLOT_EXTRA}") from None
     kinds = FigureCanvasBase.get_supported_filetypes()
     if os.path.splitext(text)[1].lstrip(".").lower() not in kinds:
         raise argparse.ArgumentTypeError(f"{text!r}: end the name in an image format matplotlib writes: "
                                          f"{', '.join('.' + k for k in sorted(kinds))}, e.g. .png")
+    return text
+
+
+def plot_dir(text: str) -> str:
+    """A folder for matplotlib's plots: :func:`out_dir`, and matplotlib installed."""
+    out_dir(text)
+    try:
+        import matplotlib  # noqa: F401  # optional: matplotlib (the plot extra)
+    except ImportError:
+        raise argparse.ArgumentTypeError(f"{text!r}: {PLOT_EXTRA}") from None
     return text
 
 

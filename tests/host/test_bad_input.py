@@ -346,6 +346,20 @@ def test_an_image_name_matplotlib_cannot_write_is_refused_before_the_run(tmp_pat
     assert "wrote" not in r.stderr and not list(tmp_path.iterdir())
 
 
+def test_a_plot_flag_without_matplotlib_is_refused_before_the_run(tmp_path):
+    """Without the plot extra, --plot FILE/DIR is argparse's one line naming the extra, exit 2, before any work
+    (hybrid-sim ran the simulation, then ended in an ImportError traceback; eval ran every trial first)."""
+    blocked = tmp_path / "blocked"
+    blocked.mkdir()
+    (blocked / "matplotlib.py").write_text("raise ImportError(\"No module named 'matplotlib'\")\n")
+    env = {"PYTHONPATH": os.pathsep.join([str(blocked), os.environ.get("PYTHONPATH", "")])}
+    for argv in (["hybrid-sim", "--plot", str(tmp_path / "s.png")], ["eval", "--plot", str(tmp_path / "plots")],
+                 ["hybrid-eval", "--plot", str(tmp_path / "plots")],
+                 ["monitor", "--port", "/dev/null", "--plot-out", str(tmp_path / "v.png")]):
+        clear(sphere(*argv, env=env), 2, "pip install 'marg-sphere[plot]'")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["blocked"]
+
+
 # ---- sphere calibrate ----
 
 def test_calibrate_bad_flags(tmp_path):

@@ -44,7 +44,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--only", metavar="TRIALS", help="comma-separated trial numbers or names to run (default: all)")
     p.add_argument("--seconds", type=argtypes.seconds, metavar="S", help="use only the first S seconds of each trial (quick check)")
     p.add_argument("--json", metavar="OUT", type=argtypes.out_file, help="write the results as JSON")
-    p.add_argument("--plot", metavar="DIR", type=argtypes.out_dir,
+    p.add_argument("--plot", metavar="DIR", type=argtypes.plot_dir,
                    help="write PNG plots (error over time per trial, bar chart per filter)")
     p.add_argument("--jobs", type=argtypes.at_least_one, default=2, help="trials run in parallel (default: 2)")
     p.add_argument("--quiet", action="store_true", help="print only the mean table")

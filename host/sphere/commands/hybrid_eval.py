@@ -52,7 +52,7 @@ def add_arguments(p) -> None:
                    help="print an ArUco marker (DICT_4X4_50 id 7, 35 mm) on the shell (on the face of the sensor "
                         "turned to the camera most of the time): the camera corrects the host filter's heading")
     p.add_argument("--json", metavar="OUT", type=argtypes.out_file, help="write the results as JSON")
-    p.add_argument("--plot", metavar="DIR", type=argtypes.out_dir, help="write PNG plots (error over time per trial, summary bars)")
+    p.add_argument("--plot", metavar="DIR", type=argtypes.plot_dir, help="write PNG plots (error over time per trial, summary bars)")
 
 
 def refused(prog: str, seconds: float, names=()) -> int | None:
