@@ -25,12 +25,13 @@ class Responder:
     """The device end: answers every command with a REPLY (ok); drops the first ``drop`` replies; after GET_HELLO
     also sends a HELLO. Sends an unrelated REPLY (another seq) first, as a stale reply would be."""
 
-    def __init__(self, drop: int = 0):
+    def __init__(self, drop: int = 0, silent=()):
         self.master, slave = os.openpty()
         tty.setraw(slave)
         self.name = os.ttyname(slave)
         os.close(slave)
         self.drop = drop
+        self.silent = set(silent)  # commands it never answers (carried out, their REPLY lost on the way)
         self.commands: list[str] = []
         self.seq = 0
         self.stop = threading.Event()
@@ -54,8 +55,8 @@ class Responder:
             for dp in stream.feed(data):
                 p = dp.packet
                 self.commands.append(p.NAME)
-                if self.drop:
-                    self.drop -= 1
+                if self.drop or p.NAME in self.silent:
+                    self.drop = max(self.drop - 1, 0)
                     continue
                 self._send(Reply(cmd_seq=(p.seq + 7) & 0xFF, cmd_type=p.TYPE, result=0))  # not ours
                 self._send(Reply(cmd_seq=p.seq, cmd_type=p.TYPE, result=0))
@@ -105,3 +106,29 @@ def test_a_port_that_goes_away_is_one_clear_error(dev):
         for _ in range(50):
             link.command(GetHello(), timeout_s=0.05, retries=0)
     link.port.close()
+
+
+def test_sphere_device_does_not_claim_nothing_changed_when_a_reply_never_came():
+    """A SET whose REPLY never comes may have been carried out (only the REPLY lost): before, `sphere device set`
+    said '...: no REPLY (is the sphere still there?); nothing was changed'. Now it says that it is unknown and how
+    to look; a refusal (a REPLY not OK) still says nothing was changed (spec §5: such a command changes nothing)."""
+    import subprocess
+    import sys
+
+    dev = Responder(silent={"SET_TAP"})
+    try:
+        r = subprocess.run([sys.executable, "-m", "sphere.cli", "device", "--port", dev.name, "--timeout", "0.2", "set",
+                            "board=gy85", "tap.threshold_g=2"], capture_output=True, text=True, timeout=30)
+        assert r.returncode == 1 and "Traceback" not in r.stderr, r.stderr
+        assert r.stderr.strip() == (f"sphere device: SET_TAP: no REPLY (is the sphere still there?); whether the sphere "
+                                    f"took it is unknown (`sphere device --port {dev.name} get` reads what it holds); "
+                                    "the settings before it were applied"), r.stderr
+        assert dev.commands.count("SET_TAP") == 3  # sent again twice: it is safe to repeat
+        r = subprocess.run([sys.executable, "-m", "sphere.cli", "device", "--port", dev.name, "--timeout", "0.2", "set",
+                            "tap.threshold_g=2"], capture_output=True, text=True, timeout=30)
+        assert r.returncode == 1 and "nothing was changed" not in r.stderr, r.stderr
+        assert r.stderr.strip().endswith("whether the sphere took it is unknown (`sphere device --port "
+                                         f"{dev.name} get` reads what it holds)"), r.stderr
+    finally:
+        dev.stop.set()
+        os.close(dev.master)

@@ -160,11 +160,14 @@ def _reply_problem(packet, reply) -> str | None:
     return None
 
 
-def _ask(link, packet, timeout_s: float, after: str = "") -> None:
-    """Send a command and wait for its REPLY; _Failed with what went wrong (and ``after``) unless it is OK."""
-    problem = _reply_problem(packet, link.command(packet, timeout_s))
+def _ask(link, packet, timeout_s: float, after: str = "", unknown: str = "") -> None:
+    """Send a command and wait for its REPLY; _Failed with what went wrong unless it is OK, and then ``after`` for a
+    refusal (a command not OK changes nothing, spec §5) or ``unknown`` for silence (the sphere may have carried it
+    out and its REPLY been lost)."""
+    reply = link.command(packet, timeout_s)
+    problem = _reply_problem(packet, reply)
     if problem:
-        raise _Failed(problem + after, 1)
+        raise _Failed(problem + (after if reply is not None else unknown), 1)
 
 
 def run(args) -> int:
@@ -231,7 +234,10 @@ def _run(args) -> int:
         except SettingError as e:
             raise _Failed(str(e)) from None
         for i, packet in enumerate(plan.packets):
-            _ask(link, packet, args.timeout, "; the settings before it were applied" if i else "; nothing was changed")
+            before = "; the settings before it were applied" if i else ""
+            _ask(link, packet, args.timeout, before or "; nothing was changed",
+                 f"; whether the sphere took it is unknown (`sphere device --port {args.port} get` reads what it holds)"
+                 + before)
         for note in plan.notes:
             print(f"note: {note}", file=sys.stderr)
         given = {item.split("=", 1)[0].strip() for item in args.items}
