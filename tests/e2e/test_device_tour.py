@@ -101,6 +101,13 @@ def test_a_rate_for_a_stream_that_is_off_is_refused_not_reported_as_set(board):
         sphere("device", "--port", pty, "set", "stream.raw=on", "stream.raw_rate_hz=200")
 
 
+def _what_calibrate_sets(get_text: str) -> list[str]:
+    """`sphere device get`'s lines without the gyro bias the firmware measures by itself once the sphere lies
+    still (it may finish that while a test runs: a CI rehearsal saw 'gyro bias measured' appear in between)."""
+    return [line.split("; gyro bias")[0] if line.startswith("calibration: ") else line
+            for line in get_text.splitlines()]
+
+
 def test_ctrl_c_in_calibrate_says_the_sphere_is_as_it_was(board):
     """Ctrl-C (SIGINT) in the middle of `sphere calibrate`: before, 'sphere: interrupted' and nothing about
     the sphere; now one line saying nothing was changed on it, exit 130, and it reports what it did before."""
@@ -124,7 +131,7 @@ def test_ctrl_c_in_calibrate_says_the_sphere_is_as_it_was(board):
     last = err.strip().splitlines()[-1]
     assert last == "sphere calibrate: interrupted; nothing was changed: the sphere keeps its calibration", err
     after = sphere("device", "--port", pty, "get")
-    assert after.stdout == before.stdout, (before.stdout, after.stdout)
+    assert _what_calibrate_sets(after.stdout) == _what_calibrate_sets(before.stdout), (before.stdout, after.stdout)
 
 
 @pytest.mark.parametrize("stream, words", [
