@@ -16,6 +16,7 @@ test_bad_input.py.
 from __future__ import annotations
 
 import os
+import select
 import signal
 import sys
 import threading
@@ -528,7 +529,7 @@ def _make(tmp, files):
 
 class _Port:
     """A pty standing for a serial device: silent, one that streams a capture while the row runs, or one
-    that streams for 0.5 s and is then unplugged (its master end closed)."""
+    that streams for 0.5 s once the program opens it and is then unplugged (its master end closed)."""
 
     def __init__(self, kind):
         self.master, slave = os.openpty()
@@ -542,6 +543,14 @@ class _Port:
                              daemon=True).start()
 
     def _feed(self, vanish, data):
+        if vanish:  # its 0.5 s count from when the program opens the port (a loaded machine may take longer to get
+            # there: a CI rehearsal at load 10 found the port already gone). A pty's master reads POLLHUP while
+            # no one has the device end open.
+            hup = select.poll()
+            hup.register(self.master, select.POLLHUP)
+            deadline = time.monotonic() + 15.0
+            while not self.stop.is_set() and time.monotonic() < deadline and hup.poll(0):
+                time.sleep(0.005)
         end = time.monotonic() + 0.5
         while not self.stop.is_set():
             if vanish and time.monotonic() > end:
