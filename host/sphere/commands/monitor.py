@@ -174,6 +174,9 @@ def run(args) -> int:
     if not tty:
         print("\n".join(mon.lines(stopped)))
     if not mon.counts:
-        print(f"sphere monitor: nothing arrived from {args.port}: is the sphere on, and this its port?", file=sys.stderr)
+        got = link.stream.stats.bytes_in
+        print(f"sphere monitor: none of the {got} bytes from {args.port} was a sphere frame: another device, or the "
+              f"wrong baud rate (the sphere sends 115200 8N1)" if got else
+              f"sphere monitor: nothing arrived from {args.port}: is the sphere on, and this its port?", file=sys.stderr)
         return code or 1
     return code
