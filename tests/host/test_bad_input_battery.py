@@ -501,6 +501,7 @@ ROWS = [
     S(["camera", "render", "--seconds", "1", "-o", "/dev/full"], 1, "cannot write", timeout=60, broad=True),
     S(["service", "install"], 2, "xdg", files={"xdg": b"a file where a folder belongs"}),
     S(["protocol", "explode"], 2, "invalid choice"),
+    S(["protocol"], 2, "required: {budget,types}"),  # was "required: what"
     # a file or folder that cannot be made is refused before the run, not in a traceback at its end
     S(["sim", "--trace", "synthetic:still", "--json", "/proc/sphere-x.json"], 2, "cannot be written"),
     S(["sim", "--trace", "synthetic:still", "--stats", "/proc/sphere-x.json"], 2, "cannot be written"),

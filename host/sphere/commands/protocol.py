@@ -10,7 +10,7 @@ HELP = "print the protocol's packet sizes and link budget"
 
 
 def add_arguments(p) -> None:
-    p.add_argument("what", choices=["budget", "types"], help="budget: spec §6 table; types: every packet type and size")
+    p.add_argument("what", choices=["budget", "types"], metavar="{budget,types}", help="budget: spec §6 table; types: every packet type and size")
 
 
 def run(args) -> int:
