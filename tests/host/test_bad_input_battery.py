@@ -224,6 +224,7 @@ ROWS = [
     S(["decode", "{tmp}/g.cap"], 1, "no valid frame", files={"g.cap": GARBAGE}),
     S(["decode", "{tmp}/t.cap"], 0, "", files={"t.cap": GOOD[:len(GOOD) // 2 + 7]}),
     S(["decode", "{tmp}/good.cap", "--type", "nosuch"], 2, "nosuch", files=CAP),
+    S(["decode", "{tmp}/good.cap", "--type", "get_hello"], 2, "not a packet type the sphere sends", files=CAP),
     S(["decode"], 2, "required"),
     # capture
     S(["capture", "--port", "{port}", "--out", "{tmp}"], 2, "is a folder", port="garbage"),

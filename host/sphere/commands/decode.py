@@ -37,10 +37,10 @@ def run(args) -> int:
         print(f"sphere decode: {e}", file=sys.stderr)
         return 2
     wanted = {t.lower() for t in args.type} if args.type else None
-    known = {cls.NAME.lower() for cls in BY_TYPE.values()}
+    known = {cls.NAME.lower() for cls in BY_TYPE.values() if cls.DIRECTION == "device"}  # what a capture holds
     if wanted and not wanted <= known:
-        print(f"sphere decode: --type {', '.join(sorted(wanted - known))}: no such packet type; known: "
-              f"{', '.join(sorted(known))}", file=sys.stderr)
+        print(f"sphere decode: --type {', '.join(sorted(wanted - known))}: not a packet type the sphere sends; a "
+              f"capture holds {', '.join(sorted(known))}", file=sys.stderr)
         return 2
     out = sys.stdout
     count = 0
