@@ -88,6 +88,20 @@ def test_missing_trials_folder_is_a_clear_error(tmp_path, capsys):
     assert "no BROAD trials" in capsys.readouterr().err
 
 
+def test_a_short_seconds_leaves_out_the_trials_it_cannot_score(tmp_path, capsys):
+    """--seconds 30 (the quick check): trial 02 rests for its first 40 s, 07 moves at once. 02 is left out with one
+    line and 07 is scored (the whole run used to end in 02's ValueError, exit 2, no figures); with only 02, exit 2."""
+    _need_broad()
+    out = tmp_path / "eval.json"
+    assert main(["eval", "--only", "02,07", "--seconds", "30", "--filters", "madgwick", "--jobs", "1", "--quiet",
+                 "--json", str(out)]) == 0
+    err = capsys.readouterr().err
+    assert "left out 02_undisturbed_slow_rotation_B: no movement phase with the optical reference in the first 30 s" in err
+    assert list(json.loads(out.read_text())["filters"]["madgwick"]["trials"]) == ["07_undisturbed_fast_rotation_B"]
+    assert main(["eval", "--only", "02", "--seconds", "30", "--filters", "madgwick", "--jobs", "1"]) == 2
+    assert "no trial has a movement phase" in capsys.readouterr().err
+
+
 def test_unknown_filter_is_refused(capsys):
     _need_broad()
     assert main(["eval", "--filters", "nope"]) == 2

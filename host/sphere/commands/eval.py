@@ -99,6 +99,8 @@ def _trial_job(args):
     trial = broad.load_trial(path)
     if seconds:
         trial = trial.seconds(0.0, seconds)
+    if not (trial.movement & np.all(np.isfinite(trial.opt_quat), axis=1)).any():
+        return trial.name, None, (trial.rate_hz, len(trial))  # nothing the metric scores: run() leaves it out
     res = {}
     for name in names:
         try:
@@ -124,7 +126,8 @@ def _trial_progress(total: int):
 
 
 def evaluate(paths, names, seconds=None, jobs=1, keep_errors=False, progress=None):
-    """Run ``names`` on every trial; returns {trial: {filter: result}} in trial order."""
+    """Run ``names`` on every trial; returns {trial: {filter: result}} in trial order (None for a trial with no
+    movement sample that has a reference: none in its first ``seconds``)."""
     jobs_list = [(p, list(names), seconds, keep_errors) for p in paths]
     results = {}
     if jobs > 1 and len(paths) > 1:
@@ -521,10 +524,19 @@ def run(args) -> int:
     try:
         results = evaluate(paths, names, seconds=args.seconds, jobs=args.jobs, keep_errors=bool(args.plot),
                            progress=_trial_progress(len(paths)))
-    except ValueError as e:  # e.g. a --seconds slice with no movement phase to score
-        hint = " (a longer --seconds, or another trial)" if args.seconds else ""
-        print(f"sphere eval: {e}{hint}", file=sys.stderr)
+    except ValueError as e:
+        print(f"sphere eval: {e}", file=sys.stderr)
         return 2
+    unscored = [t for t, r in results.items() if r is None]
+    results = {t: r for t, r in results.items() if r is not None}
+    if unscored:
+        where = (f"in the first {args.seconds:g} s (a longer --seconds scores them)" if args.seconds
+                 else "in the whole trial")
+        print(f"sphere eval: left out {', '.join(unscored)}: no movement phase with the optical reference {where}"
+              if results else f"sphere eval: no trial has a movement phase with the optical reference {where}",
+              file=sys.stderr)
+        if not results:
+            return 2
     doc = summarise(results, names, trial_groups(directory))
     print(format_report(doc, quiet=args.quiet))
     if args.json:
