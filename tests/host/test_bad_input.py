@@ -212,6 +212,31 @@ def test_mouse_stopped_twice_in_quick_succession_still_exits_0(tmp_path, home, s
     assert "sphere-mouse stats: frames" in out, out  # nothing lost: the figures were printed
 
 
+def test_mouse_whose_teardown_hangs_still_ends_on_ctrl_c(tmp_path, home):
+    """After the last lines a stop ends the process at once with the run's status: a teardown that hangs (here a
+    thread that never ends, which the interpreter waits for at exit) is not left deaf to Ctrl-C and kill."""
+    cap = tmp_path / "slow.bin"
+    cap.write_bytes(script_bytes([("still", 2.0)]))
+    code = ("import sys, threading; threading.Thread(target=threading.Event().wait).start(); "
+            "from sphere.daemon.cli import main; sys.exit(main())")
+    p = subprocess.Popen([sys.executable, "-c", code, "--no-stream", "--backend", "log", "--quiet", "--replay",
+                          str(cap), "--speed", "0.001"], stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True,
+                         env={**os.environ, **home})
+    first = _started(p, lambda line: ", backend log, " in line)
+    time.sleep(0.2)
+    p.send_signal(signal.SIGINT)
+    rest = _started(p, lambda line: "stopped:" in line, timeout_s=10)
+    time.sleep(0.5)  # the teardown, waiting for the thread
+    assert p.poll() is None, "the process ended without waiting: nothing was tested"
+    p.send_signal(signal.SIGINT)
+    try:
+        p.wait(timeout=10)
+    finally:
+        if p.poll() is None:
+            p.kill()
+    assert p.returncode == 0, (p.returncode, first + rest)
+
+
 @pytest.mark.parametrize("nohup", [False, True], ids=["terminal-closed", "under-nohup"])
 def test_mouse_sighup_is_a_clean_stop_unless_ignored(tmp_path, home, nohup):
     """Its terminal closed (SIGHUP): the daemon stops as on SIGTERM, the outputs closed (the 3-D mouse's socket

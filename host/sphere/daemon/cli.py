@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import atexit
 import logging
 import os
 import signal
@@ -316,4 +317,12 @@ def _main(argv=None) -> int:
     log(f"stopped: {daemon.moves} pointer moves, {daemon.clicks} clicks, modes {daemon.mode_changes or [daemon.mode]}")
     if args.print_stats:
         print(run_stats(daemon, time.monotonic() - started), flush=True)
+    if argv is None:  # the last lines are out: a further stop ends the teardown at once with this run's status (a
+        # teardown that hangs, say on a thread that does not end, still ends on Ctrl-C or a plain kill). Python puts
+        # its own handlers back to the default late in the interpreter's exit, after the threads are joined and the
+        # atexit calls: from the first atexit call on the stops are ignored instead (this one, registered last,
+        # runs first)
+        for sig in stops:
+            signal.signal(sig, lambda s, f: os._exit(code))
+        atexit.register(lambda: [signal.signal(sig, signal.SIG_IGN) for sig in stops])
     return code
