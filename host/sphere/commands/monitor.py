@@ -31,14 +31,15 @@ DESCRIPTION = (
 
 def add_arguments(p) -> None:
     p.add_argument("--port", required=True, help="the sphere's serial port (/dev/ttyUSB0, /dev/rfcomm0, /dev/sphere)")
-    p.add_argument("--baud", type=argtypes.baud, default=115200)
+    p.add_argument("--baud", type=argtypes.baud, default=115200, help="baud rate (default 115200, the sphere's)")
     p.add_argument("--seconds", type=argtypes.seconds, default=None, help="stop after this long (default: until Ctrl-C)")
     p.add_argument("--events", type=argtypes.at_least_one, default=None, metavar="N",
                    help="stop after N events (taps, free falls): e.g. to try a tap setting")
     p.add_argument("--plot", action="store_true", help="live curves: accelerometer, gyroscope, magnetometer, orientation")
     p.add_argument("--plot-out", metavar="PNG", type=argtypes.image_file,
                    help="write the plot's last view to this image at the end (implies --plot; works without a display)")
-    p.add_argument("--refresh", type=argtypes.seconds, default=0.5, metavar="SECONDS", help="how often the view is redrawn")
+    p.add_argument("--refresh", type=argtypes.seconds, default=0.5, metavar="SECONDS",
+                   help="how often the view is redrawn (default 0.5)")
 
 
 class PlotUnusable(SphereError, ValueError):
