@@ -65,7 +65,8 @@ HELP = "gyro bias without long rests and µs per sample: SphereFilter beside VQF
 
 
 def add_arguments(p) -> None:
-    p.add_argument("--seeds", type=argtypes.at_least_one, default=3)
+    p.add_argument("--seeds", type=argtypes.at_least_one, default=3, metavar="N",
+                   help="seeds 0 .. N-1 of each scenario's noise (default 3)")
     p.add_argument("--at", type=argtypes.seconds_up_to(3600.0), default=30.0,
                    help="seconds into the trace (default 30, at most an hour)")
     p.add_argument("--rest", type=argtypes.non_negative, default=bias_scenarios.REST_S,
