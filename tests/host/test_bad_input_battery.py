@@ -297,6 +297,7 @@ ROWS = [
     S(["sim", "--trace", "synthetic:still", "--send", "{tmp}/s.txt"], 2, "s.txt", files={"s.txt": b"zz top\n"}),
     S(["sim", "--trace", "synthetic:still", "--clock-ppm", "itg3200"], 2, "clock-ppm"),
     S(["sim", "--soak", "-1"], 2, "soak"),
+    S(["sim", "--trace", "synthetic:still", "--seconds", "0.1"], 0, "sent no frame in 0.1 simulated s"),  # "frames 0"
     S(["sim", "--trace", "synthetic:still", "--hold", "1e99"], 2, "at most 86400"),  # was an OverflowError
     S(["sim", "--trace", "synthetic:still", "--glitch", "1e99"], 2, "at most 1000"),  # the board hung
     S(["sim", "--trace", "synthetic:still", "--clock-ppm", "itg3200:nan"], 2, "PPM from"),  # "Expecting value"

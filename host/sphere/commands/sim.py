@@ -429,6 +429,10 @@ def run(args) -> int:
             print(json.dumps({"source": source, **stats}))
         else:
             _print_figures(source, stats)
+        if brun.returncode == 0 and stats.get("frames_sent") == 0 and args.firmware != "testfw":
+            print(f"sphere sim: the firmware sent no frame in {stats.get('simulated_seconds', 0):g} simulated s: it "
+                  "starts streaming about 0.25 s after power-up (later behind a boot loader); give a longer --seconds",
+                  file=sys.stderr)
         if acc is not None:
             rows.append(acc)
     if rows:
