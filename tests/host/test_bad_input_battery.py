@@ -346,7 +346,7 @@ ROWS = [
     S(["monitor", "--port", "/dev/null", "--seconds", "1"], 2, "not a serial port"),
     S(["monitor", "--port", "{port}", "--seconds", "5"], 1, "went away", port="vanish"),
     S(["monitor", "--port", "{port}", "--seconds", "1"], 1, "nothing arrived", port="silent"),
-    S(["monitor", "--port", "{port}", "--seconds", "1"], 1, "was a sphere frame", port="noise"),  # "nothing arrived"
+    S(["monitor", "--port", "{port}", "--seconds", "1.5"], 1, "was a sphere frame", port="noise"),  # "nothing arrived"
     # device
     S(["device", "--port", "/dev/ttyNOPE9", "get"], 2, "plugged in"),
     S(["device", "get"], 2, "--port"),
