@@ -100,6 +100,14 @@ def test_a_short_seconds_leaves_out_the_trials_it_cannot_score(tmp_path, capsys)
     assert list(json.loads(out.read_text())["filters"]["madgwick"]["trials"]) == ["07_undisturbed_fast_rotation_B"]
     assert main(["eval", "--only", "02", "--seconds", "30", "--filters", "madgwick", "--jobs", "1"]) == 2
     assert "no trial has a movement phase" in capsys.readouterr().err
+    # --cv likewise: 03 rests for longer than 45 s, 02, 07 and 24 move within it
+    assert main(["eval", "--cv", "--only", "02,03,07,24", "--seconds", "45", "--filters", "madgwick", "--jobs", "1",
+                 "--json", str(out)]) == 0
+    assert "left out 03_undisturbed_slow_rotation_C" in capsys.readouterr().err
+    doc = json.loads(out.read_text())
+    assert doc["left_out"] == ["03_undisturbed_slow_rotation_C"] and len(doc["trials"]) == 3
+    assert main(["eval", "--cv", "--only", "02,07", "--seconds", "30", "--filters", "madgwick", "--jobs", "1"]) == 2
+    assert "--cv needs two trials with a movement phase" in capsys.readouterr().err
 
 
 def test_unknown_filter_is_refused(capsys):

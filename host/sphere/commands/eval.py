@@ -93,13 +93,18 @@ def heading_offset_deg(q_enu: np.ndarray, trial) -> float:
     return float(np.degrees(np.arctan2(np.mean(np.sin(ang)), np.mean(np.cos(ang)))))
 
 
+def _scored(trial) -> bool:
+    """Whether the dataset's metric scores anything of ``trial``: a movement sample with a finite reference."""
+    return bool((trial.movement & np.all(np.isfinite(trial.opt_quat), axis=1)).any())
+
+
 def _trial_job(args):
     path, names, seconds, keep = args
 
     trial = broad.load_trial(path)
     if seconds:
         trial = trial.seconds(0.0, seconds)
-    if not (trial.movement & np.all(np.isfinite(trial.opt_quat), axis=1)).any():
+    if not _scored(trial):
         return trial.name, None, (trial.rate_hz, len(trial))  # nothing the metric scores: run() leaves it out
     res = {}
     for name in names:
@@ -356,6 +361,8 @@ def _cv_job(args):
             trial = broad.load_trial(path)
             if seconds:
                 trial = trial.seconds(0.0, seconds)
+            if not _scored(trial):
+                return Path(path).stem, None  # nothing the metric scores (only scored results are cached)
         try:
             r = run_filter(name, trial, **point)
             r = {"errors": r["errors"], "us_per_sample": r["us_per_sample"]}
@@ -386,8 +393,14 @@ def cross_validate(paths, names, seconds=None, jobs=1, cache=None, progress=None
             rows[tname] = res
             if progress:
                 progress(tname)
+    left_out = [t for t, r in rows.items() if r is None]
+    rows = {t: r for t, r in rows.items() if r is not None}
+    if len(rows) < 2:
+        raise ValueError(f"--cv needs two trials with a movement phase and the optical reference"
+                         f"{f' in their first {seconds:g} s' if seconds else ''}; {len(rows)} of {len(rows) + len(left_out)} "
+                         "have one" + (" (a longer --seconds scores more)" if seconds else ""))
     trials = list(rows)
-    doc = {"cv": {}, "note": CV_NOTE, "trials": trials}
+    doc = {"cv": {}, "note": CV_NOTE, "trials": trials, "left_out": left_out}
     for name in names:
         idx = [i for i, (n, _) in enumerate(tasks) if n == name]
         points = [tasks[i][1] for i in idx]
@@ -516,6 +529,9 @@ def run(args) -> int:
         except ValueError as e:
             print(f"sphere eval: {e}", file=sys.stderr)
             return 2
+        if doc["left_out"]:
+            print(f"sphere eval: left out {', '.join(doc['left_out'])}: no movement phase with the optical reference "
+                  f"in the first {args.seconds:g} s (a longer --seconds scores them)", file=sys.stderr)
         print(format_cv(doc))
         if args.json:
             Path(args.json).write_text(json.dumps(doc, indent=2, default=_json_default))
