@@ -327,3 +327,56 @@ def test_a_sphere_unplugged_during_the_baud_switch_is_looked_for_again(tmp_path)
         thread.join(5)
         dev._stop.set()
     assert not thread.is_alive()
+
+
+class PadRecorder:
+    """Stands for python-evdev's UInput (no /dev/uinput here): keeps what the gamepad output writes."""
+
+    def __init__(self, caps, **kw):
+        self.device = None
+        self.events: list[tuple[str, int]] = []
+
+    def write(self, etype, code, value):
+        self.events.append((code, value))
+
+    def syn(self):
+        self.events.append(("SYN", 0))
+
+    def close(self):
+        pass
+
+
+def test_a_lost_link_centres_the_gamepads_sticks(tmp_path, monkeypatch):
+    """The sphere rolled 10° (a third of a full stick) and then unplugged: the virtual gamepad's sticks go back to
+    the centre at once (they stayed deflected, and a game kept steering with no sphere there)."""
+    evdev = pytest.importorskip("evdev", reason="python-evdev is not installed (pip install evdev)")
+    from evdev import ecodes
+
+    from sphere.daemon.outputs.fanout import attach
+
+    monkeypatch.setattr(evdev, "UInput", PadRecorder)
+    link = tmp_path / "sphere"
+    dev = FakeSphere(link, [("still", 0.4), ("turn", (1, 0, 0), 20.0, 0.5), ("still", 0.6)])
+    source = fast_serial(str(link), link_timeout_s=30.0)  # only the unplug may end the link
+    cfg = Config().with_overrides({"outputs.page": {"enabled": False}, "gyro": {"still_time_s": 0.3},
+                                   "outputs.gamepad": {"enabled": True, "full_tilt_deg": 30.0}}, "test")
+    outputs = attach(cfg)
+    pad = outputs.outputs[0].ui
+    daemon = SphereMouse(cfg, source, RecordingBackend(), stream=outputs, log=lambda m: None)
+    thread = threading.Thread(target=daemon.run, daemon=True)
+    thread.start()
+    try:
+        def stick_x():
+            xs = [v for code, v in pad.events if code == ecodes.ABS_X]
+            return xs[-1] if xs else 0
+
+        assert wait_for(lambda: stick_x() > 0.3 * 32767 and not dev.thread.is_alive()), pad.events[-6:]
+        held = len(pad.events)
+        dev.unplug()
+        assert wait_for(lambda: source.losses == 1)
+        assert wait_for(lambda: stick_x() == 0, timeout=5.0), pad.events[held:]
+        assert pad.events[-1] == ("SYN", 0)
+    finally:
+        daemon.stop()
+        thread.join(5)
+        outputs.stop()

@@ -99,6 +99,7 @@ class SphereMouse:
         self.clicks = 0
         self.mode_changes: list[str] = []
         self._generation = None
+        self._connected = False  # the source's link as the loop last saw it (a lost one is told to the outputs)
         self._recentre_tilt = True
         self._stopped = False
         self._requests: list[str] = []
@@ -344,6 +345,10 @@ class SphereMouse:
                     self.mapper.reset()
                 for dp in batch:
                     self.handle(dp)
+                connected = getattr(source, "connected", True)
+                if self._connected and not connected and self.stream is not None:
+                    self.stream.publish_link_lost()
+                self._connected = connected
                 if self._requests:
                     self._serve_requests()
                 if self.status is not None:

@@ -130,6 +130,9 @@ class OrientationStream:
         self.mode = mode
         self._queue.append({"type": "mode", "mode": mode})
 
+    def publish_link_lost(self) -> None:
+        """The sphere's link is gone: the page keeps showing the last pose (nothing to let go of)."""
+
     def recentre(self) -> None:
         q = self._quat
         self._queue.append({"type": "recentre", "quat": [round(float(v), 6) for v in q] if q is not None else None})

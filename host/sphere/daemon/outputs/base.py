@@ -90,6 +90,11 @@ class Output:
     def event(self, name: str, t_us=None) -> None:
         self.send_event(name, t_us)
 
+    def link_lost(self) -> None:
+        """The sphere's link is gone (unplugged, out of range, its battery flat). An output whose program acts on
+        the last state by itself (a gamepad's stick held deflected keeps a game steering) lets go of it; the next
+        pose after a reconnect is sent as usual."""
+
     def mode(self, name: str) -> None:
         self.send_mode(name)
 

@@ -108,6 +108,10 @@ class Outputs:
     def recentre(self) -> None:
         self._each(lambda o: o.recentre())
 
+    def publish_link_lost(self) -> None:
+        """The sphere's link is gone (unplugged, out of range): each output lets go of what it holds."""
+        self._each(lambda o: o.link_lost())
+
     def stop(self) -> None:
         self._each(lambda o: o.close())
         self.outputs = []

@@ -3,7 +3,8 @@ tilt moves the sticks, taps press buttons.
 
 - left stick: roll → X (rolled right = right), pitch → Y (nose down = stick forward = up, as a flight stick);
 - right stick X: yaw (turned right = right);
-- buttons: single tap → A (BTN_SOUTH), double tap → B (BTN_EAST), free fall → Y (BTN_NORTH).
+- buttons: single tap → A (BTN_SOUTH), double tap → B (BTN_EAST), free fall → Y (BTN_NORTH);
+- the sphere's link lost (unplugged, out of range): the sticks back to the centre.
 
 ``full_tilt_deg`` of tilt from the reference pose is a full stick; the sticks report −32767 … 32767.
 Needs write access to /dev/uinput (host/packaging/70-sphere-mouse.rules, as for the uinput backend).
@@ -74,6 +75,18 @@ class GamepadOutput(Output):
                 changed = True
         if changed:
             self.ui.syn()
+
+    def link_lost(self) -> None:
+        """The sticks back to the centre: a stick left deflected keeps a game steering with no sphere there."""
+        moved = False
+        for code, v in self.last.items():
+            if v != 0:
+                self.ui.write(self.ecodes.EV_ABS, getattr(self.ecodes, code), 0)
+                self.last[code] = 0
+                moved = True
+        if moved:
+            self.ui.syn()
+        self._next = 0.0  # the first pose after a reconnect is sent at once
 
     def send_event(self, name: str, t_us) -> None:
         button = BUTTONS.get(name)
