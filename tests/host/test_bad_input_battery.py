@@ -360,6 +360,8 @@ ROWS = [
     S(["device", "--port", "{port}", "identify", "-1"], 2, "seconds", port="silent"),
     S(["device", "--port", "{port}", "--timeout", "-1", "get"], 2, "timeout", port="silent"),
     S(["device", "--port", "{port}", "get"], 1, "no HELLO", port="silent"),
+    S(["device", "--port", "{port}", "--baud", "57600", "get"], 1, "at 57600 baud? (the firmware talks at 115200",
+      port="silent"),  # it asked 'at 115200 baud?' whatever --baud said
     S(["device", "--port", "{port}", "get", "tap.threshold_g=1"], 2, "takes no KEY=VALUE", port="silent"),
     S(["device", "--port", "{port}", "set"], 2, "set what", port="silent"),
     S(["device", "--port", "{port}", "save", "tap.threshold_g=1"], 2, "takes no KEY=VALUE", port="silent"),

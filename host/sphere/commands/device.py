@@ -90,8 +90,10 @@ def _open(args):
     hello = link.hello(timeout_s=3.0)
     if hello is None:
         ser.close()
+        rate = ("at 115200 baud?" if args.baud == 115200 else
+                f"at {args.baud} baud? (the firmware talks at 115200 until asked otherwise: leave --baud out)")
         raise _Failed(f"no HELLO from {args.port} within 3 s: is it the sphere (its firmware flashed: `sphere flash`), "
-                      "at 115200 baud?", 1)
+                      + rate, 1)
 
     problem = version_problem(hello)
     if problem:
