@@ -118,21 +118,25 @@ def positive(text: str, least: float = 0.0, inclusive: bool = False) -> float:
     return v
 
 
-def distance_m(text: str) -> float:
-    """The virtual webcam's distance to the ball, in metres: more than 0 and at most 10 (farther, the 8 cm ball is
-    under 5 px across in its 640x480, 60° view)."""
-    v = positive(text)
-    if v > 10.0:
-        raise argparse.ArgumentTypeError(f"{text!r}: give at most 10 m (farther, the 8 cm ball is under 5 px across)")
-    return v
+def at_most(kind, limit: float, unit: str, why: str = ""):
+    """An argparse type: ``kind`` (one of these checks), then at most ``limit`` (``unit`` and ``why`` for the line)."""
+
+    def parse(text: str) -> float:
+        v = kind(text)
+        if v > limit:
+            raise argparse.ArgumentTypeError(f"{text!r}: give at most {limit:g} {unit}{why}")
+        return v
+
+    return parse
+
+
+#: the virtual webcam's distance to the ball, in metres: more than 0 and at most 10
+distance_m = at_most(positive, 10.0, "m", " (farther, the 8 cm ball is under 5 px across in the 640x480, 60° view)")
 
 
 def hue_deg(text: str) -> float:
     """A hue in degrees, 0 to 360."""
-    v = positive(text, 0.0, inclusive=True)
-    if v > 360.0:
-        raise argparse.ArgumentTypeError(f"{text!r}: give a hue from 0 to 360 degrees")
-    return v
+    return at_most(non_negative, 360.0, "degrees", " (a hue is 0 to 360)")(text)
 
 
 def non_negative(text: str) -> float:

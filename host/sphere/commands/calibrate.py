@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from sphere import chips
-from sphere.argtypes import baud, out_file, seconds
+from sphere.argtypes import baud, image_file, out_file, seconds
 from sphere.calibration import axis_check
 from sphere.calibration import session as session
 from sphere.calibration.axis_check import TURN_DEG
@@ -78,7 +78,7 @@ def add_arguments(p) -> None:
     src.add_argument("--capture", metavar="FILE", help="a capture file (sphere capture): offline, nothing is sent")
     p.add_argument("--baud", type=baud, default=115200)
     p.add_argument("--json", metavar="OUT", type=out_file, help="write the result as JSON")
-    p.add_argument("--plot", metavar="PNG", type=out_file, help="write the magnetometer cloud before/after as a PNG")
+    p.add_argument("--plot", metavar="PNG", type=image_file, help="write the magnetometer cloud before/after as a PNG")
     p.add_argument("--save-capture", metavar="FILE", type=out_file,
                    help="with --port: also keep the session's bytes as a capture")
     p.add_argument("--no-save", action="store_true", help="with --port: apply on the device but do not save to EEPROM")
@@ -171,13 +171,7 @@ def _finish(args, cal, mag, base=None) -> dict:
 
 
 def run(args) -> int:
-    if args.plot:  # checked first: a --port session is not lost to a missing plot library at its end
-        try:
-            import matplotlib  # noqa: F401  # optional dependency: the plot extra
-        except ImportError:
-            print("sphere calibrate: --plot needs matplotlib (pip install 'marg-sphere[plot]')", file=sys.stderr)
-            return 2
-    args.output_failed = None
+    args.output_failed = None  # (--plot's image name and matplotlib are checked as the flags are read)
     code = _run_capture(args) if args.capture else _run_port(args)
     return 1 if code == 0 and args.output_failed else code
 

@@ -123,24 +123,12 @@ def _chip_ppm(text: str) -> str:
     return text
 
 
-def _up_to(kind, limit: float, unit: str):
-    """An argparse type: ``kind`` (an argtypes check), then at most ``limit``."""
-
-    def parse(text: str) -> float:
-        v = kind(text)
-        if v > limit:
-            raise argparse.ArgumentTypeError(f"{text!r}: give at most {limit:g} {unit}")
-        return v
-
-    return parse
-
-
 def _start(text: str):
     """--start: 'auto' or the seconds into the trial (0 or more)."""
     if text == "auto":
         return text
     try:
-        return _up_to(argtypes.non_negative, MAX_SECONDS, "seconds")(text)
+        return argtypes.at_most(argtypes.non_negative, MAX_SECONDS, "seconds")(text)
     except argparse.ArgumentTypeError as e:
         raise argparse.ArgumentTypeError(f"{e} (or auto: 10 s before the trial's first movement)") from None
 
@@ -155,7 +143,7 @@ def add_arguments(p) -> None:
                    help="start this far into a BROAD trial (s), or 'auto': 10 s before its first movement "
                         "(default 0; with --accuracy auto)")
     p.add_argument("--full", action="store_true", help="play the whole BROAD trial (overrides --seconds and --start)")
-    p.add_argument("--hold", type=_up_to(argtypes.non_negative, MAX_SECONDS, "seconds"), default=0.0,
+    p.add_argument("--hold", type=argtypes.at_most(argtypes.non_negative, MAX_SECONDS, "seconds"), default=0.0,
                    help="lead-in: hold the first sample still for this long before the motion (s)")
     p.add_argument("--firmware", default=None,
                    help="firmware image (default firmware/build/sphere.elf, built with `make -C firmware`); "
@@ -185,7 +173,7 @@ def add_arguments(p) -> None:
                    help="a chip's oscillator off the Nano's crystal by PPM")
     p.add_argument("--clocks", choices=["random"], default=None,
                    help="every chip's oscillator off by a seeded amount within its datasheet's tolerance")
-    p.add_argument("--glitch", type=_up_to(argtypes.non_negative, MAX_GLITCH_RATE, "a second"), default=None,
+    p.add_argument("--glitch", type=argtypes.at_most(argtypes.non_negative, MAX_GLITCH_RATE, "a second"), default=None,
                    metavar="RATE",
                    help="transient I2C faults, RATE a second on average: single NACKs, clock stretching, a reset "
                         "in the middle of a read (the chip then holds SDA low)")
