@@ -386,6 +386,7 @@ ROWS = [
     S(["camera", "track", "{tmp}/v.avi", "--seconds", "-1"], 2, "argument --seconds", files={"v.avi": b"x"}),
     S(["bench", "camera", "--distance", "nan"], 2, "argument --distance"),  # timed frames without a ball
     S(["hybrid-eval", "--distance", "1e99"], 2, "at most 10 m"),
+    S(["hybrid-eval", "--hue", "nan"], 2, "--hue"),  # it was taken as a hue
     # hybrid-eval, hybrid-sim, bench, protocol
     S(["hybrid-eval", "--seconds", "1"], 2, "seconds"),
     S(["hybrid-eval", "--trials", "banana"], 2, "banana"),

@@ -45,7 +45,7 @@ def add_arguments(p) -> None:
                         f"a rest, fast translation)")
     p.add_argument("--seconds", type=argtypes.seconds, default=12.0, help="length of each stretch (default 12, at least 9)")
     p.add_argument("--distance", type=argtypes.distance_m, default=1.0, help="camera to the mean ball position, m (default 1.0)")
-    p.add_argument("--hue", type=float, default=120.0, help="the ball's hue in degrees (default 120, green)")
+    p.add_argument("--hue", type=argtypes.hue_deg, default=120.0, help="the ball's hue in degrees (default 120, green)")
     p.add_argument("--jpeg", type=int, default=85, metavar="Q",
                    help="frames coded as an MJPG webcam sends them, JPEG quality Q (default 85; 0: raw frames)")
     p.add_argument("--marker", action="store_true",
